@@ -1,0 +1,31 @@
+"""Dimension-free core shared by flatland and sphere3d.
+
+Forward-mode AD (:class:`Dual`, :func:`detach`), named results (:class:`Estimate`,
+:class:`Image`, :class:`GradientImage`), the estimator contract
+(:class:`MethodTable`, :class:`Option`), statistics and input validation.
+"""
+
+from flatland.core.contract import Estimate, MethodTable, Option
+from flatland.core.dual import Dual, as_dual, detach, is_dual, tangent, variable
+from flatland.core.dual_functions import SUPPORTED_FUNCTIONS
+from flatland.core.image import GradientImage, Image, relative_error
+from flatland.core.rng import stream
+from flatland.core.validate import ValidationError
+
+__all__ = [
+    "SUPPORTED_FUNCTIONS",
+    "Dual",
+    "Estimate",
+    "GradientImage",
+    "Image",
+    "MethodTable",
+    "Option",
+    "ValidationError",
+    "as_dual",
+    "detach",
+    "is_dual",
+    "relative_error",
+    "stream",
+    "tangent",
+    "variable",
+]

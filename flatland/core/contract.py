@@ -1,0 +1,150 @@
+"""The estimator contract shared by flatland and sphere3d: named results and method tables.
+
+How to add an estimator
+-----------------------
+1. Write one module ``<package>/estimators/<name>.py`` (100-300 lines) with one
+   public function ``<name>(problem, theta, n, seed, **options) -> Estimate``. Its
+   numpydoc docstring cites the paper's section (e.g. "Loubet et al. 2019,
+   Sec. 4.2"), states what the estimator assumes and where it is biased.
+2. Draw random numbers only from :func:`flatland.core.rng.stream` with the shared
+   stream names (``"samples"`` for the primary samples, a new name for anything
+   extra), so that methods given the same seed see the same primary samples.
+3. Make theta a :class:`~flatland.core.dual.Dual` with ``variable(theta)`` and
+   write the estimator as plain numpy on Duals; the derivative is the tangent.
+   Keep derivations on the line that uses them, e.g.
+   ``# discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz, DESIGN 2.1)``.
+4. Return an :class:`Estimate` with per-sample (or per-batch) standard errors:
+   summarize i.i.d. per-sample contributions with :func:`flatland.core.stats.summarize`.
+5. Register it in the package's :class:`MethodTable` with an :class:`Option` per
+   keyword, each with a validator that names the option in its error.
+6. Test it: against closed forms within ``z * stderr`` (state the quantile, fix the
+   seed); if it is biased, a test that measures the bias and compares it with the
+   predicted one. Add it to the contract test that runs over both packages.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from flatland.core.stats import Interval, normal_quantile
+from flatland.core.validate import ValidationError
+
+__all__ = ["Estimate", "MethodTable", "Option"]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A Monte Carlo estimate of an integral and of its derivative with respect to theta.
+
+    Attributes
+    ----------
+    value, derivative : float
+        Estimates of I(theta) and dI/dtheta.
+    value_stderr, derivative_stderr : float
+        Their standard errors (from i.i.d. samples or independent batches).
+    n : int
+        Number of samples that went into the estimate.
+    method : str
+        Name of the estimator that produced it.
+    options : Mapping
+        The options it ran with (read-only).
+    """
+
+    value: float
+    derivative: float
+    value_stderr: float
+    derivative_stderr: float
+    n: int
+    method: str = ""
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+
+    def interval(self, level: float = 0.99, of: str = "derivative") -> Interval:
+        """Normal confidence interval for ``of`` ("value" or "derivative")."""
+        mean, se = (self.derivative, self.derivative_stderr) if of == "derivative" else (self.value, self.value_stderr)
+        z = normal_quantile(level)
+        return Interval(mean - z * se, mean + z * se, level)
+
+    def z_score(self, reference: float, of: str = "derivative") -> float:
+        """Distance to ``reference`` in standard errors."""
+        mean, se = (self.derivative, self.derivative_stderr) if of == "derivative" else (self.value, self.value_stderr)
+        if se == 0.0:
+            return 0.0 if mean == reference else math.inf
+        return (mean - reference) / se
+
+
+@dataclass(frozen=True)
+class Option:
+    """A keyword option of a method: its default and a validator that names it in errors."""
+
+    name: str
+    default: Any
+    check: Callable[[str, Any], Any]
+
+    def validate(self, value: Any) -> Any:
+        """The checked value (``None`` passes through when it is the default)."""
+        if value is None and self.default is None:
+            return None
+        return self.check(self.name, value)
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registered estimator: its function and its options."""
+
+    name: str
+    func: Callable[..., Any]
+    options: Mapping[str, Option]
+
+
+class MethodTable:
+    """Methods of one package by name, with option validation.
+
+    ``table.run("reparam", problem, theta, kappa=100.0)`` checks the method name and
+    every option (unknown ones included) and calls the estimator with the defaults
+    filled in.
+    """
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+        self._methods: dict[str, Method] = {}
+
+    def register(self, name: str, *options: Option) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+        """Decorator registering ``func`` as method ``name`` with ``options``."""
+
+        def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+            self._methods[name] = Method(name, func, {o.name: o for o in options})
+            return func
+
+        return decorate
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Registered method names, in registration order."""
+        return tuple(self._methods)
+
+    def get(self, name: Any) -> Method:
+        """The method called ``name``; ValueError naming it if unknown."""
+        if not isinstance(name, str) or name not in self._methods:
+            raise ValidationError("method", f"unknown {self.kind} method {name!r}; choose from {', '.join(self.names)}")
+        return self._methods[name]
+
+    def resolve_options(self, name: str, options: Mapping[str, Any]) -> dict[str, Any]:
+        """All options of ``name`` with defaults filled in, each validated."""
+        method = self.get(name)
+        unknown = sorted(set(options) - set(method.options))
+        if unknown:
+            known = ", ".join(method.options) or "none"
+            raise ValidationError(unknown[0], f"is not an option of method {name!r} (options: {known})")
+        return {k: o.validate(options.get(k, o.default)) for k, o in method.options.items()}
+
+    def run(self, name: str, *args: Any, **options: Any) -> Any:
+        """Validate and call method ``name``."""
+        method = self.get(name)
+        return method.func(*args, **self.resolve_options(name, options))

@@ -1,0 +1,41 @@
+"""Central finite differences with common random numbers."""
+
+from __future__ import annotations
+
+from flatland.core.contract import Estimate, Option
+from flatland.core.dual import detach
+from flatland.core.stats import summarize
+from flatland.core.validate import check_positive
+from flatland.estimators._common import METHODS, primary_samples
+from flatland.integrals import Integrand
+
+
+@METHODS.register("finite_difference", Option("h", 1e-2, check_positive))
+def finite_difference(integrand: Integrand, theta: float, n: int, seed: int, h: float) -> Estimate:
+    """Central difference ``[Î(θ + h) - Î(θ - h)] / 2h`` with the same samples at both ends.
+
+    Common random numbers make the two estimates correlated, so their difference
+    only sees the samples whose integrand changed: near a discontinuity, within
+    ``h |c'|`` of it. Assumes nothing about continuity, but is biased by the
+    truncation error: its expectation is exactly ``[I(θ + h) - I(θ - h)] / 2h =
+    I'(θ) + h² I'''(θ) / 6 + O(h⁴)``. Its variance grows like ``1 / h`` at a jump
+    (like ``1 / h²`` without common random numbers). Not part of the paper: the
+    reference every gradient is checked against.
+    """
+    integrand.check_theta(theta - h, "theta - h")
+    integrand.check_theta(theta + h, "theta + h")
+    s = primary_samples(integrand, n, seed)
+    f_plus = detach(integrand.f(s.x, theta + h)) / s.pdf
+    f_minus = detach(integrand.f(s.x, theta - h)) / s.pdf
+    values = summarize(detach(integrand.f(s.x, theta)) / s.pdf)
+    # per-sample central difference: common random numbers cancel everything that did not move
+    derivs = summarize((f_plus - f_minus) / (2.0 * h))
+    return Estimate(
+        value=float(values.mean),
+        derivative=float(derivs.mean),
+        value_stderr=float(values.stderr),
+        derivative_stderr=float(derivs.stderr),
+        n=n,
+        method="finite_difference",
+        options={"h": h},
+    )
