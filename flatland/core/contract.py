@@ -67,13 +67,21 @@ class Estimate:
 
     def interval(self, level: float = 0.99, of: str = "derivative") -> Interval:
         """Normal confidence interval for ``of`` ("value" or "derivative")."""
-        mean, se = (self.derivative, self.derivative_stderr) if of == "derivative" else (self.value, self.value_stderr)
+        mean, se = (
+            (self.derivative, self.derivative_stderr)
+            if of == "derivative"
+            else (self.value, self.value_stderr)
+        )
         z = normal_quantile(level)
         return Interval(mean - z * se, mean + z * se, level)
 
     def z_score(self, reference: float, of: str = "derivative") -> float:
         """Distance to ``reference`` in standard errors."""
-        mean, se = (self.derivative, self.derivative_stderr) if of == "derivative" else (self.value, self.value_stderr)
+        mean, se = (
+            (self.derivative, self.derivative_stderr)
+            if of == "derivative"
+            else (self.value, self.value_stderr)
+        )
         if se == 0.0:
             return 0.0 if mean == reference else math.inf
         return (mean - reference) / se
@@ -132,7 +140,9 @@ class MethodTable:
     def get(self, name: Any) -> Method:
         """The method called ``name``; ValueError naming it if unknown."""
         if not isinstance(name, str) or name not in self._methods:
-            raise ValidationError("method", f"unknown {self.kind} method {name!r}; choose from {', '.join(self.names)}")
+            raise ValidationError(
+                "method", f"unknown {self.kind} method {name!r}; choose from {', '.join(self.names)}"
+            )
         return self._methods[name]
 
     def resolve_options(self, name: str, options: Mapping[str, Any]) -> dict[str, Any]:

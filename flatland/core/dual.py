@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Dual", "detach", "tangent", "is_dual", "variable", "as_dual"]
+__all__ = ["Dual", "as_dual", "detach", "is_dual", "tangent", "variable"]
 
 _UNARY: dict[np.ufunc, Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]] = {}
 _BINARY: dict[np.ufunc, Callable[..., tuple[np.ndarray, np.ndarray]]] = {}
@@ -71,7 +71,7 @@ class Dual(np.lib.mixins.NDArrayOperatorsMixin):
     indexing and boolean masks) and item assignment act on value and tangent alike.
     """
 
-    __slots__ = ("value", "tangent")
+    __slots__ = ("tangent", "value")
     __array_priority__ = 1000.0
 
     value: np.ndarray
@@ -120,9 +120,7 @@ class Dual(np.lib.mixins.NDArrayOperatorsMixin):
             yield self[i]
 
     def __getitem__(self, index: Any) -> Dual:
-        if isinstance(index, Dual) or (
-            isinstance(index, tuple) and any(isinstance(i, Dual) for i in index)
-        ):
+        if isinstance(index, Dual) or (isinstance(index, tuple) and any(isinstance(i, Dual) for i in index)):
             raise TypeError("a Dual cannot be used as an index; index with detach(x) instead")
         return Dual(self.value[index], self.tangent[index])
 
@@ -205,7 +203,9 @@ class Dual(np.lib.mixins.NDArrayOperatorsMixin):
             target[...] = result
             return target
         if isinstance(result, Dual):
-            raise TypeError(f"np.{ufunc.__name__}: writing a Dual result into a plain array drops its tangent")
+            raise TypeError(
+                f"np.{ufunc.__name__}: writing a Dual result into a plain array drops its tangent"
+            )
         target[...] = result
         return target
 

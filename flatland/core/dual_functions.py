@@ -58,7 +58,9 @@ for _f in (np.stack, np.concatenate, np.hstack, np.vstack, np.column_stack):
 
 @_implements(np.take_along_axis)
 def _take_along_axis(arr: Any, indices: Any, axis: Any) -> Dual:
-    return Dual(np.take_along_axis(detach(arr), indices, axis), np.take_along_axis(tangent(arr), indices, axis))
+    return Dual(
+        np.take_along_axis(detach(arr), indices, axis), np.take_along_axis(tangent(arr), indices, axis)
+    )
 
 
 @_implements(np.shape)

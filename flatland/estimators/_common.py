@@ -34,7 +34,9 @@ def primary_samples(integrand: Integrand, n: int, seed: int) -> Samples:
     return Samples(x=x, pdf=integrand.pdf(x))
 
 
-def to_estimate(per_sample: Any, n: int, method: str, options: dict[str, Any], extra_derivative: float = 0.0) -> Estimate:
+def to_estimate(
+    per_sample: Any, n: int, method: str, options: dict[str, Any], extra_derivative: float = 0.0
+) -> Estimate:
     """Estimate from i.i.d. per-sample contributions (a Dual or a plain array).
 
     ``extra_derivative`` is a deterministic term added to the derivative (the exact
