@@ -36,7 +36,9 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
 ------------------------------------------------------------------------
 ``mean_derivative``      mean of the T trial estimates
 ``bias``                 mean - reference, with a Student-t interval (T - 1 degrees
-                         of freedom) of half-width t · sqrt(s²/T + s_ref²)
+                         of freedom) of half-width t · sqrt(s²/T + s_ref²) (plus a
+                         floating-point allowance of 64 ε |reference|; a spread of
+                         the trials below that counts as zero variance)
 ``variance_per_sample``  s² · samples (s² the variance of the trial estimates), the
                          variance a single-sample estimate would have
 ``seconds_per_sample``   measured wall time (time.perf_counter) / (T · samples)
@@ -78,6 +80,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from flatland.core.table import format_table
 from flatland.core.validate import (
     ValidationError,
     check_choice,
@@ -115,6 +118,7 @@ CSV_COLUMNS = (
 """Columns of the study CSV, in order."""
 
 CACHE_VERSION = 1
+_ROUNDING = 64 * np.finfo(np.float64).eps  # relative size of floating-point noise in a mean of many terms
 _TOP_KEYS = ("name", "problem", "methods", "n", "spp", "trials", "seed", "workers", "scheduler", "level",
              "reference", "time_budget")  # fmt: skip
 _PROBLEM_KEYS = ("integral", "theta", "scene", "param", "functional", "pixel")
@@ -208,8 +212,14 @@ class StudyConfig:
     reference: ReferenceSpec | None = None
 
     @classmethod
-    def from_dict(cls, data: Any, *, package: str = "flatland", base_dir: str | os.PathLike | None = None,
-                  name: str = "study") -> StudyConfig:
+    def from_dict(
+        cls,
+        data: Any,
+        *,
+        package: str = "flatland",
+        base_dir: str | os.PathLike | None = None,
+        name: str = "study",
+    ) -> StudyConfig:
         """Validate a configuration dict (the JSON file's content); errors name the field.
 
         Scene paths are resolved relative to ``base_dir`` (the config file's folder).
@@ -249,7 +259,9 @@ def load_config(path: str | os.PathLike, *, package: str = "flatland") -> StudyC
     try:
         data = json.loads(text)
     except json.JSONDecodeError as e:
-        raise ValidationError(str(path), f"invalid JSON: {e.msg} (line {e.lineno}, column {e.colno})") from None
+        raise ValidationError(
+            str(path), f"invalid JSON: {e.msg} (line {e.lineno}, column {e.colno})"
+        ) from None
     return StudyConfig.from_dict(data, package=package, base_dir=path.parent, name=path.stem)
 
 
@@ -318,7 +330,9 @@ def _resolve(table: Any, where: str, method: Any, options: Mapping[str, Any]) ->
 
 def _expand_cells(data: Any, problem: Problem, default_n: int | None) -> tuple[Cell, ...]:
     if not isinstance(data, list | tuple) or not data:
-        raise ValidationError("methods", f"must be a non-empty list of {{'method': ...}} objects, got {data!r}")
+        raise ValidationError(
+            "methods", f"must be a non-empty list of {{'method': ...}} objects, got {data!r}"
+        )
     table = _method_table(problem)
     count = problem.count_name
     cells: list[Cell] = []
@@ -404,8 +418,12 @@ def _functional(problem: Problem, image: np.ndarray) -> float:
     """The scalar studied, from a derivative image (see the module docstring)."""
     if problem.pixel is None:
         return float(np.sum(image))
-    if len(problem.pixel) != image.ndim or any(p >= s for p, s in zip(problem.pixel, image.shape, strict=False)):
-        raise ValidationError("problem.pixel", f"{list(problem.pixel)} is outside the film of shape {image.shape}")
+    if len(problem.pixel) != image.ndim or any(
+        p >= s for p, s in zip(problem.pixel, image.shape, strict=False)
+    ):
+        raise ValidationError(
+            "problem.pixel", f"{list(problem.pixel)} is outside the film of shape {image.shape}"
+        )
     return float(image[problem.pixel])
 
 
@@ -537,7 +555,9 @@ def _run_one(problem: Problem, cell: Cell, seed: int) -> _Run:
     seconds = time.perf_counter() - start
     value = _functional(problem, np.asarray(g.value))
     derivative = _functional(problem, np.asarray(g.derivative))
-    return _Run(value, derivative, cell.n * int(np.size(g.derivative)), seconds, g.derivative, g.derivative_stderr)
+    return _Run(
+        value, derivative, cell.n * int(np.size(g.derivative)), seconds, g.derivative, g.derivative_stderr
+    )
 
 
 def _run_task(task: _Task) -> _Outcome:
@@ -620,14 +640,22 @@ def _relative_error(run: _Run, reference: Reference) -> float:
     return abs(run.derivative - reference.derivative) / abs(reference.derivative)
 
 
-def _summarize(cell: Cell, runs: Sequence[_Run], reference: Reference, level: float, budget: float) -> CellResult:
+def _summarize(
+    cell: Cell, runs: Sequence[_Run], reference: Reference, level: float, budget: float
+) -> CellResult:
     d = np.array([r.derivative for r in runs])
     t = len(runs)
     samples = runs[0].samples
     mean = float(d.mean())
     var = float(d.var(ddof=1))
+    # differences at the level of floating-point rounding are not variance or bias
+    resolution = _ROUNDING * max(abs(mean), abs(reference.derivative))
+    if math.sqrt(var) <= resolution:
+        var = 0.0
     stderr = math.sqrt(var / t)
-    half = float(stats.t.ppf(0.5 + 0.5 * level, t - 1)) * math.sqrt(var / t + reference.stderr**2)
+    half = (
+        float(stats.t.ppf(0.5 + 0.5 * level, t - 1)) * math.sqrt(var / t + reference.stderr**2) + resolution
+    )
     bias = mean - reference.derivative
     var_ps = var * samples
     sec_ps = sum(r.seconds for r in runs) / (t * samples)
@@ -688,17 +716,24 @@ class StudyResult:
 
     def table(self) -> str:
         """A fixed-width text table of the main columns."""
-        head = ("method", "mean dI/dθ", "bias", f"{self.config.level:.0%} CI", "var/sample", "s/sample", "rmse",
-                "efficiency")  # fmt: skip
-        lines = []
-        for r in self.rows:
-            lines.append((r.cell.label, f"{r.mean_derivative:.5g}", f"{r.bias:+.3g}",
-                          f"[{r.bias_low:+.3g}, {r.bias_high:+.3g}]", f"{r.variance_per_sample:.3g}",
-                          f"{r.seconds_per_sample:.3g}", f"{r.rmse:.3g}", f"{r.efficiency:.3g}"))  # fmt: skip
-        widths = [max(len(h), *(len(x[i]) for x in lines)) for i, h in enumerate(head)]
-        fmt = lambda cols: "  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(cols, widths, strict=True)))  # noqa: E501, E731
-        title = f"{self.config.problem.label}: reference {self.reference.derivative:.6g} ({self.reference.source})"
-        return "\n".join([title, fmt(head), fmt(["-" * w for w in widths]), *map(fmt, lines)])
+        level = f"{self.config.level:.0%} CI"
+        head = ("method", "mean dI/dθ", "bias", level, "var/sample", "s/sample", "rmse", "efficiency")
+        rows = [
+            (
+                r.cell.label,
+                f"{r.mean_derivative:.5g}",
+                f"{r.bias:+.3g}",
+                f"[{r.bias_low:+.3g}, {r.bias_high:+.3g}]",
+                f"{r.variance_per_sample:.3g}",
+                f"{r.seconds_per_sample:.3g}",
+                f"{r.rmse:.3g}",
+                f"{r.efficiency:.3g}",
+            )
+            for r in self.rows
+        ]
+        ref = self.reference
+        title = f"{self.config.problem.label}: reference dI/dθ = {ref.derivative:.6g} ({ref.source})"
+        return format_table(head, rows, title)
 
 
 def _csv_value(row: CellResult, column: str, config: StudyConfig) -> Any:

@@ -1,0 +1,298 @@
+"""Figures shared by flatland (1D film strips) and sphere3d (2D images): matplotlib only, no numerics.
+
+Gradient images use a diverging colormap centred on zero with one symmetric colour
+scale shared by every method in a figure, so equal colours mean equal derivatives.
+A 1D film is drawn as a strip (one row of pixels stretched vertically) and, in the
+panel, also as curves with ±2 standard-error bands; a 2D film is drawn as an image.
+Study figures read :class:`~flatland.core.study.StudyResult` rows as they are.
+
+Every function writes one PNG and returns its path; figures are closed after saving.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; must precede pyplot
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import Normalize
+
+__all__ = [
+    "DIVERGING",
+    "PRIMAL",
+    "efficiency_figure",
+    "gradient_figure",
+    "image_figure",
+    "kappa_figure",
+    "panel_figure",
+    "study_figures",
+    "symmetric_limit",
+]
+
+DIVERGING = "RdBu_r"
+"""Colormap for derivatives: blue negative, white zero, red positive."""
+PRIMAL = "gray"
+"""Colormap for radiance."""
+DPI = 110
+
+
+def symmetric_limit(arrays: Sequence[np.ndarray], percentile: float = 99.5) -> float:
+    """One colour limit for all ``arrays``: the largest ``percentile`` of |a| among them.
+
+    A percentile rather than the maximum, so that a few noisy pixels (finite
+    differences) do not wash out every other image; 1.0 when everything is zero.
+    """
+    limits = [float(np.percentile(np.abs(a), percentile)) for a in arrays if np.size(a)]
+    limit = max(limits, default=0.0)
+    if limit == 0.0 or not math.isfinite(limit):
+        limit = max((float(np.max(np.abs(a))) for a in arrays if np.size(a)), default=0.0)
+    return limit if limit > 0.0 and math.isfinite(limit) else 1.0
+
+
+def _save(fig: Any, path: str | os.PathLike) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _film(ax: Any, array: np.ndarray, cmap: str, norm: Normalize, title: str = "") -> Any:
+    """Draw a 1D film as a strip or a 2D film as an image; returns the mappable."""
+    array = np.asarray(array, dtype=np.float64)
+    if array.ndim == 1:
+        im = ax.imshow(array[None, :], cmap=cmap, norm=norm, aspect="auto", interpolation="nearest",
+                       extent=(0, array.size, 0, 1))  # fmt: skip
+        ax.set_yticks([])
+        ax.set_xlabel("pixel")
+    else:
+        im = ax.imshow(array, cmap=cmap, norm=norm, interpolation="nearest")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if title:
+        ax.set_title(title, fontsize=10)
+    return im
+
+
+def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, color: Any = None) -> None:
+    x = np.arange(np.size(array)) + 0.5
+    (line,) = ax.plot(x, array, lw=1.2, label=label, color=color)
+    if stderr is not None:
+        ax.fill_between(x, array - 2 * stderr, array + 2 * stderr, color=line.get_color(), alpha=0.2, lw=0)
+
+
+def image_figure(
+    value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = ""
+) -> Path:
+    """A rendered image (1D: strip over a curve with ±2 standard errors; 2D: grey image)."""
+    value = np.asarray(value)
+    norm = Normalize(0.0, max(float(np.max(value)), 1e-12))
+    if value.ndim == 1:
+        fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 3.2), height_ratios=(1, 2), sharex=True)
+        _film(top, value, PRIMAL, norm, title)
+        top.set_xlabel("")
+        _curve(bottom, value, stderr, "radiance")
+        bottom.set_xlabel("pixel")
+        bottom.set_ylabel("radiance")
+        bottom.set_xlim(0, value.size)
+    else:
+        fig, ax = plt.subplots(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4))
+        fig.colorbar(_film(ax, value, PRIMAL, norm, title), ax=ax, shrink=0.8)
+    return _save(fig, path)
+
+
+def gradient_figure(
+    derivative: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
+    limit: float | None = None,
+) -> Path:  # fmt: skip
+    """A derivative image on the diverging map centred on zero (1D: strip over a curve)."""
+    derivative = np.asarray(derivative)
+    limit = symmetric_limit([derivative]) if limit is None else limit
+    norm = Normalize(-limit, limit)
+    if derivative.ndim == 1:
+        fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 3.2), height_ratios=(1, 2), sharex=True)
+        fig.colorbar(
+            _film(top, derivative, DIVERGING, norm, title), ax=[top, bottom], shrink=0.6, label="dI/dθ"
+        )
+        top.set_xlabel("")
+        _curve(bottom, derivative, stderr, "dI/dθ")
+        bottom.axhline(0.0, color="0.5", lw=0.6)
+        bottom.set_xlabel("pixel")
+        bottom.set_ylabel("dI/dθ")
+        bottom.set_xlim(0, derivative.size)
+    else:
+        fig, ax = plt.subplots(figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4))
+        fig.colorbar(_film(ax, derivative, DIVERGING, norm, title), ax=ax, shrink=0.8, label="dI/dθ")
+    return _save(fig, path)
+
+
+def panel_figure(
+    primal: np.ndarray,
+    gradients: Mapping[str, tuple[np.ndarray, np.ndarray | None]],
+    path: str | os.PathLike,
+    title: str = "",
+) -> Path:
+    """The side-by-side panel: primal, then each method's derivative on one shared diverging scale.
+
+    ``gradients`` maps a column title to ``(derivative, stderr)``. A 1D film gets a
+    second row with all derivatives as curves (±2 standard errors) on one axis.
+    """
+    primal = np.asarray(primal)
+    columns = 1 + len(gradients)
+    limit = symmetric_limit([np.asarray(d) for d, _ in gradients.values()])
+    norm = Normalize(-limit, limit)
+    primal_norm = Normalize(0.0, max(float(np.max(primal)), 1e-12))
+    if primal.ndim == 1:
+        fig = plt.figure(figsize=(2.6 * columns, 5.2))
+        grid = fig.add_gridspec(2, columns, height_ratios=(1, 1.6), hspace=0.45)
+        axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
+        curves = fig.add_subplot(grid[1, :])
+    else:
+        aspect = primal.shape[0] / max(primal.shape[1], 1)
+        fig, axes = plt.subplots(1, columns, figsize=(2.6 * columns, 2.6 * aspect + 0.9))
+        axes, curves = list(np.atleast_1d(axes)), None
+    _film(axes[0], primal, PRIMAL, primal_norm, "primal")
+    mappable = None
+    for ax, (label, (derivative, _)) in zip(axes[1:], gradients.items(), strict=True):
+        mappable = _film(ax, derivative, DIVERGING, norm, label)
+    if mappable is not None:
+        fig.colorbar(mappable, ax=axes, shrink=0.85, label="dI/dθ (shared scale)", pad=0.02)
+    if curves is not None:
+        for label, (derivative, stderr) in gradients.items():
+            _curve(curves, np.asarray(derivative), None if stderr is None else np.asarray(stderr), label)
+        curves.axhline(0.0, color="0.5", lw=0.6)
+        curves.set_xlim(0, primal.size)
+        curves.set_ylim(-1.15 * limit, 1.15 * limit)
+        curves.set_xlabel("pixel")
+        curves.set_ylabel("dI/dθ")
+        curves.legend(fontsize=8, ncols=min(len(gradients), 5), loc="upper right")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------------------- study figures
+def _series(rows: Sequence[Any]) -> dict[str, list[Any]]:
+    """Rows that vary ``kappa``, grouped by everything else (method, other options, sample count)."""
+    groups: dict[str, list[Any]] = {}
+    for r in rows:
+        options = r.cell.options_dict
+        if options.get("kappa") is None:
+            continue
+        rest = [r.cell.method] + [
+            k if v is True else f"{k}={v}"
+            for k, v in options.items()
+            if k != "kappa" and v not in (None, False)
+        ]
+        groups.setdefault(" ".join(rest) + f" n={r.cell.n}", []).append(r)
+    return {k: sorted(v, key=lambda r: r.cell.options_dict["kappa"]) for k, v in groups.items() if len(v) > 1}
+
+
+def has_kappa_series(rows: Sequence[Any]) -> bool:
+    """True if some method is run at two or more values of ``kappa``."""
+    return bool(_series(rows))
+
+
+def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
+    """Bias ± confidence interval and standard deviation per sample against κ, on log axes.
+
+    The trade-off of Loubet et al. 2019, Sec. 4.2: a wide kernel (small κ) leaves
+    bias, a narrow one (large κ) adds variance.
+    """
+    series = _series(rows)
+    if not series:
+        raise ValueError("rows: no method is run at two or more values of kappa")
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    for label, group in series.items():
+        kappa = [r.cell.options_dict["kappa"] for r in group]
+        bias = np.array([r.bias for r in group])
+        err = np.array([[r.bias - r.bias_low for r in group], [r.bias_high - r.bias for r in group]])
+        left.errorbar(kappa, bias, yerr=err, marker="o", capsize=3, label=label)
+        right.plot(kappa, [math.sqrt(r.variance_per_sample) for r in group], marker="o", label=label)
+    level = rows[0].level
+    left.axhline(0.0, color="0.4", lw=0.8, ls="--")
+    left.set_xscale("log")
+    left.set_yscale("symlog", linthresh=_linthresh([r for group in series.values() for r in group]))
+    left.set_xlabel("κ (kernel concentration)")
+    left.set_ylabel(f"bias of dI/dθ (±{level:.0%} CI)")
+    left.set_title("bias falls as κ grows")
+    right.set_xscale("log")
+    right.set_yscale("log")
+    right.set_xlabel("κ (kernel concentration)")
+    right.set_ylabel("standard deviation per sample")
+    right.set_title("variance rises as κ grows")
+    for ax in (left, right):
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+def _linthresh(rows: Sequence[Any]) -> float:
+    """Linear range of the symlog bias axis: the smallest interval half-width, so CIs stay readable."""
+    widths = [0.5 * (r.bias_high - r.bias_low) for r in rows if r.bias_high > r.bias_low]
+    return max(min(widths, default=1e-3), 1e-12)
+
+
+def efficiency_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
+    """Equal-time comparison: efficiency 1/(variance × time) bars and the RMSE a fixed budget buys.
+
+    Efficiency ignores bias; the right-hand bars (``equal_time_rmse``) count it. A
+    zero-variance estimator has infinite efficiency: its bar is drawn to the top
+    and labelled "σ² = 0".
+    """
+    labels = [r.cell.label for r in rows]
+    colors = [f"C{sorted({r.cell.method for r in rows}).index(r.cell.method)}" for r in rows]
+    finite = [r.efficiency for r in rows if math.isfinite(r.efficiency) and r.efficiency > 0]
+    top = 10 * max(finite) if finite else 1.0
+    bottom = min(finite) / 10 if finite else 0.1
+    heights = [r.efficiency if math.isfinite(r.efficiency) else top for r in rows]
+    y = np.arange(len(rows))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 0.45 * len(rows) + 1.6), sharey=True)
+    left.barh(y, [h - bottom for h in heights], color=colors, left=bottom)
+    for yi, r in zip(y, rows, strict=True):
+        if math.isfinite(r.efficiency):
+            left.text(
+                max(r.efficiency, bottom), yi, f" {r.efficiency:.2g}", ha="left", va="center", fontsize=7
+            )
+        else:
+            left.text(top, yi, " σ² = 0 ", ha="right", va="center", fontsize=8, color="white")
+    left.set_xscale("log")
+    left.set_xlim(bottom, top)
+    left.set_yticks(y, labels, fontsize=8)
+    left.invert_yaxis()
+    left.set_xlabel("efficiency 1 / (variance per sample × seconds per sample)")
+    budget = rows[0].time_budget
+    rmse = [r.equal_time_rmse for r in rows]
+    # a log axis spanning four decades below the worst RMSE; smaller values sit on its edge, labelled
+    floor = max(rmse) * 1e-4 if max(rmse) > 0 else 1e-12
+    right.barh(y, [max(v, floor) - floor for v in rmse], color=colors, left=floor)
+    for yi, v in zip(y, rmse, strict=True):
+        right.text(max(v, floor), yi, f" {v:.2g}", ha="left", va="center", fontsize=7)
+    right.set_xscale("log")
+    right.set_xlim(floor, max(rmse) * 8 if max(rmse) > 0 else 1.0)
+    right.set_xlabel(f"RMSE after {budget:g} s of sampling (bias included)")
+    for ax in (left, right):
+        ax.grid(True, axis="x", which="both", alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+def study_figures(result: Any, out_dir: str | os.PathLike) -> list[Path]:
+    """The figures of a study: ``<name>_kappa.png`` (if κ is swept) and ``<name>_efficiency.png``."""
+    out_dir = Path(out_dir)
+    name, label = result.config.name, result.config.problem.label
+    paths = []
+    if has_kappa_series(result.rows):
+        paths.append(kappa_figure(result.rows, out_dir / f"{name}_kappa.png", f"{name}: {label}"))
+    paths.append(efficiency_figure(result.rows, out_dir / f"{name}_efficiency.png", f"{name}: {label}"))
+    return paths
