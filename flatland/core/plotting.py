@@ -29,9 +29,16 @@ __all__ = [
     "PRIMAL",
     "efficiency_figure",
     "gradient_figure",
+    "has_kappa_series",
     "image_figure",
     "kappa_figure",
     "panel_figure",
+    "plot_efficiency",
+    "plot_gradient",
+    "plot_image",
+    "plot_kappa",
+    "plot_panel",
+    "plot_study",
     "study_figures",
     "symmetric_limit",
 ]
@@ -296,3 +303,36 @@ def study_figures(result: Any, out_dir: str | os.PathLike) -> list[Path]:
         paths.append(kappa_figure(result.rows, out_dir / f"{name}_kappa.png", f"{name}: {label}"))
     paths.append(efficiency_figure(result.rows, out_dir / f"{name}_efficiency.png", f"{name}: {label}"))
     return paths
+
+
+# ------------------------------------------------------------------- result-level API (package plot modules)
+def plot_image(image: Any, path: str | os.PathLike, title: str = "") -> Path:
+    """PNG of an :class:`~flatland.core.image.Image`."""
+    return image_figure(image.value, image.stderr, path, title or image.scene)
+
+
+def plot_gradient(
+    gradient: Any, path: str | os.PathLike, title: str = "", limit: float | None = None
+) -> Path:
+    """PNG of a :class:`~flatland.core.image.GradientImage`'s derivative, diverging map centred on 0."""
+    title = title or f"{gradient.scene}: d/d {gradient.param} ({gradient.method})"
+    return gradient_figure(gradient.derivative, gradient.derivative_stderr, path, title, limit)
+
+
+def plot_panel(primal: Any, gradients: Mapping[str, Any], path: str | os.PathLike, title: str = "") -> Path:
+    """The side-by-side panel from an Image and GradientImages keyed by column title."""
+    columns = {label: (g.derivative, g.derivative_stderr) for label, g in gradients.items()}
+    return panel_figure(primal.value, columns, path, title)
+
+
+def plot_kappa(result: Any, path: str | os.PathLike) -> Path:
+    """Bias ± CI and standard deviation against κ for a study result."""
+    return kappa_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
+
+
+def plot_efficiency(result: Any, path: str | os.PathLike) -> Path:
+    """Equal-time efficiency bars for a study result."""
+    return efficiency_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
+
+
+plot_study = study_figures

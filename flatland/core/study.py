@@ -252,16 +252,34 @@ class StudyConfig:
         return cls(name, problem, cells, trials, seed, workers, scheduler, level, time_budget, reference)
 
 
-def load_config(path: str | os.PathLike, *, package: str = "flatland") -> StudyConfig:
-    """Read and validate a study configuration file (JSON); its stem is the default name."""
+def load_config(
+    path: str | os.PathLike,
+    *,
+    package: str = "flatland",
+    seed: int | None = None,
+    samples: int | None = None,
+) -> StudyConfig:
+    """Read and validate a study configuration file (JSON); its stem is the default name.
+
+    ``seed`` replaces the file's seed; ``samples`` replaces every sample count of
+    the grid (``n`` or ``spp``, swept or not) with one value.
+    """
     path = Path(path)
     text = path.read_text(encoding="utf-8")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as e:
-        raise ValidationError(
-            str(path), f"invalid JSON: {e.msg} (line {e.lineno}, column {e.colno})"
-        ) from None
+        where = f"line {e.lineno}, column {e.colno}"
+        raise ValidationError(str(path), f"invalid JSON: {e.msg} ({where})") from None
+    if isinstance(data, dict):
+        if seed is not None:
+            data["seed"] = seed
+        if samples is not None:
+            count = "spp" if isinstance(data.get("problem"), dict) and "scene" in data["problem"] else "n"
+            data[count] = samples
+            for entry in data.get("methods") or ():
+                if isinstance(entry, dict):
+                    entry.pop(count, None)
     return StudyConfig.from_dict(data, package=package, base_dir=path.parent, name=path.stem)
 
 
@@ -446,25 +464,31 @@ def _code_digest(package: str) -> str:
     return h.hexdigest()
 
 
+def _scene_fingerprint(problem: Problem) -> Any:
+    """The scene's content: its ``to_dict()`` if it has one, else the file's bytes' hash, else its name."""
+    scene = _load_scene(problem.package, problem.scene)
+    if hasattr(scene, "to_dict"):
+        return scene.to_dict()
+    if Path(problem.scene).is_file():
+        return hashlib.sha256(Path(problem.scene).read_bytes()).hexdigest()
+    return problem.scene
+
+
 def _cache_key(problem: Problem, spec: ReferenceSpec) -> str:
-    scene_digest = None
-    if problem.is_scene and Path(problem.scene).is_file():
-        scene_digest = hashlib.sha256(Path(problem.scene).read_bytes()).hexdigest()
     payload = {
         "version": CACHE_VERSION,
         "code": _code_digest(problem.package),
         "package": problem.package,
         "integral": problem.integral,
         "theta": problem.theta,
-        "scene": Path(problem.scene).name if scene_digest else problem.scene,
-        "scene_digest": scene_digest,
+        "scene": _scene_fingerprint(problem) if problem.is_scene else None,
         "param": problem.param,
         "method": spec.method,
         "options": [[k, v] for k, v in spec.options],
         "n": spec.n,
         "seed": spec.seed,
     }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:32]
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()[:32]
 
 
 def _compute_reference(problem: Problem, spec: ReferenceSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -485,7 +509,7 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
     if spec is None:
         from flatland.integrals import get_integral
 
-        return Reference(get_integral(problem.integral).derivative(problem.theta), 0.0, "closed form")
+        return Reference(float(get_integral(problem.integral).derivative(problem.theta)), 0.0, "closed form")
     label = f"{spec.method} {problem.count_name}={spec.n} seed={spec.seed}"
     path = Path(cache_dir) / f"{_cache_key(problem, spec)}.npz" if cache_dir is not None else None
     if path is not None and path.is_file():
@@ -572,11 +596,11 @@ def _execute(tasks: Sequence[_Task], workers: int, scheduler: str | None, progre
     """Run the tasks serially, in a process pool or on a Dask cluster; outcomes in task order."""
     outcomes: list[_Outcome] = []
     if scheduler is not None:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client
 
         with Client(scheduler, set_as_default=False) as client:
             futures = client.map(_run_task, tasks, pure=False)
-            for future in as_completed(futures):
+            for future in futures:  # collected in submission order; they run in any order
                 outcomes.append(future.result())
                 progress.update(1)
     elif workers == 1:
@@ -656,7 +680,7 @@ def _summarize(
     half = (
         float(stats.t.ppf(0.5 + 0.5 * level, t - 1)) * math.sqrt(var / t + reference.stderr**2) + resolution
     )
-    bias = mean - reference.derivative
+    bias = float(mean - reference.derivative)
     var_ps = var * samples
     sec_ps = sum(r.seconds for r in runs) / (t * samples)
     cost = var_ps * sec_ps
@@ -754,7 +778,7 @@ def _csv_value(row: CellResult, column: str, config: StudyConfig) -> Any:
     if column in special_cases:
         return special_cases[column]
     v = getattr(row, column)
-    return repr(v) if isinstance(v, float) else v
+    return repr(float(v)) if isinstance(v, float) else v
 
 
 def read_csv(path: str | os.PathLike) -> list[dict[str, Any]]:

@@ -1,0 +1,327 @@
+"""The command line shared by both packages: ``python -m flatland …`` and ``python -m sphere3d …``.
+
+Verbs (the same in both packages):
+
+``demo``
+    The package's default scene as the side-by-side panel "primal | naive | boundary
+    | reparam | finite differences" (methods the package lacks are left out), written
+    to ``--out``, and a table of each method's error against a reference; packages
+    may append further sections (flatland: the textbook table).
+``render SCENE``
+    The image as PNG and ``.npy``.
+``gradient SCENE --param P --method M``
+    The derivative image as PNG and ``.npy`` (structured array with fields
+    ``value``, ``value_stderr``, ``derivative``, ``derivative_stderr``).
+``study CONFIG``
+    A study (:mod:`flatland.core.study`): CSV and figures in ``--out``.
+
+``SCENE`` is a built-in scene name or a JSON file. Bad arguments, scene files or
+configurations print one line ``error: <what is wrong>`` on stderr and exit with
+status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any, NoReturn
+
+import numpy as np
+
+from flatland.core.table import format_table
+from flatland.core.validate import ValidationError, check_int, check_positive, check_seed
+
+__all__ = ["EXIT_USAGE", "Package", "main"]
+
+EXIT_USAGE = 2
+"""Exit status for bad arguments, scene files or configurations."""
+
+DEMO_METHODS = ("naive", "boundary", "reparam", "finite_difference")
+"""Panel columns after the primal, in order (those the package has)."""
+PANEL_TITLES = {"finite_difference": "finite differences"}
+
+
+@dataclass(frozen=True)
+class Package:
+    """What the shared CLI needs to know about a package.
+
+    Attributes
+    ----------
+    name : str
+        Import name; ``<name>.scene``, ``<name>.render`` and ``<name>.plot`` provide
+        the shared API (``load_scene``, ``list_scenes``, ``render``,
+        ``render_gradient``, ``GRADIENT_METHODS``, ``plot_*``).
+    demo_scene, demo_param : str
+        The embedded default scene of ``demo`` and the parameter it differentiates.
+    demo_spp : int
+        Default samples per pixel of ``demo``; the reference uses ``reference_factor``
+        times as many.
+    reference_factor : int
+        Sample multiplier of the demo's reference.
+    demo_sections : tuple of callables
+        Extra text sections printed by ``demo``, each called with the parsed arguments.
+    """
+
+    name: str
+    demo_scene: str
+    demo_param: str
+    demo_spp: int = 64
+    reference_factor: int = 16
+    demo_sections: tuple[Callable[[argparse.Namespace], str], ...] = ()
+
+    def module(self, part: str) -> ModuleType:
+        """``<name>.<part>``."""
+        return importlib.import_module(f"{self.name}.{part}")
+
+
+class _UsageError(Exception):
+    """An argparse error, reported as one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(f"{self.prog.split()[-1]}: {message}")
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _check_counts(args: argparse.Namespace) -> None:
+    """Counts and seed parsed as plain ints are checked here, so errors read ``spp: must be ...``."""
+    for name in ("spp", "batches", "probes", "workers"):
+        if getattr(args, name, None) is not None:
+            check_int(name, getattr(args, name))
+    if args.seed is not None:
+        check_seed("seed", args.seed)
+
+
+def _load_scene(pkg: Package, source: str) -> Any:
+    """The scene ``source`` (name or JSON file), with JSON syntax errors naming the file."""
+    try:
+        return pkg.module("scene").load_scene(source)
+    except json.JSONDecodeError as e:
+        where = f"line {e.lineno}, column {e.colno}"
+        raise ValidationError(source, f"invalid JSON: {e.msg} ({where})") from None
+
+
+def _stem(source: str) -> str:
+    return Path(source).stem if source.endswith(".json") else source
+
+
+def _save_fields(path: Path, **fields: np.ndarray) -> Path:
+    """One ``.npy`` holding a structured array with one float64 field per keyword."""
+    shape = np.shape(next(iter(fields.values())))
+    out = np.empty(shape, dtype=[(k, np.float64) for k in fields])
+    for k, v in fields.items():
+        out[k] = v
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.save(path, out)
+    return path
+
+
+def _options(args: argparse.Namespace) -> dict[str, Any]:
+    """Method options given on the command line (unset ones are left to the method's defaults)."""
+    options = {}
+    if args.kappa is not None:
+        options["kappa"] = check_positive("kappa", args.kappa)
+    if args.probes is not None:
+        options["probes"] = args.probes
+    if args.paired:
+        options["paired"] = True
+    if args.h is not None:
+        options["h"] = check_positive("h", args.h)
+    return options
+
+
+# ------------------------------------------------------------------------------------------------ verbs
+def _demo(pkg: Package, args: argparse.Namespace) -> int:
+    render, plot = pkg.module("render"), pkg.module("plot")
+    spp = args.spp or pkg.demo_spp
+    seed = args.seed
+    scene = _load_scene(pkg, pkg.demo_scene)
+    table = render.GRADIENT_METHODS
+    methods = [m for m in DEMO_METHODS if m in table.names]
+    reference_method = "boundary" if "boundary" in table.names else "finite_difference"
+    out = Path(args.out)
+
+    start = time.perf_counter()
+    primal = render.render(scene, spp=spp, seed=seed)
+    gradients, seconds = {}, {}
+    for method in methods:
+        t0 = time.perf_counter()
+        gradients[method] = render.render_gradient(scene, pkg.demo_param, method=method, spp=spp, seed=seed)
+        seconds[method] = time.perf_counter() - t0
+    ref_spp = pkg.reference_factor * spp
+    reference = render.render_gradient(
+        scene, pkg.demo_param, method=reference_method, spp=ref_spp, seed=seed + 1
+    )
+    columns = {PANEL_TITLES.get(m, m): g for m, g in gradients.items()}
+    title = f"{pkg.demo_scene}: d/d {pkg.demo_param}, {spp} spp"
+    panel = plot.plot_panel(primal, columns, out / "demo_panel.png", title=title)
+    rows = [
+        (
+            m,
+            f"{g.error_vs(reference):.4f}",
+            f"{float(np.sum(g.derivative)):+.5g}",
+            f"{float(np.mean(g.derivative_stderr)):.3g}",
+            f"{seconds[m]:.2f}",
+        )
+        for m, g in gradients.items()
+    ]
+    heads = ("method", "relative error", "Σ dI/dθ", "mean stderr", "seconds")
+    ref_sum = float(np.sum(reference.derivative))
+    print(
+        format_table(
+            heads,
+            rows,
+            f"{pkg.name} demo: scene {pkg.demo_scene!r}, parameter {pkg.demo_param!r}, {spp} spp, seed {seed}\n"
+            f"reference: {reference_method} at {ref_spp} spp (Σ dI/dθ = {ref_sum:+.5g}); "
+            "relative error = mean|g - g_ref| / max|g_ref|",
+        )
+    )
+    print(f"\nwrote {panel}  ({time.perf_counter() - start:.1f} s)")
+    for section in pkg.demo_sections:
+        print()
+        print(section(args))
+    return 0
+
+
+def _render(pkg: Package, args: argparse.Namespace) -> int:
+    render, plot = pkg.module("render"), pkg.module("plot")
+    scene = _load_scene(pkg, args.scene)
+    image = render.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
+    base = Path(args.out) / _stem(args.scene)
+    png = plot.plot_image(image, base.with_suffix(".png"), title=f"{_stem(args.scene)}, {args.spp} spp")
+    npy = _save_fields(base.with_suffix(".npy"), value=image.value, stderr=image.stderr)
+    print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
+    return 0
+
+
+def _gradient(pkg: Package, args: argparse.Namespace) -> int:
+    render, plot = pkg.module("render"), pkg.module("plot")
+    scene = _load_scene(pkg, args.scene)
+    g = render.render_gradient(
+        scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
+        **_options(args),
+    )  # fmt: skip
+    base = Path(args.out) / f"{_stem(args.scene)}_{args.param}_{args.method}"
+    title = f"{_stem(args.scene)}: d/d {args.param}, {args.method}, {args.spp} spp"
+    png = plot.plot_gradient(g, base.with_suffix(".png"), title=title)
+    npy = _save_fields(
+        base.with_suffix(".npy"),
+        value=g.value,
+        value_stderr=g.value_stderr,
+        derivative=g.derivative,
+        derivative_stderr=g.derivative_stderr,
+    )
+    total = float(np.sum(g.derivative))
+    total_se = float(np.sqrt(np.sum(np.square(g.derivative_stderr))))
+    print(f"Σ dI/dθ over the film = {total:+.6g} ± {total_se:.3g} (one standard error)")
+    print(f"wrote {png} and {npy} (fields value, value_stderr, derivative, derivative_stderr)")
+    return 0
+
+
+def _study(pkg: Package, args: argparse.Namespace) -> int:
+    from flatland.core.study import load_config, run_study
+
+    config = load_config(args.config, package=pkg.name, seed=args.seed, samples=args.spp)
+    out = Path(args.out)
+    cache = Path(args.cache_dir) if args.cache_dir else out / ".cache" / "reparam-lab"
+    result = run_study(
+        config,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        cache_dir=cache,
+        progress=False if args.quiet else None,
+    )
+    csv_path = result.to_csv(out / f"{config.name}.csv")
+    figures = pkg.module("plot").plot_study(result, out)
+    print(result.table())
+    print(f"\nwrote {csv_path}" + "".join(f", {f}" for f in figures) + f"  ({result.seconds:.1f} s)")
+    return 0
+
+
+# ------------------------------------------------------------------------------------------------ parser
+def _parser(pkg: Package) -> _Parser:
+    parser = _Parser(
+        prog=f"python -m {pkg.name}",
+        description=f"{pkg.name}: differentiable rendering of discontinuous integrands "
+        "(Loubet, Holzschuch, Jakob 2019). Errors print one line and exit with status 2.",
+    )
+    verbs = parser.add_subparsers(dest="verb", required=True, metavar="VERB", parser_class=_Parser)
+
+    def common(
+        p: argparse.ArgumentParser, spp_help: str, spp_default: int | None, seed: int | None = 0
+    ) -> None:
+        seed_help = "random seed (default 0)" if seed is not None else "replace the configuration's seed"
+        p.add_argument("--seed", type=int, default=seed, help=seed_help)
+        p.add_argument("--spp", type=int, default=spp_default, help=spp_help)
+        p.add_argument("--out", default="out", help="output folder (default ./out)")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    def scene_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument("scene", metavar="SCENE", help="built-in scene name or JSON scene file")
+        p.add_argument("--batches", type=int, default=None, help="independent batches behind the stderr")
+
+    demo = verbs.add_parser("demo", help="the default scene: panel of methods and error table (< 1 min)")
+    common(demo, f"samples per pixel (default {pkg.demo_spp})", None)
+    demo.set_defaults(func=_demo)
+
+    render = verbs.add_parser("render", help="render SCENE to PNG and .npy")
+    scene_arg(render)
+    common(render, "samples per pixel (default 64)", 64)
+    render.set_defaults(func=_render)
+
+    gradient = verbs.add_parser("gradient", help="derivative image of SCENE w.r.t. --param, PNG and .npy")
+    scene_arg(gradient)
+    gradient.add_argument("--param", required=True, help="scene parameter, e.g. occluder.translate.x")
+    gradient.add_argument("--method", default="reparam", help="naive, finite_difference, boundary, reparam")
+    gradient.add_argument(
+        "--kappa", type=float, default=None, help="reparam: convolution kernel concentration"
+    )
+    gradient.add_argument("--probes", type=int, default=None, help="reparam: probe rays")
+    gradient.add_argument("--paired", action="store_true", help="reparam: paired samples (needs --kappa)")
+    gradient.add_argument("--h", type=float, default=None, help="finite_difference: step")
+    common(gradient, "samples per pixel (default 64)", 64)
+    gradient.set_defaults(func=_gradient)
+
+    study = verbs.add_parser("study", help="run a study CONFIG (JSON): CSV and figures")
+    study.add_argument("config", metavar="CONFIG", help="study configuration (JSON file)")
+    study.add_argument("--workers", type=int, default=None, help="worker processes")
+    study.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    study.add_argument("--cache-dir", default=None, help="reference cache (default OUT/.cache/reparam-lab)")
+    common(study, "replace every cell's samples per trial (n or spp)", None, seed=None)
+    study.set_defaults(func=_study)
+    return parser
+
+
+def _one_line(error: BaseException) -> str:
+    if isinstance(error, OSError) and error.filename is not None and error.strerror:
+        message = f"{error.filename}: {error.strerror}"
+    else:
+        message = str(error) or type(error).__name__
+    return " ".join(message.split())
+
+
+def main(package: Package, argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv`` (default ``sys.argv[1:]``) and run the verb; returns the exit status."""
+    try:
+        args = _parser(package).parse_args(argv)
+        _check_counts(args)
+        return args.func(package, args)
+    except _UsageError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except (ValueError, OSError) as e:  # ValidationError, JSONDecodeError, missing files
+        print(f"error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as e:  # --help
+        return e.code if isinstance(e.code, int) else 0
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,25 @@
+"""Figures of flatland results: matplotlib only, no numerics.
+
+A flatland film is one row of pixels. Images are drawn as a strip (the row stretched
+vertically) above a curve with ±2 standard-error bands; derivatives use the
+diverging map ``RdBu_r`` centred on zero, one symmetric scale shared by all methods
+of a figure. The panel puts "primal | naive | boundary | reparam | finite
+differences" side by side as strips and overlays every method's derivative as
+curves below, where the spike naive differentiation misses at a moving shadow edge
+is plain to see. Study figures: bias ± CI and standard deviation against κ, and
+equal-time efficiency bars. The drawing code is shared with sphere3d
+(:mod:`flatland.core.plotting`), which draws its 2D films as images.
+"""
+
+from __future__ import annotations
+
+from flatland.core.plotting import (
+    plot_efficiency,
+    plot_gradient,
+    plot_image,
+    plot_kappa,
+    plot_panel,
+    plot_study,
+)
+
+__all__ = ["plot_efficiency", "plot_gradient", "plot_image", "plot_kappa", "plot_panel", "plot_study"]

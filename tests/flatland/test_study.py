@@ -1,0 +1,189 @@
+"""The study runner on textbook integrals: configuration, grid, statistics, CSV, reference cache.
+
+The κ trade-off from the CSV the command line writes is in test_study_cli.py; the
+workers=1 / workers=2 / Dask equality in test_study_parallel.py.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from flatland.core import study
+from flatland.core.stats import normal_quantile
+from flatland.core.study import StudyConfig, load_config, read_csv, run_study, trial_seed
+from flatland.core.validate import ValidationError
+from flatland.integrals import get_integral
+
+
+def _config(**overrides):
+    data = {
+        "problem": {"integral": "step", "theta": 0.5},
+        "methods": [{"method": "naive"}, {"method": "reparam"}, {"method": "finite_difference", "h": 0.05}],
+        "n": 4000,
+        "trials": 12,
+        "seed": 7,
+    }
+    data.update(overrides)
+    return StudyConfig.from_dict(data)
+
+
+def test01_grid_expands_swept_options_in_order():
+    config = StudyConfig.from_dict(
+        {
+            "problem": {"integral": "two_steps"},
+            "methods": [
+                {"method": "boundary"},
+                {"method": "reparam", "kappa": [1, 10], "paired": [False, True], "n": [100, 200]},
+            ],
+            "n": 50,
+            "trials": 3,
+        }
+    )
+    cells = config.cells
+    assert [c.index for c in cells] == list(range(9))
+    assert (cells[0].method, cells[0].options, cells[0].n) == ("boundary", (), 50)
+    swept = [(c.options_dict["kappa"], c.options_dict["paired"], c.n) for c in cells[1:]]
+    assert swept == [(k, p, n) for k in (1.0, 10.0) for p in (False, True) for n in (100, 200)]
+    assert config.problem.theta == get_integral("two_steps").default_theta
+    assert cells[4].label == "reparam kappa=1 paired"
+    assert config.reference is None  # closed form
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"trials": 1}, "trials:"),
+        ({"seed": -1}, "seed:"),
+        ({"colour": 3}, "colour:"),
+        ({"problem": {"integral": "nope"}}, "problem.integral:"),
+        ({"problem": {"integral": "step", "theta": 9.0}}, "problem.theta:"),
+        ({"problem": {"integral": "step", "param": "x"}}, "problem.param:"),
+        ({"problem": {"integral": "step", "scene": "shadow"}}, "problem:"),
+        ({"methods": []}, "methods:"),
+        ({"methods": [{"method": "naive"}, {"method": "reparam", "kappa": [1, -2]}]}, "methods[1].kappa:"),
+        ({"methods": [{"method": "reparam", "probes": 4}]}, "methods[0].probes:"),
+        ({"methods": [{"method": "magic"}]}, "methods[0].method:"),
+        ({"methods": [{"method": "naive", "n": 0}]}, "methods[0].n:"),
+        ({"methods": [{"method": "naive", "spp": 4}]}, "methods[0].spp:"),
+        ({"spp": 16}, "spp:"),
+        ({"level": 1.5}, "level:"),
+        ({"workers": 0}, "workers:"),
+        ({"reference": {"method": "reparam", "kappa": 0}}, "reference.kappa:"),
+    ],
+)
+def test02_configuration_errors_name_the_field(change, field):
+    with pytest.raises(ValidationError) as info:
+        _config(**change)
+    assert str(info.value).startswith(field), str(info.value)
+
+
+def test03_trial_seeds_depend_only_on_seed_cell_and_trial():
+    seeds = {(c, k): trial_seed(5, c, k) for c in range(20) for k in range(20)}
+    assert len(set(seeds.values())) == 400
+    assert seeds[3, 4] == trial_seed(5, 3, 4)
+    assert trial_seed(6, 3, 4) != seeds[3, 4]
+
+
+def test04_cell_statistics_follow_their_definitions():
+    """Each column recomputed from the trial estimates it summarizes."""
+    result = run_study(_config(), progress=False)
+    reference = get_integral("step").derivative(0.5)
+    assert result.reference.derivative == reference and result.reference.source == "closed form"
+    for row in result.rows:
+        d = np.array(row.derivatives)
+        assert row.trials == d.size == 12 and row.samples == 4000
+        assert row.mean_derivative == pytest.approx(d.mean(), rel=1e-14)
+        assert row.variance_per_sample == pytest.approx(d.var(ddof=1) * 4000, rel=1e-12, abs=1e-300)
+        assert row.rmse == pytest.approx(np.sqrt(np.mean((d - reference) ** 2)), rel=1e-12)
+        half = stats.t.ppf(0.975, 11) * d.std(ddof=1) / np.sqrt(12)
+        assert row.bias_high - row.bias_low == pytest.approx(2 * half, rel=1e-9, abs=1e-14)
+        assert row.seconds_per_sample > 0.0
+        cost = row.variance_per_sample * row.seconds_per_sample
+        assert row.efficiency == (1.0 / cost if cost > 0 else math.inf)
+        assert row.equal_time_rmse == pytest.approx(math.sqrt(row.bias**2 + cost / row.time_budget))
+
+
+def test05_biased_and_unbiased_methods_are_told_apart():
+    """Naive drops the whole derivative of the step (bias -dI/dθ, zero variance); the translation
+    and finite differences (h² I'''/6 ≈ 2e-4 here, far below their interval) cover the closed form.
+
+    Level 0.999 per interval, seed fixed.
+    """
+    result = run_study(_config(level=0.999), progress=False)
+    naive = result.row("naive")
+    assert naive.mean_derivative == 0.0 and naive.variance_per_sample == 0.0
+    assert naive.bias == -result.reference.derivative and not naive.bias_contains_zero()
+    assert math.isinf(naive.efficiency)
+    for method in ("reparam", "finite_difference"):
+        row = result.row(method)
+        assert row.bias_contains_zero(), (method, row.bias_low, row.bias_high)
+        assert row.variance_per_sample > 0.0
+
+
+def test06_boundary_has_zero_variance_up_to_rounding():
+    """The boundary estimator of two_steps adds the exact jump term to a zero interior term: its
+    spread over trials is floating-point noise, reported as zero variance and an unbiased interval."""
+    config = StudyConfig.from_dict(
+        {"problem": {"integral": "two_steps"}, "methods": [{"method": "boundary"}], "n": 1000, "trials": 5}
+    )
+    row = run_study(config, progress=False).rows[0]
+    assert row.variance_per_sample == 0.0 and math.isinf(row.efficiency)
+    assert row.bias_contains_zero() and abs(row.bias) < 1e-14
+
+
+def test07_csv_round_trips_every_number_exactly(tmp_path):
+    result = run_study(_config(trials=3), progress=False)
+    path = result.to_csv(tmp_path / "out" / "s.csv")
+    rows = read_csv(path)
+    assert tuple(rows[0]) == study.CSV_COLUMNS
+    for written, row in zip(rows, result.rows, strict=True):
+        for column in ("mean_derivative", "bias", "bias_low", "bias_high", "variance_per_sample", "rmse"):
+            assert written[column] == getattr(row, column)
+        assert written["method"] == row.cell.method and written["n"] == 4000 and written["trials"] == 3
+    assert rows[2]["h"] == 0.05 and rows[1]["h"] is None and rows[0]["kappa"] is None
+    assert rows[0]["efficiency"] == math.inf
+
+
+def test08_monte_carlo_reference_is_cached_by_its_inputs(tmp_path, monkeypatch):
+    config = _config(reference={"method": "finite_difference", "h": 0.01, "n": 20000, "seed": 3}, trials=2)
+    first = study.resolve_reference(config, tmp_path)
+    files = list(tmp_path.glob("*.npz"))
+    assert len(files) == 1 and first.source.startswith("finite_difference n=20000")
+    assert "cached" not in first.source
+
+    def fail(*args):
+        raise AssertionError("the cached reference should have been used")
+
+    monkeypatch.setattr(study, "_compute_reference", fail)
+    second = study.resolve_reference(config, tmp_path)
+    assert second.source.endswith("(cached)") and second.derivative == first.derivative
+    assert second.stderr == first.stderr > 0.0
+    # the reference estimate itself: within z(0.999) standard errors of the closed form (h² bias ~4e-6)
+    assert (
+        abs(first.derivative - get_integral("step").derivative(0.5)) <= normal_quantile(0.999) * first.stderr
+    )
+
+    monkeypatch.undo()
+    other = _config(reference={"method": "finite_difference", "h": 0.01, "n": 20000, "seed": 4}, trials=2)
+    study.resolve_reference(other, tmp_path)
+    assert len(list(tmp_path.glob("*.npz"))) == 2
+
+
+def test09_load_config_reads_json_and_applies_overrides(tmp_path):
+    path = tmp_path / "my_study.json"
+    data = {"problem": {"integral": "arc"}, "methods": [{"method": "reparam", "n": [10, 20]}]}
+    data.update(n=5, trials=2)
+    path.write_text(json.dumps(data))
+    config = load_config(path)
+    assert config.name == "my_study" and [c.n for c in config.cells] == [10, 20]
+    replaced = load_config(path, seed=11, samples=64)
+    assert replaced.seed == 11 and [c.n for c in replaced.cells] == [64]
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"problem": {"integral": "arc"},}')
+    with pytest.raises(ValidationError, match=r"bad\.json: invalid JSON: .*line 1"):
+        load_config(bad)
