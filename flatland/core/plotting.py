@@ -105,7 +105,7 @@ def image_figure(
         fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 3.2), height_ratios=(1, 2), sharex=True)
         _film(top, value, PRIMAL, norm, title)
         top.set_xlabel("")
-        _curve(bottom, value, stderr, "radiance")
+        _curve(bottom, value, stderr, "radiance", color="k")
         bottom.set_xlabel("pixel")
         bottom.set_ylabel("radiance")
         bottom.set_xlim(0, value.size)
@@ -129,7 +129,7 @@ def gradient_figure(
             _film(top, derivative, DIVERGING, norm, title), ax=[top, bottom], shrink=0.6, label="dI/dθ"
         )
         top.set_xlabel("")
-        _curve(bottom, derivative, stderr, "dI/dθ")
+        _curve(bottom, derivative, stderr, "dI/dθ", color="k")
         bottom.axhline(0.0, color="0.5", lw=0.6)
         bottom.set_xlabel("pixel")
         bottom.set_ylabel("dI/dθ")
