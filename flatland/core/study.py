@@ -24,7 +24,7 @@ Problems
 Cells and trials
 ----------------
 Each entry of ``"methods"`` names a method and its options; any option (``kappa``,
-``probes``, ``paired``, ``h``) and the sample count (``"n"`` for integrals, ``"spp"``
+``probes``, ``paired``, ``h``, ...) and the sample count (``"n"`` for integrals, ``"spp"``
 for scenes) may be a list, and the entry expands to the Cartesian product: one
 :class:`Cell` per combination, numbered in order. Trial ``k`` of cell ``c`` runs
 with the seed :func:`trial_seed` ``(seed, c, k)``, a function of those three numbers
@@ -123,7 +123,6 @@ _TOP_KEYS = ("name", "problem", "methods", "n", "spp", "trials", "seed", "worker
              "reference", "time_budget")  # fmt: skip
 _PROBLEM_KEYS = ("integral", "theta", "scene", "param", "functional", "pixel")
 _REFERENCE_KEYS = ("method", "n", "spp", "seed")
-_SWEEPABLE = (*OPTION_COLUMNS, "n", "spp")
 
 
 # ------------------------------------------------------------------------------------------ configuration
@@ -373,8 +372,6 @@ def _expand_cells(data: Any, problem: Problem, default_n: int | None) -> tuple[C
             if isinstance(v, list | tuple):
                 if not v:
                     raise ValidationError(f"{where}.{k}", "an empty list sweeps nothing")
-                if k not in _SWEEPABLE:
-                    raise ValidationError(f"{where}.{k}", f"only {', '.join(_SWEEPABLE)} can be swept")
                 values.append(list(v))
             else:
                 values.append([v])
