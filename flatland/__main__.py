@@ -26,6 +26,7 @@ PACKAGE = Package(
     "flatland",
     demo_scene="shadow",
     demo_param="occluder.translate.x",
+    demo_spp=256,
     demo_sections=(_textbook_section,),
 )
 """What the shared command line needs to know about flatland."""
