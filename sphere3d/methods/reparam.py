@@ -1,0 +1,218 @@
+"""Reparameterization by rotations on S², with probe rays, vMF convolution and paired samples.
+
+Loubet et al. 2019, Sec. 3.2 (change of variables), 4.1 (one rotation per integral),
+4.2 (convolution kernels for integrands of large support), 4.3 (choosing the
+rotation by ray tracing), and the paired-sample control variate of the authors'
+implementation (DESIGN 2.6–2.9).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.contract import Option
+from flatland.core.dual import detach, variable
+from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
+from sphere3d.integrator import Shading
+from sphere3d.methods._common import GRADIENT_METHODS
+from sphere3d.probes import follow_probes, mean_point_direction
+from sphere3d.rotation import Rotation
+from sphere3d.sampling import (
+    sample_cosine_hemisphere,
+    sample_filter,
+    sample_mesh,
+    sample_vmf,
+    triangle_barycentrics,
+)
+from sphere3d.state import SceneState
+from sphere3d.tasks import ImageTask, PointTask, Tally
+from sphere3d.tracing import Hits, attached_points
+from sphere3d.vector import dot, norm, scatter, zeros
+
+__all__ = ["ReparamTransforms", "reparam"]
+
+SMALL_WEIGHT = 1e-5
+"""Paired weights with |w| below this count as 1 (DESIGN 2.9)."""
+
+
+@dataclass(frozen=True)
+class ReparamTransforms:
+    """The rotations of the three integrals of :mod:`sphere3d.integrator`.
+
+    Attributes
+    ----------
+    kappa : float or None
+        vMF concentration of the convolution kernel of the cosine-sampled integral;
+        None: no kernel, one rotation per sample from probes drawn from the cosine
+        density itself (Sec. 4.1 over a support too large for it: biased).
+    probes : int
+        Probe rays per transform.
+    paired : bool
+        Two kernel samples per outer sample share one rotation (DESIGN 2.9).
+    """
+
+    kappa: float | None
+    probes: int
+    paired: bool
+
+    def camera(
+        self, state: SceneState, rows: np.ndarray, cols: np.ndarray, rng: np.random.Generator
+    ) -> Rotation:
+        """Pixel integral (small support): one rotation per pixel from probes drawn from its filter."""
+        cam = state.camera
+        s = sample_filter(rng.random((rows.size, self.probes, 2)), cam.filter)
+        d = cam.directions(cols[:, None] + 0.5 + s[..., 0], rows[:, None] + 0.5 + s[..., 1])
+        hits = state.tracer.intersect(detach(cam.origin), d)
+        return follow_probes(state, cam.origin, d, hits)
+
+    def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
+        """Emitter sampling: one rotation per shading point from ``probes`` shadow rays (Sec. 4.3).
+
+        The authors' rule: follow the mean attached hit of the occluded probes. When
+        no probe is occluded there is no shadow edge to follow, and instead of the
+        identity the rotation follows the mean of the probes' attached points on the
+        emitters: the samples then stay attached to a moving emitter (or to a static
+        one seen from a moving point), so the derivative does not pick up the
+        steep radiance fade at the emitter's border as noise. Any rotation is exact
+        for a continuous integrand; this one only lowers the variance.
+        """
+        state = shading.state
+        m = len(shading)
+        u = rng.random((m, self.probes, 3))
+        emitters = np.asarray(detach(state.triangles))[state.emitters]
+        y, k = sample_mesh(u, emitters)
+        to = y - detach(shading.x)[:, None]
+        dist = norm(to)
+        w = to / np.where(dist > 0.0, dist, 1.0)[..., None]
+        tmax = np.maximum(dist - 2.0 * state.epsilon, 0.0)
+        # only probes that are light samples the strategy could use: above the surface, far enough
+        usable = (dot(w, detach(shading.n)[:, None]) > 0.0) & (dist > 4.0 * state.epsilon)
+        occluded = state.tracer.occluded(shading.origin[:, None], w, tmax) & usable
+        shadowed = occluded.any(axis=1)
+        target = zeros((m, 3), state.dual)
+        found = np.zeros(m, dtype=bool)
+        s = np.flatnonzero(shadowed)
+        if s.size:  # the authors' rule: the mean attached hit of the occluded probes
+            hits = state.tracer.intersect(shading.origin[s, None], w[s], tmax[s])
+            points = attached_points(state.triangles[np.where(occluded[s], hits.triangle, 0)], hits.u, hits.v)
+            target[s], found[s] = mean_point_direction(shading.x[s], points, occluded[s])
+        f = np.flatnonzero(~shadowed & usable.any(axis=1))
+        if f.size:  # no shadow edge: the mean attached probe point on the emitters
+            b1, b2 = triangle_barycentrics(u[f, :, 1:3])
+            points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)
+            target[f], found[f] = mean_point_direction(shading.x[f], points, usable[f])
+        return Rotation.following(target, found)
+
+    def _probe_rotation(self, shading: Shading, centre: np.ndarray, rng: np.random.Generator) -> Rotation:
+        """One rotation per shading point from probes in the kernel lobe around ``centre``.
+
+        Without a kernel (``kappa`` None) the probes come from the cosine lobe instead.
+        """
+        m = len(shading)
+        u = rng.random((m, self.probes, 2))
+        if self.kappa is None:
+            d = sample_cosine_hemisphere(u, detach(shading.n)[:, None])
+        else:
+            d = sample_vmf(u, centre[:, None], self.kappa)
+        hits = shading.state.tracer.intersect(shading.origin[:, None], d)
+        # a probe below the horizon sees only the surface it leaves, where the integrand is 0
+        # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
+        hits = hits.without(dot(d, detach(shading.n)[:, None]) <= 0.0)
+        return follow_probes(shading.state, shading.x, d, hits)
+
+    def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
+        """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (DESIGN 2.7)."""
+        log_k = self.kappa * dot(rotated, centre)  # the vMF normalization cancels in the ratio
+        return np.exp(log_k - detach(log_k))
+
+    def bsdf(
+        self, shading: Shading, mu: np.ndarray, pdf: np.ndarray, hits: Hits, kernel: Any, probes: Any
+    ) -> Any:
+        """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
+        if self.paired:
+            return self._paired(shading, mu, pdf, kernel, probes)
+        # samples whose integrand is 0 with zero derivative need no rotation (and no probes)
+        live = np.flatnonzero(shading.contributes(mu, hits))
+        sub, mu_l, hits_l = shading.take(live), mu[live], hits.take(live)
+        if self.kappa is None:
+            rotated = self._probe_rotation(sub, mu_l, probes).apply(mu_l)
+            est = sub.evaluate_bsdf(mu_l, rotated, hits_l) / pdf[live]
+        else:
+            # kernel centre ω ~ k(·, μ) around the primary sample μ: the joint density of (μ, ω) is
+            # the paper's "ω ~ p, μ ~ k(·, ω)" read the other way (k symmetric), and μ stays the
+            # naive sample, so the primal is bit-identical to the naive one
+            centre = sample_vmf(kernel.random((live.size, 2)), mu_l, self.kappa)
+            rotated = self._probe_rotation(sub, centre, probes).apply(mu_l)
+            # f(Rμ) k(Rμ, ω) / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
+            est = sub.evaluate_bsdf(mu_l, rotated, hits_l) * self._kernel_weight(rotated, centre) / pdf[live]
+        return scatter(len(mu), live, est, shading.state.dual)
+
+    def _paired(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray, kernel: Any, probes: Any) -> Any:
+        """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (DESIGN 2.9)."""
+        m = len(mu)
+        rotation = self._probe_rotation(shading, mu, probes)
+        e, w = [], []
+        for _ in range(2):  # the two members of each pair (not a loop over samples)
+            member = sample_vmf(kernel.random((m, 2)), mu, self.kappa)
+            rotated = rotation.apply(member)
+            weight = self._kernel_weight(rotated, mu)
+            weight = np.where(np.abs(detach(weight)) < SMALL_WEIGHT, 1.0 + 0.0 * weight, weight)
+            w.append(weight)
+            e.append(shading.evaluate_bsdf(member, rotated, shading.trace(member)) * weight / pdf)
+        # each weight's derivative has zero mean given ω and is independent of the other member:
+        # a control variate scaled by the other member's estimate                      (DESIGN 2.9)
+        return 0.5 * (e[0] - e[1] / w[1] * (w[0] - detach(w[0]))) + 0.5 * (
+            e[1] - e[0] / w[0] * (w[1] - detach(w[1]))
+        )
+
+
+def _check_kappa(name: str, value: Any) -> float | None:
+    """κ > 0, or None for no convolution kernel."""
+    return None if value is None else check_positive(name, value)
+
+
+def _check_probes(name: str, value: Any) -> int:
+    return check_int(name, value, minimum=1)
+
+
+@GRADIENT_METHODS.register(
+    "reparam",
+    Option("kappa", 1000.0, _check_kappa),
+    Option("probes", 4, _check_probes),
+    Option("paired", False, check_bool),
+)
+def reparam(task: ImageTask | PointTask, kappa: float | None, probes: int, paired: bool) -> Tally:
+    """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
+
+    Each integral's samples ω are evaluated at R(θ)·ω, R the identity at θ0 that moves
+    like one chosen occluder point (Sec. 4.1, DESIGN 2.6), |det J| = 1:
+
+    - **pixel integral** (support: the filter footprint): one rotation per pixel and
+      batch, picked from ``probes`` camera rays drawn from the filter by the
+      heuristic of Sec. 4.3 (:mod:`sphere3d.probes`); the filter weight carries the
+      derivative of k·J under the rotation, so it needs a continuous filter (tent,
+      gaussian): with ``box`` the footprint's edge moves and the gradient is biased
+      (DESIGN 2.11);
+    - **emitter sampling**: one rotation per shading point following the mean of the
+      attached hits of ``probes`` occluded shadow rays (the authors' implementation);
+      exact when one rigid occluder casts the shadow onto a small emitter, biased when
+      several occluders moving differently share the emitter's solid angle, and at the
+      emitter's own border unless its radiance fades there (``fade``, DESIGN 2.8);
+    - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
+      with concentration ``kappa``: a kernel centre ω ~ vMF(μ, κ) per sample, probes in
+      the kernel's lobe, weight ``k(Rμ, ω) / detach(k(Rμ, ω))``. Biased where the kernel
+      reaches discontinuities the rotation does not follow (falls as κ grows), with a
+      variance growing like √κ. ``kappa=None``: no kernel, probes from the cosine
+      density (one rotation for the whole hemisphere: strongly biased, for study).
+
+    The primal is bit-identical to ``naive``'s for the same seed, except with
+    ``paired=True`` (needs ``kappa``): then the outer sample is the cosine sample, two
+    kernel samples around it share the rotation, and the control variate of DESIGN 2.9
+    reduces the variance of the kernel weights (a different, still unbiased primal).
+    """
+    if paired and kappa is None:
+        raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
+    return task.evaluate(variable(task.theta0), ReparamTransforms(kappa, probes, paired))

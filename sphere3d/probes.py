@@ -1,0 +1,159 @@
+"""Choosing the rotation by ray tracing: the probe heuristic of Loubet et al. 2019, Sec. 4.3 (DESIGN 2.8).
+
+Inside the support of an integrand a few probe rays (default 4) are traced, and one
+point p is picked whose motion the rotation should follow:
+
+- pair probe 0 with the *last* probe that hits a different shape (a miss counts as
+  its own "shape"); if there is none, probe 0 stands alone;
+- only one of the pair hits: its hit point;
+- both hit: the tangent plane (p_k, n_k) of one *occludes* the other when it
+  separates that point from the ray origin o,
+  ``(n0·(p1 - p0)) (n0·(o - p0)) < 0``; if exactly one occludes the other, the point
+  on the occluder;
+- otherwise, nearly parallel normals (|n0·n1| > 0.99): p0;
+- otherwise the intersection of the two tangent planes with the plane through o
+  spanned by the two probe directions (where the two surfaces would meet between
+  the probes: a silhouette or crease), falling back to p0 when that 3×3 system is
+  degenerate; a departure from DESIGN 2.8, argued in :func:`select_points`: the
+  fallback also applies when the point does not lie in front of o;
+- no probe hits: the identity.
+
+The chosen point is *attached* (detached barycentrics on the θ-dependent vertices),
+so it moves with its shape; its direction from the (possibly moving) origin gives
+the rotation (:class:`~sphere3d.rotation.Rotation`). For emitter sampling the point
+is instead the mean of the attached hits of the occluded shadow probes
+(:func:`mean_point_direction`), one transform for all light samples of a point.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach
+from sphere3d.rotation import Rotation
+from sphere3d.state import SceneState
+from sphere3d.tracing import Hits, attached_points, face_normals
+from sphere3d.vector import cross, dot, norm
+
+__all__ = ["PARALLEL", "follow_probes", "mean_point_direction", "pair_index", "select_points"]
+
+PARALLEL = 0.99
+"""|n0·n1| above which the two tangent planes count as parallel (DESIGN 2.8)."""
+DEGENERATE = 1e-6
+"""|det| of the plane system below which the intersection is ill-conditioned."""
+
+
+def pair_index(shape: np.ndarray) -> np.ndarray:
+    """Per row, the last probe whose shape differs from probe 0's (0 if none).
+
+    Parameters
+    ----------
+    shape : ndarray of int, shape (m, P)
+        Hit shape per probe, -1 for a miss.
+    """
+    different = shape[:, 1:] != shape[:, :1]
+    last = shape.shape[1] - 1 - np.argmax(different[:, ::-1], axis=1)
+    return np.where(different.any(axis=1), last, 0)
+
+
+def _towards(point: Any, origin: Any, found: np.ndarray) -> tuple[Any, np.ndarray]:
+    """point - origin (Dual), and ``found`` cleared where its direction is undefined."""
+    to = point - origin
+    length = detach(norm(to))
+    return to, found & (length > 0.0) & np.isfinite(length)
+
+
+def select_points(
+    state: SceneState, origin: Any, directions: np.ndarray, hits: Hits
+) -> tuple[Any, np.ndarray]:
+    """The point to follow per row of probes, and whether there is one (see the module docstring).
+
+    Parameters
+    ----------
+    state : SceneState
+        For the θ-dependent triangles.
+    origin : Dual or ndarray, shape (m, 3) or (3,)
+        Probe ray origin (re-attached: it may move with θ).
+    directions : ndarray, shape (m, P, 3)
+        Probe directions (θ-free).
+    hits : Hits, shape (m, P)
+
+    Returns
+    -------
+    point : Dual, shape (m, 3)
+    found : ndarray of bool, shape (m,)
+
+    Notes
+    -----
+    The plane-intersection point is replaced by p0 when it lies behind the origin:
+    a tangent-plane line that crosses the probe plane behind o says nothing about
+    the silhouette between the two probes, and its direction would be reversed.
+    """
+    m = directions.shape[0]
+    rows = np.arange(m)
+    j = pair_index(hits.shape)
+    hit0 = hits.shape[:, 0] >= 0
+    hit1 = (hits.shape[rows, j] >= 0) & (j != 0)
+    t0 = state.triangles[np.maximum(hits.triangle[:, 0], 0)]
+    t1 = state.triangles[np.maximum(hits.triangle[rows, j], 0)]
+    p0 = attached_points(t0, hits.u[:, 0], hits.v[:, 0])
+    p1 = attached_points(t1, hits.u[rows, j], hits.v[rows, j])
+    n0, n1 = face_normals(t0), face_normals(t1)
+    o = origin + 0.0 * p0  # broadcast to (m, 3)
+    p0v, p1v, n0v, n1v, ov = detach(p0), detach(p1), detach(n0), detach(n1), detach(o)
+    # tangent plane k separates the other hit from the origin: shape k occludes the other   (DESIGN 2.8)
+    occ0 = dot(n0v, p1v - p0v) * dot(n0v, ov - p0v) < 0.0
+    occ1 = dot(n1v, p0v - p1v) * dot(n1v, ov - p1v) < 0.0
+    parallel = np.abs(dot(n0v, n1v)) > PARALLEL
+    # the two tangent planes and the plane through o spanned by the probe directions:
+    # x = (h0 (n1 × m) + h1 (m × n0) + h2 (n0 × n1)) / (n0 · (n1 × m)),  h_k = n_k · p_k, h2 = m · o
+    d0, d1 = directions[:, 0], directions[rows, j]
+    mv = cross(d0, d1)
+    m_len = norm(mv)
+    mv = mv / np.where(m_len > 0.0, m_len, 1.0)[:, None]
+    n1xm = cross(n1, mv)
+    det = dot(n0, n1xm)
+    ok = (np.abs(detach(det)) > DEGENERATE) & (m_len > 1e-12)
+    safe_det = np.where(ok, det, 1.0)
+    crossing = (dot(n0, p0)[:, None] * n1xm + dot(n1, p1)[:, None] * cross(mv, n0)
+                + dot(mv, o)[:, None] * cross(n0, n1)) / safe_det[:, None]  # fmt: skip
+    ok = ok & (dot(detach(crossing) - ov, d0 + d1) > 0.0)
+
+    both = hit0 & hit1
+    use_cross = both & ~(occ0 ^ occ1) & ~parallel & ok
+    use_p1 = (hit1 & ~hit0) | (both & occ1 & ~occ0)
+    point = np.where(use_cross[:, None], crossing, np.where(use_p1[:, None], p1, p0))
+    return point, hit0 | hit1
+
+
+def follow_probes(state: SceneState, origin: Any, directions: np.ndarray, hits: Hits) -> Rotation:
+    """The rotation following the point chosen by :func:`select_points` (identity where none)."""
+    point, found = select_points(state, origin, directions, hits)
+    to, found = _towards(point, origin, found)
+    return Rotation.following(to, found)
+
+
+def mean_point_direction(origin: Any, points: Any, mask: np.ndarray) -> tuple[Any, np.ndarray]:
+    """Direction (not normalized) from ``origin`` to the mean of the attached ``points`` where ``mask``.
+
+    Parameters
+    ----------
+    origin : Dual, shape (m, 3)
+        The shading points.
+    points : Dual, shape (m, P, 3)
+        Attached points, one per probe.
+    mask : ndarray of bool, shape (m, P)
+        Which probes count.
+
+    Returns
+    -------
+    direction : Dual, shape (m, 3)
+        For :meth:`Rotation.following`.
+    found : ndarray of bool, shape (m,)
+        False where no probe counts (the rotation is then the identity).
+    """
+    count = mask.sum(axis=1)
+    total = np.einsum("mpk,mp->mk", points, mask.astype(np.float64))
+    return _towards(total / np.maximum(count, 1)[:, None], origin, count > 0)

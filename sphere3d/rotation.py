@@ -1,0 +1,144 @@
+"""Differentiable rotations of the sphere S² (Loubet et al. 2019, Sec. 4.1; DESIGN 2.6).
+
+On S² the change of variables that makes one moving silhouette static is a rotation
+R(θ): integrate ``f(R(θ) ω, θ)`` instead of ``f(ω, θ)`` (|det J| = 1). It must be the
+identity at the parameter value θ0 where the gradient is taken, so that the primal
+estimate is unchanged sample for sample, and it must move the direction ω_p of one
+chosen occluder point exactly: ``∂R/∂θ ω_p0 = ∂ω_p/∂θ``.
+
+Construction (the rotation taking the unit vector ``a`` to the unit vector ``b``,
+Rodrigues' formula written without trigonometry)::
+
+    R(a → b) = c I + [v]× + v vᵀ / (1 + c),     v = a × b,  c = a · b.
+
+With ``a = detach(ω_p)`` and ``b = ω_p`` (a Dual), ``v = 0`` and ``c = 1`` in value,
+so R is the identity in value; its derivative is ``Ṙ = ċ I + [a × ḃ]×`` (the
+quadratic term has a double zero), and ``Ṙ a = ċ a + ḃ (a·a) - a (a·ḃ) = ḃ`` because
+``a·ḃ = ċ = 0`` for a unit vector. Samples are rotated as ``R · detach(ω)``: they are
+drawn θ-independently, and only the rotation carries the tangent.
+
+Floating point: ``a × a`` is exactly 0 but ``a · a`` is 1 only to rounding, so
+:meth:`Rotation.apply` returns ``ω + (Rω - detach(Rω))``: value exactly ω (the
+primal stays bit-identical to the naive estimator), tangent exactly that of Rω.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach, tangent
+from sphere3d.vector import cross, dot, norm
+
+__all__ = ["Rotation", "rotate", "rotation_matrix"]
+
+
+def rotation_matrix(a: Any, b: Any) -> Any:
+    """The matrix R(a → b) = c I + [v]× + v vᵀ / (1 + c) of the rotation taking ``a`` to ``b``.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (..., 3)
+        Unit vectors (plain or Dual), not antiparallel (c = a·b > -1).
+
+    Returns
+    -------
+    ndarray or Dual, shape (..., 3, 3)
+        Rotation matrices; a Dual when ``a`` or ``b`` is.
+    """
+    v = cross(a, b)
+    c = dot(a, b)
+    zero = 0.0 * c
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    # [v]x, the cross-product matrix: [v]x w = v x w
+    skew = np.stack(
+        [
+            np.stack([zero, -vz, vy], axis=-1),
+            np.stack([vz, zero, -vx], axis=-1),
+            np.stack([-vy, vx, zero], axis=-1),
+        ],
+        axis=-2,
+    )
+    eye = np.eye(3) * c[..., None, None]
+    outer = v[..., :, None] * v[..., None, :] / (1.0 + c)[..., None, None]
+    return eye + skew + outer
+
+
+def rotate(a: Any, b: Any, omega: Any) -> Any:
+    """R(a → b) ω without forming the matrix: ``c ω + v × ω + v (v·ω) / (1 + c)``.
+
+    Broadcasts over leading axes; any argument may be a Dual.
+    """
+    v = cross(a, b)
+    c = dot(a, b)
+    return c[..., None] * omega + cross(v, omega) + v * (dot(v, omega) / (1.0 + c))[..., None]
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """A rotation R(θ) that is the identity at θ0 and follows one direction ω_p(θ) exactly.
+
+    Attributes
+    ----------
+    target : Dual, shape (..., 3)
+        ω_p(θ), unit directions; R takes ``detach(target)`` to ``target``.
+    active : ndarray of bool, shape (...)
+        Where a point was found; elsewhere R is the identity (zero derivative).
+    """
+
+    target: Dual
+    active: np.ndarray
+
+    @staticmethod
+    def identity(shape: tuple[int, ...]) -> Rotation:
+        """The identity rotation (no point to follow) for ``shape`` integrals."""
+        z = np.zeros((*shape, 3))
+        z[..., 2] = 1.0
+        return Rotation(Dual(z), np.zeros(shape, dtype=bool))
+
+    @staticmethod
+    def following(omega_p: Any, active: np.ndarray | None = None) -> Rotation:
+        """The rotation whose derivative moves ``detach(ω_p)`` like ``ω_p`` (DESIGN 2.6).
+
+        ``omega_p`` need not be unit: it is normalized here, tangent included.
+        Where ``active`` is False the direction is replaced by a constant, so the
+        rotation there is the identity, also in derivative (and NaNs from an
+        undefined ω_p cannot leak).
+        """
+        omega_p = omega_p if isinstance(omega_p, Dual) else Dual(omega_p)
+        if active is None:
+            active = np.ones(omega_p.shape[:-1], dtype=bool)
+        length = norm(omega_p)
+        active = np.asarray(active, dtype=bool) & (length.value > 0.0) & np.isfinite(length.value)
+        active = active & np.all(np.isfinite(omega_p.tangent), axis=-1)
+        ez = np.zeros(omega_p.shape)
+        ez[..., 2] = 1.0
+        # normalized with its tangent (a unit Dual: b·ḃ = 0, which Ṙ a = ḃ relies on)
+        unit = omega_p / np.where(active, length, 1.0)[..., None]
+        return Rotation(np.where(active[..., None], unit, ez), active)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Shape of the family of rotations (without the vector axis)."""
+        return self.active.shape
+
+    def take(self, index: Any) -> Rotation:
+        """The rotations at ``index`` (e.g. one per sample from one per pixel)."""
+        return Rotation(self.target[index], self.active[index])
+
+    def apply(self, omega: np.ndarray) -> Dual:
+        """R(θ) · detach(ω): value exactly ``detach(ω)``, tangent Ṙ ω (DESIGN 2.6).
+
+        Parameters
+        ----------
+        omega : ndarray, shape broadcastable with (..., 3)
+            Directions drawn independently of θ (a Dual is detached first).
+        """
+        omega = detach(omega)
+        b = self.target
+        a = detach(b)
+        r = rotate(a, b, omega)
+        # value exactly ω (R is the identity at θ0 up to rounding in a·a); tangent dR/dθ ω
+        return Dual(np.broadcast_to(omega, np.shape(r.value)).copy(), tangent(r))

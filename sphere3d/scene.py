@@ -1,0 +1,399 @@
+"""Scenes on the sphere: shapes, materials, emitters, camera and parameters; loaded from dicts or JSON.
+
+A scene is a dict (or a JSON file of the same shape)::
+
+    {"name": "shadow",
+     "camera": {"position": [x, y, z], "look_at": [x, y, z], "up": [x, y, z],
+                "fov": 0.7, "width": 64, "height": 64, "filter": "gaussian"},
+     "sky": 0.0,
+     "shapes": [{"name": "floor", "type": "rectangle", "size": [4, 4], "albedo": 0.7},
+                {"name": "light", "type": "rectangle", "size": [1, 1],
+                 "translate": [0, 0, 2], "rotate": [3.14159, 0, 0],
+                 "emission": 8.0, "fade": 0.25, "albedo": 0.0}, ...]}
+
+Every shape has ``translate`` (position of its centre), ``rotate`` (radians about x,
+then y, then z, acting about the centre), ``scale`` (uniform, about the centre),
+``albedo`` (diffuse reflectance in [0, 1]), ``emission`` (radiance of its front side,
+the side its normals face) and ``fade`` (emitter border fade, rectangle and disk
+only); type-specific keys are listed in :data:`SHAPE_KEYS`. ``fov`` is the
+horizontal field of view in radians; ``sky`` the constant environment radiance.
+
+Parameters (the θ of a gradient) are named like ``occluder.translate.x``:
+``NAME.translate.x|y|z``, ``NAME.rotate.x|y|z``, ``NAME.scale``, ``NAME.albedo``,
+``NAME.emission``, ``camera.translate.x|y|z`` (moves position and look-at together)
+and ``sky.emission``. θ0 is the value the scene file gives.
+
+Bad input raises one :class:`~flatland.core.validate.ValidationError` naming the
+field path and the value, e.g. ``shapes[2].radius: must be > 0, got -1.0``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from dataclasses import field as dataclass_field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flatland.core.validate import (
+    ValidationError,
+    check_choice,
+    check_finite,
+    check_int,
+    check_positive,
+)
+from sphere3d import shapes as shp
+from sphere3d.sampling import FILTERS
+
+__all__ = ["SHAPE_KEYS", "SHAPE_TYPES", "Camera", "Scene", "Shape", "list_scenes", "load_scene"]
+
+SHAPE_TYPES = ("rectangle", "box", "icosphere", "disk", "mesh")
+COMMON_KEYS = ("name", "type", "translate", "rotate", "scale", "albedo", "emission", "fade")
+SHAPE_KEYS: Mapping[str, tuple[str, ...]] = {
+    "rectangle": ("size",),
+    "box": ("size",),
+    "icosphere": ("radius", "subdivisions"),
+    "disk": ("radius", "segments"),
+    "mesh": ("path", "vertices", "faces"),
+}
+"""Type-specific keys of each shape type (besides :data:`COMMON_KEYS`)."""
+DEFAULTS: Mapping[str, Any] = {
+    "translate": [0.0, 0.0, 0.0],
+    "rotate": [0.0, 0.0, 0.0],
+    "scale": 1.0,
+    "albedo": 0.5,
+    "emission": 0.0,
+    "fade": 0.0,
+    "subdivisions": 2,
+    "segments": 32,
+}
+CAMERA_KEYS = ("position", "look_at", "up", "fov", "width", "height", "filter")
+CAMERA_DEFAULTS: Mapping[str, Any] = {"up": [0.0, 0.0, 1.0], "filter": "gaussian"}
+AXES = ("x", "y", "z")
+MAX_PIXELS = 4096
+
+
+# ------------------------------------------------------------------ validation
+def _check_keys(field: str, d: Any, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> None:
+    if not isinstance(d, Mapping):
+        raise ValidationError(field, f"must be an object (dict), got {type(d).__name__}")
+    for key in d:
+        if key not in allowed:
+            raise ValidationError(
+                f"{field}.{key}" if field else str(key), f"unknown key; allowed: {', '.join(allowed)}"
+            )
+    for key in required:
+        if key not in d:
+            raise ValidationError(f"{field}.{key}" if field else key, "is required")
+
+
+def _vec(field: str, value: Any, n: int = 3, positive: bool = False) -> tuple[float, ...]:
+    if not isinstance(value, list | tuple) or len(value) != n:
+        raise ValidationError(field, f"must be a list of {n} numbers, got {value!r}")
+    check = check_positive if positive else check_finite
+    return tuple(check(f"{field}[{i}]", x) for i, x in enumerate(value))
+
+
+def _unit_interval(field: str, value: Any) -> float:
+    out = check_finite(field, value)
+    if not 0.0 <= out <= 1.0:
+        raise ValidationError(field, f"must lie in [0, 1], got {value!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole camera: position, look-at point, up vector, horizontal fov (radians), film and filter."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float]
+    fov: float
+    width: int
+    height: int
+    filter: str
+
+    @staticmethod
+    def from_dict(d: Any) -> Camera:
+        _check_keys("camera", d, CAMERA_KEYS, ("position", "look_at", "fov", "width", "height"))
+        d = {**CAMERA_DEFAULTS, **d}
+        position = _vec("camera.position", d["position"])
+        look_at = _vec("camera.look_at", d["look_at"])
+        up = _vec("camera.up", d["up"])
+        fov = check_positive("camera.fov", d["fov"])
+        if fov >= math.pi:
+            raise ValidationError("camera.fov", f"must be < π (radians), got {d['fov']!r}")
+        width = check_int("camera.width", d["width"])
+        height = check_int("camera.height", d["height"])
+        for key, n in (("width", width), ("height", height)):
+            if n > MAX_PIXELS:
+                raise ValidationError(f"camera.{key}", f"must be <= {MAX_PIXELS}, got {n}")
+        forward = np.subtract(look_at, position)
+        if np.linalg.norm(forward) == 0.0:
+            raise ValidationError("camera.look_at", f"must differ from camera.position, got {list(look_at)}")
+        if np.linalg.norm(np.cross(forward / np.linalg.norm(forward), up)) < 1e-6 * np.linalg.norm(up):
+            raise ValidationError("camera.up", f"must not be parallel to the view direction, got {list(up)}")
+        return Camera(
+            position, look_at, up, fov, width, height, check_choice("camera.filter", d["filter"], FILTERS)
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "position": list(self.position),
+            "look_at": list(self.look_at),
+            "up": list(self.up),
+            "fov": self.fov,
+            "width": self.width,
+            "height": self.height,
+            "filter": self.filter,
+        }
+
+    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit (forward, right, up) vectors of the camera."""
+        f = np.subtract(self.look_at, self.position)
+        f = f / np.linalg.norm(f)
+        r = np.cross(f, self.up)
+        r = r / np.linalg.norm(r)
+        return f, r, np.cross(r, f)
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One shape: its type-specific geometry (``geometry``), transform and material."""
+
+    name: str
+    type: str
+    translate: tuple[float, float, float]
+    rotate: tuple[float, float, float]
+    scale: float
+    albedo: float
+    emission: float
+    fade: float
+    geometry: tuple[tuple[str, Any], ...]
+    mesh: shp.LocalMesh = dataclass_field(compare=False, repr=False)
+
+    @staticmethod
+    def from_dict(field: str, d: Any, base_dir: Path | None) -> Shape:
+        if not isinstance(d, Mapping):
+            raise ValidationError(field, f"must be an object (dict), got {type(d).__name__}")
+        kind = check_choice(f"{field}.type", d.get("type"), SHAPE_TYPES)
+        _check_keys(field, d, COMMON_KEYS + SHAPE_KEYS[kind], ("name", "type"))
+        name = d["name"]
+        if not isinstance(name, str) or not name or "." in name or name in ("camera", "sky"):
+            raise ValidationError(
+                f"{field}.name", f"must be a non-empty name without '.', not camera/sky; got {name!r}"
+            )
+        d = {**DEFAULTS, **d}
+        geometry, mesh = _geometry(field, kind, d, base_dir)
+        fade = _unit_interval(f"{field}.fade", d["fade"])
+        if fade > 0.0 and mesh.fade_kind == shp.FADE_NONE:
+            raise ValidationError(
+                f"{field}.fade", f"is only defined for rectangle and disk emitters, got {fade!r}"
+            )
+        if fade >= 1.0 and mesh.fade_kind != shp.FADE_NONE:
+            raise ValidationError(f"{field}.fade", f"must be < 1, got {fade!r}")
+        return Shape(
+            name=name,
+            type=kind,
+            translate=_vec(f"{field}.translate", d["translate"]),
+            rotate=_vec(f"{field}.rotate", d["rotate"]),
+            scale=check_positive(f"{field}.scale", d["scale"]),
+            albedo=_unit_interval(f"{field}.albedo", d["albedo"]),
+            emission=check_positive(f"{field}.emission", d["emission"], allow_zero=True),
+            fade=fade,
+            geometry=geometry,
+            mesh=mesh,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "type": self.type}
+        out.update({k: (list(v) if isinstance(v, tuple) else v) for k, v in self.geometry})
+        out.update(
+            translate=list(self.translate),
+            rotate=list(self.rotate),
+            scale=self.scale,
+            albedo=self.albedo,
+            emission=self.emission,
+            fade=self.fade,
+        )
+        return out
+
+
+def _geometry(
+    field: str, kind: str, d: Mapping[str, Any], base_dir: Path | None
+) -> tuple[tuple, shp.LocalMesh]:
+    """The type-specific keys (validated) and the local mesh they describe."""
+    if kind == "rectangle":
+        size = _vec(f"{field}.size", d.get("size", [1.0, 1.0]), 2, positive=True)
+        return (("size", size),), shp.rectangle(*size)
+    if kind == "box":
+        size = _vec(f"{field}.size", d.get("size", [1.0, 1.0, 1.0]), 3, positive=True)
+        return (("size", size),), shp.box(*size)
+    if kind == "icosphere":
+        radius = check_positive(f"{field}.radius", d.get("radius", 1.0))
+        sub = check_int(f"{field}.subdivisions", d["subdivisions"], minimum=0)
+        if sub > 6:
+            raise ValidationError(f"{field}.subdivisions", f"must be <= 6, got {sub}")
+        return (("radius", radius), ("subdivisions", sub)), shp.icosphere(radius, sub)
+    if kind == "disk":
+        radius = check_positive(f"{field}.radius", d.get("radius", 1.0))
+        segments = check_int(f"{field}.segments", d["segments"], minimum=3)
+        return (("radius", radius), ("segments", segments)), shp.disk(radius, segments)
+    # mesh: a file, or inline vertices and faces
+    if "path" in d:
+        if "vertices" in d or "faces" in d:
+            raise ValidationError(f"{field}.path", "give either path or vertices/faces, not both")
+        if not isinstance(d["path"], str):
+            raise ValidationError(f"{field}.path", f"must be a file path string, got {d['path']!r}")
+        path = Path(d["path"])
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+        path = path.resolve()
+        return (("path", str(path)),), shp.load_mesh_file(f"{field}.path", path)
+    if "vertices" not in d or "faces" not in d:
+        raise ValidationError(f"{field}.path", "a mesh needs a path or both vertices and faces")
+    mesh = shp.inline_mesh(field, d["vertices"], d["faces"])
+    vertices = tuple(tuple(float(x) for x in row) for row in mesh.vertices)
+    faces = tuple(tuple(int(i) for i in row) for row in mesh.faces)
+    return (("vertices", [list(r) for r in vertices]), ("faces", [list(r) for r in faces])), mesh
+
+
+# ---------------------------------------------------------------------- scene
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene (immutable). Build with :func:`load_scene`."""
+
+    name: str
+    camera: Camera
+    sky: float
+    shapes: tuple[Shape, ...]
+
+    @staticmethod
+    def from_dict(d: Any, base_dir: Path | None = None) -> Scene:
+        _check_keys("", d, ("name", "camera", "sky", "shapes"), ("name", "camera", "shapes"))
+        name = d["name"]
+        if not isinstance(name, str) or not name:
+            raise ValidationError("name", f"must be a non-empty string, got {name!r}")
+        camera = Camera.from_dict(d["camera"])
+        sky = check_positive("sky", d.get("sky", 0.0), allow_zero=True)
+        if not isinstance(d["shapes"], list | tuple) or not d["shapes"]:
+            raise ValidationError("shapes", f"must be a non-empty list of shapes, got {d['shapes']!r}")
+        shapes = tuple(Shape.from_dict(f"shapes[{i}]", s, base_dir) for i, s in enumerate(d["shapes"]))
+        seen: dict[str, int] = {}
+        for i, s in enumerate(shapes):
+            if s.name in seen:
+                raise ValidationError(
+                    f"shapes[{i}].name", f"duplicate name {s.name!r} (also shapes[{seen[s.name]}])"
+                )
+            seen[s.name] = i
+        return Scene(name, camera, sky, shapes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scene as a JSON-ready dict; ``load_scene(scene.to_dict())`` gives an equal scene."""
+        return {
+            "name": self.name,
+            "camera": self.camera.to_dict(),
+            "sky": self.sky,
+            "shapes": [s.to_dict() for s in self.shapes],
+        }
+
+    # -------------------------------------------------------------- parameters
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """Every parameter name of this scene."""
+        names = [f"camera.translate.{a}" for a in AXES] + ["sky.emission"]
+        for s in self.shapes:
+            names += [f"{s.name}.translate.{a}" for a in AXES] + [f"{s.name}.rotate.{a}" for a in AXES]
+            names += [f"{s.name}.scale", f"{s.name}.albedo", f"{s.name}.emission"]
+        return tuple(names)
+
+    def check_param(self, param: Any) -> str:
+        """``param`` if it names a parameter of this scene; one error listing the choices otherwise."""
+        if not isinstance(param, str) or param not in self.parameters:
+            raise ValidationError(
+                "param", f"unknown parameter {param!r}; choose from {', '.join(self.parameters)}"
+            )
+        return param
+
+    def shape_index(self, name: str) -> int:
+        """Index of the shape called ``name``."""
+        return [s.name for s in self.shapes].index(name)
+
+    def param_value(self, param: str) -> float:
+        """θ0: the value of ``param`` in this scene."""
+        param = self.check_param(param)
+        owner, _, rest = param.partition(".")
+        if owner == "camera":
+            return float(self.camera.position[AXES.index(rest[-1])])
+        if owner == "sky":
+            return float(self.sky)
+        shape = self.shapes[self.shape_index(owner)]
+        kind, _, axis = rest.partition(".")
+        value = getattr(shape, kind)
+        return float(value[AXES.index(axis)] if axis else value)
+
+    def state(self, param: str | None = None, theta: Any = None, tracer: str = "embree"):
+        """The scene's geometry and materials with ``param`` set to ``theta`` (a float or a Dual).
+
+        See :class:`sphere3d.state.SceneState`.
+        """
+        from sphere3d.state import build_state
+
+        return build_state(self, param, theta, tracer)
+
+
+# ------------------------------------------------------------------- loading
+def _builtin_dir():
+    return resources.files("sphere3d") / "scenes"
+
+
+def list_scenes() -> tuple[str, ...]:
+    """Names of the built-in scenes (``sphere3d/scenes/*.json``)."""
+    return tuple(sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".json")))
+
+
+def _read_json(field: str, text: str, where: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValidationError(field, f"{where} is not valid JSON: {exc}") from None
+
+
+def load_scene(source: Any) -> Scene:
+    """A validated :class:`Scene` from a built-in name, a path to a .json file, or a dict.
+
+    Raises
+    ------
+    ValidationError
+        Naming the field and value of the first problem found.
+    """
+    if isinstance(source, Scene):
+        return source
+    if isinstance(source, Mapping):
+        return Scene.from_dict(source)
+    if isinstance(source, str | Path):
+        text = str(source)
+        if isinstance(source, str) and text in list_scenes():
+            data = _read_json(
+                "scene", (_builtin_dir() / f"{text}.json").read_text(), f"built-in scene {text!r}"
+            )
+            return Scene.from_dict(data)
+        path = Path(source)
+        if path.suffix.lower() == ".json":
+            if not path.is_file():
+                raise ValidationError("scene", f"no such file: {text!r}")
+            return Scene.from_dict(
+                _read_json("scene", path.read_text(), repr(text)), base_dir=path.parent.resolve()
+            )
+        raise ValidationError(
+            "scene",
+            f"unknown scene {text!r}; built-in scenes: {', '.join(list_scenes())}, or a path to a .json file",
+        )
+    raise ValidationError(
+        "scene", f"must be a scene name, a .json path or a dict, got {type(source).__name__}"
+    )

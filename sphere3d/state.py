@@ -1,0 +1,221 @@
+"""A scene evaluated at one parameter value θ: world-space triangles, materials, camera, tracer.
+
+:func:`build_state` is where θ enters (DESIGN 4, "scene + parameter → θ as a Dual"):
+the parameter's field is replaced by ``theta`` — a float (finite differences, plain
+renders) or a :class:`~flatland.core.dual.Dual` (``variable(θ0)`` for the gradient) —
+and every quantity computed from it (vertex positions, the camera origin, albedos,
+emissions, the total emitter area) carries the tangent. The tracer is built from
+the detached triangles: rays are traced at θ0 and re-attached to these Duals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach
+from sphere3d import shapes as shp
+from sphere3d.sampling import triangle_area
+from sphere3d.scene import AXES, Scene
+from sphere3d.tracing import make_tracer
+from sphere3d.vector import dot
+
+__all__ = ["CameraState", "SceneState", "build_state"]
+
+
+def _axis_rotation(axis: int, angle: Any) -> Any:
+    """Rotation matrix about coordinate axis ``axis`` by ``angle`` (float or Dual)."""
+    c, s = np.cos(angle), np.sin(angle)
+    one, zero = 1.0 + 0.0 * c, 0.0 * c
+    rows = {
+        0: [[one, zero, zero], [zero, c, -s], [zero, s, c]],
+        1: [[c, zero, s], [zero, one, zero], [-s, zero, c]],
+        2: [[c, -s, zero], [s, c, zero], [zero, zero, one]],
+    }[axis]
+    return np.stack([np.stack(r) for r in rows])
+
+
+def euler_matrix(angles: Any) -> Any:
+    """R = Rz(γ) Ry(β) Rx(α): rotate about x first, then y, then z (radians)."""
+    return _axis_rotation(2, angles[2]) @ _axis_rotation(1, angles[1]) @ _axis_rotation(0, angles[0])
+
+
+@dataclass(frozen=True)
+class CameraState:
+    """The pinhole camera at θ: origin (maybe a Dual), fixed frame, film mapping.
+
+    Continuous pixel coordinates: x in [0, width) left to right, y in [0, height)
+    top to bottom; pixel (row i, column j) has its centre at (j + ½, i + ½). The film
+    plane lies at distance 1 along ``forward``; pixels are square.
+    """
+
+    origin: Any
+    forward: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    tan_half: float
+    width: int
+    height: int
+    filter: str
+
+    def directions(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Unit directions through continuous pixel coordinates (x, y) (plain)."""
+        sx = (2.0 * x / self.width - 1.0) * self.tan_half
+        sy = (1.0 - 2.0 * y / self.height) * self.tan_half * self.height / self.width
+        d = self.forward + sx[..., None] * self.right + sy[..., None] * self.up
+        return d / np.sqrt(np.einsum("...i,...i->...", d, d))[..., None]
+
+    def film(self, omega: Any) -> tuple[Any, Any]:
+        """Continuous pixel coordinates (x, y) where direction ``omega`` meets the film; Dual-aware."""
+        cz = dot(omega, self.forward)
+        px = dot(omega, self.right) / cz
+        py = dot(omega, self.up) / cz
+        x = (px / self.tan_half + 1.0) * (0.5 * self.width)
+        y = (1.0 - py / (self.tan_half * self.height / self.width)) * (0.5 * self.height)
+        return x, y
+
+    def log_jacobian(self, omega: Any) -> Any:
+        """log of film area per solid angle, ``-3 log cos θ`` (up to a constant); Dual-aware."""
+        return -3.0 * np.log(dot(omega, self.forward))
+
+
+@dataclass(frozen=True)
+class SceneState:
+    """Everything the integrator reads, at one θ.
+
+    Attributes
+    ----------
+    scene : Scene
+    param : str or None
+        The parameter θ stands for (None: a plain render).
+    triangles : Dual or ndarray, shape (T, 3, 3)
+        World-space vertices of all triangles, grouped by shape.
+    shape_of : ndarray of int, shape (T,)
+    uv : ndarray, shape (T, 3, 2)
+        Per-vertex fade coordinates; ``fade_kind``, ``fade``: per triangle.
+    albedo, emission : Dual or ndarray, shape (S,)
+        Per shape. ``sky``: the environment radiance.
+    emitters : ndarray of int
+        Triangles that emit (emission > 0, or the emission is the parameter).
+    emitter_area : Dual or float
+        Their total area (the emitter sampling density is 1 / emitter_area).
+    camera : CameraState
+    tracer : EmbreeTracer or BruteForceTracer
+        Built on the detached triangles.
+    epsilon : float
+        Ray offset against self-intersection (scene-size relative).
+    """
+
+    scene: Scene
+    param: str | None
+    triangles: Any
+    shape_of: np.ndarray
+    uv: np.ndarray
+    fade_kind: np.ndarray
+    fade: np.ndarray
+    albedo: Any
+    emission: Any
+    sky: Any
+    emitters: np.ndarray
+    emitter_area: Any
+    camera: CameraState
+    tracer: Any
+    epsilon: float
+
+    @property
+    def dual(self) -> bool:
+        """True if the state carries θ-tangents."""
+        return isinstance(self.triangles, Dual)
+
+    def emitted(self, triangle: np.ndarray, b1: Any, b2: Any) -> Any:
+        """Front-side radiance at barycentrics (b1, b2) of ``triangle``: emission × border fade."""
+        uv = self.uv[triangle]
+        b1, b2 = b1[..., None], b2[..., None]
+        point_uv = (1.0 - b1 - b2) * uv[..., 0, :] + b1 * uv[..., 1, :] + b2 * uv[..., 2, :]
+        fade = shp.fade_weight(point_uv, self.fade_kind[triangle], self.fade[triangle])
+        return self.emission[self.shape_of[triangle]] * fade
+
+
+def _with(values: tuple[float, ...], index: int, theta: Any) -> Any:
+    """``values`` as a vector with component ``index`` replaced by ``theta``."""
+    return np.stack([theta if i == index else float(v) for i, v in enumerate(values)])
+
+
+def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embree") -> SceneState:
+    """The :class:`SceneState` of ``scene`` with ``param`` set to ``theta`` (see module docstring)."""
+    if param is not None:
+        param = scene.check_param(param)
+    owner, kind, axis = None, None, None
+    if param is not None:
+        owner, _, rest = param.partition(".")
+        kind, _, axis_name = rest.partition(".")
+        axis = AXES.index(axis_name) if axis_name else None
+        if theta is None:
+            theta = scene.param_value(param)
+
+    triangles, shape_of, uv, fade_kind, fade, albedo, emission = [], [], [], [], [], [], []
+    for index, s in enumerate(scene.shapes):
+        mine = owner == s.name
+        translate = _with(s.translate, axis, theta) if mine and kind == "translate" else np.array(s.translate)
+        rotate = _with(s.rotate, axis, theta) if mine and kind == "rotate" else np.array(s.rotate)
+        scale = theta if mine and kind == "scale" else s.scale
+        # world = translate + R (scale · local): rotation and scale act about the centre
+        world = translate + (scale * s.mesh.vertices) @ np.swapaxes(euler_matrix(rotate), -1, -2)
+        triangles.append(world[s.mesh.faces])
+        n = len(s.mesh.faces)
+        shape_of.append(np.full(n, index))
+        uv.append(s.mesh.uv[s.mesh.faces])
+        fade_kind.append(np.full(n, s.mesh.fade_kind))
+        fade.append(np.full(n, s.fade))
+        albedo.append(theta if mine and kind == "albedo" else s.albedo)
+        emission.append(theta if mine and kind == "emission" else s.emission)
+
+    triangles = np.concatenate(triangles)
+    shape_of = np.concatenate(shape_of)
+    albedo = np.stack(albedo)
+    emission = np.stack(emission)
+    sky = theta if owner == "sky" else np.float64(scene.sky)
+    if isinstance(theta, Dual):
+        # one code path: with a Dual θ every scene quantity is a Dual (most with zero tangent)
+        triangles, albedo, emission, sky = (
+            x if isinstance(x, Dual) else Dual(x) for x in (triangles, albedo, emission, sky)
+        )
+
+    emitting = [
+        i for i, s in enumerate(scene.shapes) if s.emission > 0.0 or (owner == s.name and kind == "emission")
+    ]
+    emitters = np.flatnonzero(np.isin(shape_of, emitting))
+    et = triangles[emitters]
+    emitter_area = np.sum(triangle_area(et[:, 0], et[:, 1], et[:, 2])) if len(emitters) else 0.0
+
+    cam = scene.camera
+    forward, right, up = cam.frame()
+    origin = _with(cam.position, axis, theta) if owner == "camera" else np.array(cam.position)
+    if isinstance(theta, Dual) and not isinstance(origin, Dual):
+        origin = Dual(origin)
+    camera = CameraState(
+        origin, forward, right, up, float(np.tan(0.5 * cam.fov)), cam.width, cam.height, cam.filter
+    )
+
+    plain = np.asarray(detach(triangles))
+    extent = float(np.max(np.ptp(plain.reshape(-1, 3), axis=0)))
+    extent = max(extent, float(np.max(np.abs(detach(origin) - plain.reshape(-1, 3).mean(axis=0)))))
+    return SceneState(
+        scene=scene,
+        param=param,
+        triangles=triangles,
+        shape_of=shape_of,
+        uv=np.concatenate(uv),
+        fade_kind=np.concatenate(fade_kind),
+        fade=np.concatenate(fade),
+        albedo=albedo,
+        emission=emission,
+        sky=sky,
+        emitters=emitters,
+        emitter_area=emitter_area,
+        camera=camera,
+        tracer=make_tracer(plain, shape_of, tracer),
+        epsilon=1e-4 * max(extent, 1e-3),
+    )

@@ -1,0 +1,190 @@
+"""What a method estimates: the pixels of an image, or the irradiance at one point, in independent batches.
+
+A task fixes the scene, the parameter, the sample count, the seed and the batches;
+``task.evaluate(theta, transforms)`` runs the integrator once with θ given as a
+float (plain) or as a Dual, and returns a :class:`Tally` of per-batch means. Methods
+(:mod:`sphere3d.methods`) differ only in the ``theta`` and the
+:class:`~sphere3d.integrator.Transforms` they pass, so they share every primary
+sample: the uniforms come from ``stream(seed, "samples", batch, chunk)`` whatever
+the method, and anything a method draws in addition comes from other streams
+(``"kernel"``, ``"probes"``, ``"probes.camera"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach, tangent
+from flatland.core.rng import stream
+from flatland.core.validate import ValidationError, check_finite, check_int
+from sphere3d.integrator import (
+    PRIMARY_UNIFORMS,
+    Identity,
+    PixelSamples,
+    Shading,
+    Transforms,
+    irradiance_samples,
+    pixel_samples,
+)
+from sphere3d.scene import Scene
+
+__all__ = ["CHUNK", "ImageTask", "PointTask", "Tally", "resolve_batches"]
+
+CHUNK = 1 << 15
+"""Camera samples per memory chunk (a loop over chunks, vectorized inside)."""
+MAX_BATCHES = 8
+
+
+@dataclass(frozen=True)
+class Tally:
+    """Per-batch means of the value and of its θ-derivative, shape (batches, *output shape)."""
+
+    value: np.ndarray
+    derivative: np.ndarray
+
+
+def resolve_batches(samples: int, batches: Any, field: str = "spp") -> int:
+    """Number of batches: given (must divide ``samples``), or the largest divisor of it up to 8."""
+    if batches is None:
+        return max(b for b in range(1, min(MAX_BATCHES, samples) + 1) if samples % b == 0)
+    batches = check_int("batches", batches)
+    if samples % batches:
+        raise ValidationError("batches", f"must divide {field}={samples}, got {batches}")
+    return batches
+
+
+def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
+    return Tally(
+        value=np.stack([np.asarray(detach(v), dtype=np.float64).reshape(shape) for v in values]),
+        derivative=np.stack([np.asarray(tangent(v), dtype=np.float64).reshape(shape) for v in values]),
+    )
+
+
+@dataclass(frozen=True)
+class ImageTask:
+    """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``."""
+
+    scene: Scene
+    param: str | None
+    spp: int
+    seed: int
+    batches: int
+    tracer: str = "embree"
+
+    @property
+    def theta0(self) -> float:
+        """The parameter's value in the scene (0 when there is no parameter)."""
+        return self.scene.param_value(self.param) if self.param is not None else 0.0
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.scene.camera.height, self.scene.camera.width)
+
+    def _control_variate(self, samples: PixelSamples, per_batch: int) -> Any:
+        """Per-sample estimates (pixels × samples), with the filter-weight control variate.
+
+        With a continuous filter, the tangent of each sample's filter weight w_i has
+        zero mean given the pixel's rotation (∫ k = 1 for every θ), so
+        ``e_i - c_{-i} (w_i - detach(w_i))`` keeps the expectation while cancelling
+        the term ``L ẇ_i`` that a rotated pixel integral adds even where the radiance
+        is flat. The scale ``c_{-i}`` is the mean radiance of the *other* samples of the
+        pixel in the batch (independent of sample i, so no bias); the value is
+        untouched, bit for bit (an exact zero is subtracted). Not applied to the box
+        filter, whose weight derivative does not have zero mean (DESIGN 2.11).
+        """
+        est = samples.estimate.reshape(-1, per_batch)
+        if not isinstance(est, Dual) or per_batch < 2 or self.scene.camera.filter == "box":
+            return est
+        radiance = np.asarray(detach(samples.radiance), dtype=np.float64).reshape(-1, per_batch)
+        others = (radiance.sum(axis=1, keepdims=True) - radiance) / (per_batch - 1)
+        weight = samples.weight.reshape(-1, per_batch)
+        return est - others * (weight - detach(weight))
+
+    def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
+        """Render every pixel with θ = ``theta`` (float or Dual) under ``transforms``."""
+        transforms = transforms or Identity()
+        state = self.scene.state(self.param, theta, self.tracer)
+        height, width = self.shape
+        per_batch = self.spp // self.batches
+        pixels = np.arange(height * width)
+        rows_all, cols_all = np.divmod(pixels, width)
+        chunk_pixels = max(1, CHUNK // per_batch)
+        means = []
+        for b in range(self.batches):
+            # one rotation per pixel and batch for the pixel integral, from its own probe stream
+            camera = transforms.camera(state, rows_all, cols_all, stream(self.seed, "probes.camera", b))
+            parts = []
+            for c, start in enumerate(range(0, height * width, chunk_pixels)):  # memory chunks
+                pix = np.repeat(pixels[start : start + chunk_pixels], per_batch)
+                u = stream(self.seed, "samples", b, c).random((pix.size, PRIMARY_UNIFORMS))
+                est = pixel_samples(
+                    state,
+                    transforms,
+                    rows_all[pix],
+                    cols_all[pix],
+                    u,
+                    camera.take(pix),
+                    stream(self.seed, "kernel", b, c),
+                    stream(self.seed, "probes", b, c),
+                )
+                parts.append(np.mean(self._control_variate(est, per_batch), axis=1))
+            means.append(np.concatenate(parts))
+        return _tally(means, self.shape)
+
+
+@dataclass(frozen=True)
+class PointTask:
+    """The irradiance ``E = ∫ L_i cos θ dω`` at a fixed point with a fixed unit normal: ``n`` samples."""
+
+    scene: Scene
+    param: str | None
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    n: int
+    seed: int
+    batches: int
+    tracer: str = "embree"
+
+    @staticmethod
+    def check_vector(field: str, value: Any, unit: bool = False) -> tuple[float, float, float]:
+        if not isinstance(value, list | tuple | np.ndarray) or len(value) != 3:
+            raise ValidationError(field, f"must be 3 numbers, got {value!r}")
+        out = tuple(check_finite(f"{field}[{i}]", float(x)) for i, x in enumerate(value))
+        length = float(np.linalg.norm(out))
+        if unit and length == 0.0:
+            raise ValidationError(field, f"must not be zero, got {list(out)}")
+        return tuple(x / length for x in out) if unit else out
+
+    @property
+    def theta0(self) -> float:
+        return self.scene.param_value(self.param) if self.param is not None else 0.0
+
+    @property
+    def shape(self) -> tuple[()]:
+        return ()
+
+    def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
+        """Estimate E at the point with θ = ``theta`` under ``transforms``."""
+        transforms = transforms or Identity()
+        state = self.scene.state(self.param, theta, self.tracer)
+        per_batch = self.n // self.batches
+        means = []
+        for b in range(self.batches):
+            total = 0.0
+            for c, start in enumerate(range(0, per_batch, CHUNK)):  # memory chunks
+                size = min(CHUNK, per_batch - start)
+                x = np.broadcast_to(np.array(self.point), (size, 3)).copy()
+                nrm = np.broadcast_to(np.array(self.normal), (size, 3)).copy()
+                if state.dual:
+                    x, nrm = Dual(x), Dual(nrm)
+                u = stream(self.seed, "samples", b, c).random((size, 5))
+                est = irradiance_samples(
+                    Shading.at(state, x, nrm), u, transforms, stream(self.seed, "kernel", b, c),
+                    stream(self.seed, "probes", b, c),
+                )  # fmt: skip
+                total = total + np.sum(est)
+            means.append(total / per_batch)
+        return _tally(means, ())

@@ -1,0 +1,77 @@
+"""Small vector helpers for arrays of 3D vectors (last axis of length 3), Dual or plain.
+
+Each helper is written once with numpy functions that have forward-mode rules
+(:mod:`flatland.core.dual`), so the same line computes a plain value or a value
+with its θ-tangent. Norms use ``sqrt(einsum)`` in both cases, so a plain and a Dual
+evaluation of the same input give bit-identical values.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach
+
+__all__ = ["cross", "dot", "frame", "is_dual_any", "norm", "normalize", "scatter", "zeros"]
+
+
+def dot(a: Any, b: Any) -> Any:
+    """Row-wise dot product over the last axis."""
+    return np.einsum("...i,...i->...", a, b)
+
+
+def cross(a: Any, b: Any) -> Any:
+    """Row-wise cross product over the last axis."""
+    return np.cross(a, b)
+
+
+def norm(a: Any) -> Any:
+    """Euclidean length over the last axis."""
+    return np.sqrt(dot(a, a))
+
+
+def normalize(a: Any) -> Any:
+    """``a / |a|`` over the last axis (the caller guarantees |a| > 0)."""
+    return a / norm(a)[..., None]
+
+
+def frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents (t, b) completing the unit normal ``n`` to a right-handed basis.
+
+    The branch-free construction of Duff et al. 2017 ("Building an orthonormal basis,
+    revisited"), on plain (detached) normals: sampling frames never carry a tangent.
+    """
+    n = np.asarray(n, dtype=np.float64)
+    sign = np.where(n[..., 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[..., 2])
+    b = n[..., 0] * n[..., 1] * a
+    t = np.stack([1.0 + sign * n[..., 0] ** 2 * a, sign * b, -sign * n[..., 0]], axis=-1)
+    s = np.stack([b, sign + n[..., 1] ** 2 * a, -n[..., 1]], axis=-1)
+    return t, s
+
+
+def is_dual_any(*xs: Any) -> bool:
+    """True if any argument carries a tangent."""
+    return any(isinstance(x, Dual) for x in xs)
+
+
+def zeros(shape: tuple[int, ...], dual: bool) -> Any:
+    """Zeros of ``shape``: a Dual (zero tangent) when ``dual``, else a plain array."""
+    return Dual(np.zeros(shape)) if dual else np.zeros(shape)
+
+
+def scatter(
+    n: int, index: np.ndarray, values: Any, dual: bool | None = None, tail: tuple[int, ...] = ()
+) -> Any:
+    """An array of ``n`` rows (times ``tail``), zero except ``out[index] = values``.
+
+    A Dual when ``dual`` is True (or, if ``dual`` is None, when ``values`` is a Dual).
+    """
+    out = zeros((n, *tail), isinstance(values, Dual) if dual is None else dual)
+    if isinstance(out, Dual):
+        out[index] = values
+    else:
+        out[index] = detach(values)
+    return out
