@@ -82,7 +82,7 @@ class Package:
     demo_sections: tuple[Callable[[argparse.Namespace], str], ...] = ()
 
     def module(self, part: str) -> ModuleType:
-        """``<name>.<part>``."""
+        """``<name>.<part>``, imported on first use (matplotlib only once there is a figure to draw)."""
         return importlib.import_module(f"{self.name}.{part}")
 
 
@@ -163,7 +163,7 @@ def _film_sum(g: Any) -> str:
 
 # ------------------------------------------------------------------------------------------------ verbs
 def _demo(pkg: Package, args: argparse.Namespace) -> int:
-    render, plot = pkg.module("render"), pkg.module("plot")
+    render = pkg.module("render")
     spp = args.spp or pkg.demo_spp
     seed = args.seed
     scene = _load_scene(pkg, pkg.demo_scene)
@@ -187,7 +187,7 @@ def _demo(pkg: Package, args: argparse.Namespace) -> int:
     ref_label = " ".join([reference_method, *(f"{k}={v}" for k, v in ref_options.items())])
     columns = {PANEL_TITLES.get(m, m): g for m, g in gradients.items()}
     title = f"{pkg.demo_scene}: d/d {pkg.demo_param}, {spp} spp"
-    panel = plot.plot_panel(primal, columns, out / "demo_panel.png", title=title)
+    panel = pkg.module("plot").plot_panel(primal, columns, out / "demo_panel.png", title=title)
     heads = ("method", "relative error", "Σ dI/dθ ± stderr", "z of Σ", "seconds")
     rows = [
         (m, f"{g.error_vs(reference):.4f}", _film_sum(g), f"{_sum_z(g, reference):+.1f}", f"{seconds[m]:.2f}")
@@ -208,18 +208,20 @@ def _demo(pkg: Package, args: argparse.Namespace) -> int:
 
 
 def _render(pkg: Package, args: argparse.Namespace) -> int:
-    render, plot = pkg.module("render"), pkg.module("plot")
+    render = pkg.module("render")
     scene = _load_scene(pkg, args.scene)
     image = render.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
     base = Path(args.out) / _stem(args.scene)
-    png = plot.plot_image(image, base.with_suffix(".png"), title=f"{_stem(args.scene)}, {args.spp} spp")
+    png = pkg.module("plot").plot_image(
+        image, base.with_suffix(".png"), title=f"{_stem(args.scene)}, {args.spp} spp"
+    )
     npy = _save_fields(base.with_suffix(".npy"), value=image.value, stderr=image.stderr)
     print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
     return 0
 
 
 def _gradient(pkg: Package, args: argparse.Namespace) -> int:
-    render, plot = pkg.module("render"), pkg.module("plot")
+    render = pkg.module("render")
     scene = _load_scene(pkg, args.scene)
     g = render.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
@@ -227,7 +229,7 @@ def _gradient(pkg: Package, args: argparse.Namespace) -> int:
     )  # fmt: skip
     base = Path(args.out) / f"{_stem(args.scene)}_{args.param}_{args.method}"
     title = f"{_stem(args.scene)}: d/d {args.param}, {args.method}, {args.spp} spp"
-    png = plot.plot_gradient(g, base.with_suffix(".png"), title=title)
+    png = pkg.module("plot").plot_gradient(g, base.with_suffix(".png"), title=title)
     npy = _save_fields(
         base.with_suffix(".npy"),
         value=g.value,

@@ -112,22 +112,48 @@ def test05_study_on_a_scene_writes_csv_and_figures(tmp_path, scene_file):
     assert len(list((tmp_path / ".cache" / "reparam-lab").glob("*.npz"))) == 1
 
 
-def test06_missing_scene_file(tmp_path):
-    assert_one_line_error(run("render", tmp_path / "missing.json"), "missing.json")
+@pytest.fixture(scope="module")
+def error_runs(tmp_path_factory, scene_file):
+    """The four bad commands, started together (each pays the interpreter start-up once, in parallel)."""
+    folder = tmp_path_factory.mktemp("errors")
+    broken = folder / "broken.json"
+    broken.write_text('{"name": "broken", "shapes": [}')
+    commands = {
+        "missing file": ["render", folder / "missing.json"],
+        "malformed JSON": ["gradient", broken, "--param", "occluder.translate.x"],
+        "unknown parameter": ["gradient", scene_file, "--param", "occluder.spin"],
+        "negative spp": ["render", scene_file, "--spp", -4],
+    }
+    procs = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", "flatland", *map(str, argv)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name, argv in commands.items()
+    }
+    results = {}
+    for name, proc in procs.items():
+        out, err = proc.communicate(timeout=120)
+        results[name] = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+    return results
 
 
-def test07_malformed_json_scene(tmp_path):
-    bad = tmp_path / "broken.json"
-    bad.write_text('{"name": "broken", "shapes": [}')
-    assert_one_line_error(run("gradient", bad, "--param", "occluder.translate.x"), "broken.json", "JSON")
+def test06_missing_scene_file(error_runs):
+    assert_one_line_error(error_runs["missing file"], "missing.json")
 
 
-def test08_unknown_parameter(scene_file):
-    assert_one_line_error(run("gradient", scene_file, "--param", "occluder.spin"), "param", "occluder.spin")
+def test07_malformed_json_scene(error_runs):
+    assert_one_line_error(error_runs["malformed JSON"], "broken.json", "JSON")
 
 
-def test09_negative_spp(scene_file):
-    assert_one_line_error(run("render", scene_file, "--spp", -4), "spp", "-4")
+def test08_unknown_parameter(error_runs):
+    assert_one_line_error(error_runs["unknown parameter"], "param", "occluder.spin")
+
+
+def test09_negative_spp(error_runs):
+    assert_one_line_error(error_runs["negative spp"], "spp", "-4")
 
 
 @pytest.mark.parametrize(

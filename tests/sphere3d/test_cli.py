@@ -1,0 +1,133 @@
+"""``python -m sphere3d``: the real commands in a subprocess (exit codes, files, one-line errors)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("embreex")
+
+from sphere3d.__main__ import main
+from sphere3d.scene import load_scene
+
+W, H = 16, 12
+
+
+def run(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "sphere3d", *map(str, args)], capture_output=True, text=True, timeout=180
+    )
+
+
+def assert_one_line_error(result, *fragments):
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+
+
+@pytest.fixture(scope="module")
+def scene_file(tmp_path_factory):
+    """The built-in shadow scene on a 16 × 12 film, as a JSON file."""
+    data = load_scene("shadow").to_dict()
+    data["camera"].update(width=W, height=H)
+    path = tmp_path_factory.mktemp("scenes") / "small_shadow.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test01_demo_writes_the_panel_and_the_error_table(tmp_path):
+    result = run("demo", "--spp", 4, "--out", tmp_path, "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "demo_panel.png").stat().st_size > 20_000
+    for method in ("naive", "reparam", "finite_difference"):
+        assert f"\n{method} " in result.stdout
+    assert "\nboundary " not in result.stdout  # sphere3d has no boundary method
+    assert "reference: finite_difference h=0.05 at 32 spp" in result.stdout
+
+
+def test02_render_and_gradient_write_png_and_npy(tmp_path, scene_file):
+    result = run("render", scene_file, "--spp", 4, "--out", tmp_path)
+    assert result.returncode == 0, result.stderr
+    image = np.load(tmp_path / "small_shadow.npy")
+    assert image.shape == (H, W) and image.dtype.names == ("value", "stderr")
+    assert (tmp_path / "small_shadow.png").stat().st_size > 3_000
+    result = run("gradient", scene_file, "--param", "occluder.translate.x", "--method", "finite_difference",
+                 "--h", 0.05, "--spp", 4, "--out", tmp_path)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    stem = tmp_path / "small_shadow_occluder.translate.x_finite_difference"
+    data = np.load(stem.with_suffix(".npy"))
+    assert data.shape == (H, W) and data.dtype.names == (
+        "value",
+        "value_stderr",
+        "derivative",
+        "derivative_stderr",
+    )
+    assert np.any(data["derivative"] != 0.0) and stem.with_suffix(".png").stat().st_size > 3_000
+
+
+def test03_study_on_a_scene_pixel(tmp_path, scene_file):
+    config = {
+        "name": "s3",
+        "problem": {"scene": str(scene_file), "param": "occluder.translate.x", "pixel": [6, 8]},
+        "methods": [{"method": "naive"}, {"method": "reparam", "kappa": [100, 1000]}],
+        "spp": 2,
+        "trials": 2,
+        "reference": {"spp": 8, "h": 0.05},
+    }
+    path = tmp_path / "s3.json"
+    path.write_text(json.dumps(config))
+    assert main(["study", str(path), "--out", str(tmp_path), "--quiet"]) == 0  # in-process: the same code
+    text = (tmp_path / "s3.csv").read_text()
+    assert text.count("\n") == 4 and "small_shadow:occluder.translate.x[6,8]" in text
+    assert (tmp_path / "s3_kappa.png").is_file() and (tmp_path / "s3_efficiency.png").is_file()
+
+
+@pytest.fixture(scope="module")
+def error_runs(tmp_path_factory, scene_file):
+    """The four bad commands, started together (each pays the interpreter start-up once, in parallel)."""
+    folder = tmp_path_factory.mktemp("errors")
+    broken = folder / "broken.json"
+    broken.write_text('{"name": "broken", "shapes": [}')
+    commands = {
+        "missing file": ["render", folder / "missing.json"],
+        "malformed JSON": ["gradient", broken, "--param", "occluder.translate.x"],
+        "unknown parameter": ["gradient", scene_file, "--param", "occluder.spin"],
+        "negative spp": ["render", scene_file, "--spp", -4],
+    }
+    procs = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", "sphere3d", *map(str, argv)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name, argv in commands.items()
+    }
+    results = {}
+    for name, proc in procs.items():
+        out, err = proc.communicate(timeout=120)
+        results[name] = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+    return results
+
+
+def test04_missing_scene_file(error_runs):
+    assert_one_line_error(error_runs["missing file"], "missing.json")
+
+
+def test05_malformed_json_scene(error_runs):
+    assert_one_line_error(error_runs["malformed JSON"], "broken.json", "JSON")
+
+
+def test06_unknown_parameter(error_runs):
+    assert_one_line_error(error_runs["unknown parameter"], "param", "occluder.spin")
+
+
+def test07_negative_spp(error_runs):
+    assert_one_line_error(error_runs["negative spp"], "spp", "-4")
