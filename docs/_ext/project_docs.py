@@ -1,0 +1,275 @@
+"""Sphinx extension of this site: DESIGN-to-code links, strict project cross-references, generated pages.
+
+The ``implements`` directive
+----------------------------
+Every theory page ties each DESIGN section it explains to the code that implements
+it, in one machine-checkable form (MyST syntax)::
+
+    ```{implements} DESIGN 2.5
+    flatland.estimators.reparam.follow_nearest
+    flatland.estimators.reparam.reparam
+    ```
+
+The argument names the DESIGN section, the body lists fully qualified names of
+functions or classes, one per line. The directive renders a line "DESIGN 2.5 in the
+code: ..." whose names link to the API reference, and warns (an error under ``-W``)
+when a name cannot be imported or has no page in the API reference.
+``tests/test_docs.py`` checks the same blocks without building the site.
+
+Strict project references
+-------------------------
+A cross-reference to ``flatland.*`` or ``sphere3d.*`` that does not resolve is a
+warning, even without ``nitpicky``: a renamed function breaks the build instead of
+leaving a dead link. References to numpy or Python types stay unchecked.
+
+Re-exported names
+-----------------
+``flatland.estimate`` and ``flatland.Dual`` are documented where they are defined
+(``flatland.estimators.estimate``, ``flatland.core.dual.Dual``); a reference to the
+re-exported name resolves to that page.
+
+Plain-text mathematics in docstrings
+------------------------------------
+Docstrings write absolute values and determinants as ``|x|`` and ``|det J|``, which
+reStructuredText would read as substitution references. Pipes outside literals,
+roles and table lines are escaped before the docstring is parsed.
+
+Members outside ``__all__``
+---------------------------
+Autosummary lists the functions and classes a module defines; those missing from
+the module's ``__all__`` (helpers that are public by name only) are skipped.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+import shutil
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from docutils import nodes
+from sphinx import addnodes
+from sphinx.application import Sphinx
+from sphinx.util import logging
+from sphinx.util.docutils import SphinxDirective
+
+PROJECT_PACKAGES = ("flatland", "sphere3d")
+DESIGN_ARGUMENT = re.compile(r"DESIGN (\d+(?:\.\d+)?)")
+logger = logging.getLogger(__name__)
+
+
+def resolve_name(dotted: str) -> Any:
+    """The object a fully qualified name refers to: the longest importable module prefix, then attributes.
+
+    Raises ImportError (no importable module prefix) or AttributeError (a missing attribute).
+    """
+    parts = dotted.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:cut]))
+        except ImportError:
+            continue
+        for attr in parts[cut:]:
+            obj = getattr(obj, attr)
+        return obj
+    raise ImportError(f"no module of {dotted!r} can be imported")
+
+
+class Implements(SphinxDirective):
+    """``{implements} DESIGN x.y`` with one fully qualified name per body line."""
+
+    required_arguments = 1
+    final_argument_whitespace = True
+    has_content = True
+
+    def run(self) -> list[nodes.Node]:
+        match = DESIGN_ARGUMENT.fullmatch(self.arguments[0].strip())
+        if match is None:
+            raise self.error(f"implements: argument must read 'DESIGN <section>', got {self.arguments[0]!r}")
+        targets = [line.strip() for line in self.content if line.strip()]
+        if not targets:
+            raise self.error("implements: list at least one fully qualified name")
+        para = nodes.paragraph(classes=["implements"])
+        para += nodes.strong(text=f"DESIGN {match.group(1)} in the code: ")
+        for i, target in enumerate(targets):
+            try:
+                obj = resolve_name(target)
+            except (ImportError, AttributeError) as exc:
+                logger.warning(
+                    f"implements: {target} cannot be imported ({exc})", location=self.get_location()
+                )
+            else:
+                if not callable(obj):
+                    logger.warning(
+                        f"implements: {target} is not a function or class", location=self.get_location()
+                    )
+            if i:
+                para += nodes.Text(", ")
+            ref = addnodes.pending_xref(
+                "", refdomain="py", reftype="obj", reftarget=target, refexplicit=False, refwarn=True
+            )
+            ref += nodes.literal(target, target.rsplit(".", 1)[-1], classes=["xref", "py", "py-obj"])
+            para += ref
+        return [para]
+
+
+def _canonical_name(target: str) -> str | None:
+    """``module.qualname`` of the object ``target`` names, if that differs from ``target``."""
+    try:
+        obj = resolve_name(target)
+    except (ImportError, AttributeError):
+        return None
+    module, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    if not module or not qualname:
+        return None
+    canonical = f"{module}.{qualname}"
+    return canonical if canonical != target else None
+
+
+def _resolve_project_reference(app: Sphinx, env: Any, node: Any, contnode: Any) -> Any:
+    """Resolve re-exported names to their defining module; make hand-written dead links warn.
+
+    A reference from a page outside the generated API reference to an unresolvable
+    ``flatland.*`` / ``sphere3d.*`` name gets ``refwarn`` so Sphinx reports it
+    (docstrings may mention helpers that are not exported; those stay plain text).
+    """
+    target = node.get("reftarget", "")
+    if node.get("refdomain") != "py" or target.split(".")[0] not in PROJECT_PACKAGES:
+        return None
+    canonical = _canonical_name(target)
+    if canonical is not None:
+        domain = env.get_domain("py")
+        resolved = domain.resolve_xref(
+            env, node["refdoc"], app.builder, node["reftype"], canonical, node, contnode
+        )
+        if resolved is not None:
+            return resolved
+    if not node.get("refdoc", "").startswith("api/generated/"):
+        node["refwarn"] = True
+    return None
+
+
+_PROTECTED = re.compile(r"(``.+?``|(?::[\w:+-]+:)?`[^`]+`_{0,2})")
+
+
+def _escape_pipes(line: str) -> str:
+    """``line`` with ``|`` escaped outside inline literals and interpreted text."""
+    stripped = line.strip()
+    if stripped.startswith(("| ", "+-", "+=")) or stripped == "|":
+        return line  # a grid-table row or a line block: pipes are syntax there
+    parts = _PROTECTED.split(line)
+    return "".join(p if i % 2 else p.replace("|", r"\|") for i, p in enumerate(parts))
+
+
+_TYPE_FIELD = re.compile(r"^(\s*:(?:type|vartype|rtype|kwtype)(?: [^:]+)?:)\s+(\S.*)$")
+
+
+def _plain_types(app: Sphinx, what: str, name: str, obj: Any, options: Any, lines: list[str]) -> None:
+    """Render napoleon's type fields as emphasized text, not as cross-references.
+
+    numpydoc types are prose ("ndarray, shape (n, 3)", "Dual or float"); Sphinx would
+    turn every word into a fuzzy cross-reference, linking "shape" to whichever
+    ``.shape`` it finds first. A type field whose content is not plain text is
+    rendered as written.
+    """
+    if name.split(".")[0] not in PROJECT_PACKAGES:
+        return
+    for i, line in enumerate(lines):
+        match = _TYPE_FIELD.match(line)
+        if match and not any(ch in match.group(2) for ch in "*`"):
+            lines[i] = f"{match.group(1)} *{match.group(2).strip()}*"
+
+
+def _process_docstring(app: Sphinx, what: str, name: str, obj: Any, options: Any, lines: list[str]) -> None:
+    """Escape plain-text pipes (``|x|``) in project docstrings, in place."""
+    if name.split(".")[0] in PROJECT_PACKAGES:
+        lines[:] = [_escape_pipes(line) for line in lines]
+
+
+def _skip_outside_all(app: Sphinx, what: str, name: str, obj: Any, skip: bool, options: Any) -> bool | None:
+    """Skip module-level functions and classes of the project that their module's ``__all__`` omits."""
+    if skip or getattr(obj, "__qualname__", None) != name:
+        return None  # already skipped, or a class member (qualname "Class.name")
+    modname = getattr(obj, "__module__", None) or ""
+    if modname.split(".")[0] not in PROJECT_PACKAGES:
+        return None
+    public = getattr(sys.modules.get(modname), "__all__", None)
+    return True if public is not None and name not in public else None
+
+
+API_INDEX = """\
+API reference
+=============
+
+Generated from the numpydoc docstrings. Each package below is documented
+recursively: every public module gets a page listing the functions and classes it
+defines and exports in ``__all__``. New modules appear here without editing the
+docs; a new package is added to ``API_PACKAGES`` in ``docs/conf.py``.
+
+.. autosummary::
+   :toctree: generated
+   :recursive:
+
+{entries}
+"""
+
+
+def write_api_index(path: Path, packages: Iterable[str]) -> list[str]:
+    """Write the API index listing the importable ``packages``; returns them.
+
+    The file is rewritten only when its content changes, so incremental builds stay
+    incremental.
+    """
+    found = []
+    for name in packages:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            continue
+        if getattr(sys.modules[name], "__file__", None) is None:
+            continue  # an empty folder imports as a namespace package: nothing to document
+        found.append(name)
+    text = API_INDEX.format(entries="\n".join(f"   {name}" for name in found))
+    if not path.exists() or path.read_text(encoding="utf-8") != text:
+        path.write_text(text, encoding="utf-8")
+    return found
+
+
+def copy_tutorials(source: Path, target: Path) -> list[Path]:
+    """Copy ``source/NN_*.ipynb`` into ``target`` (only changed files), removing stale copies."""
+    target.mkdir(parents=True, exist_ok=True)
+    notebooks = sorted(source.glob("[0-9][0-9]_*.ipynb"))
+    names = {nb.name for nb in notebooks}
+    for stale in target.glob("[0-9][0-9]_*.ipynb"):
+        if stale.name not in names:
+            stale.unlink()
+    for nb in notebooks:
+        dest = target / nb.name
+        if not dest.exists() or dest.read_bytes() != nb.read_bytes():
+            shutil.copyfile(nb, dest)
+    return notebooks
+
+
+def _forget_environment_after_warnings(app: Sphinx, exception: Exception | None) -> None:
+    """Delete the saved environment after a build with warnings, so the next build reports them again.
+
+    Sphinx re-reads only changed sources; without this, a second ``make docs`` after a
+    failed one would skip the offending pages and succeed.
+    """
+    if getattr(app, "_warncount", 0) and app.doctreedir is not None:
+        (Path(app.doctreedir) / "environment.pickle").unlink(missing_ok=True)
+
+
+def setup(app: Sphinx) -> dict[str, Any]:
+    """Register the directive and the event handlers."""
+    app.add_directive("implements", Implements)
+    app.connect("missing-reference", _resolve_project_reference, priority=900)
+    app.connect("autodoc-process-docstring", _process_docstring, priority=400)  # before napoleon (500)
+    app.connect("autodoc-process-docstring", _plain_types, priority=600)  # after napoleon
+    app.connect("autodoc-skip-member", _skip_outside_all)
+    app.connect("build-finished", _forget_environment_after_warnings)
+    app.add_css_file("project.css")
+    return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

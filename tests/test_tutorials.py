@@ -1,0 +1,160 @@
+"""The tutorials: diffable, well-formed, and executed top to bottom.
+
+Each tutorial is a pair ``tutorials/NN_name.ipynb`` (committed without outputs, what a
+student opens) and ``tutorials/NN_name.py`` (jupytext percent format, what a reviewer
+diffs). The tests check that the pair agrees cell for cell, that the notebook carries
+no outputs, that it follows the course's cell conventions (docs/guides/tutorials.md),
+and finally run it in a fresh Jupyter kernel: a cell that raises, including a failing
+``assert`` in a check cell, fails the test, and so does anything written to stderr
+(warnings included), which the docs build would also reject.
+
+Execution happens in a subprocess (nbclient driving an ipykernel), so the test
+process's ``filterwarnings = error`` applies to neither the Jupyter client machinery
+nor the notebook's own kernel.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import jupytext
+import nbformat
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+TUTORIALS = ROOT / "tutorials"
+NOTEBOOKS = sorted(TUTORIALS.glob("[0-9][0-9]_*.ipynb"))
+SCRIPTS = sorted(TUTORIALS.glob("[0-9][0-9]_*.py"))
+IDS = [nb.stem for nb in NOTEBOOKS]
+PAIRING = "ipynb,py:percent"
+CELL_TIMEOUT = 240  # seconds per cell; the whole course is budgeted at 5 minutes on 2 cores
+PLOT_CALL = re.compile(r"\bplot_[a-z_]+\(")
+
+RUNNER = r"""
+import json, sys, time
+import nbformat
+from nbclient import NotebookClient
+from nbclient.exceptions import CellExecutionError
+
+source, target, workdir, timeout = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+nb = nbformat.read(source, as_version=4)
+client = NotebookClient(nb, timeout=timeout, kernel_name="python3", resources={"metadata": {"path": workdir}})
+start = time.perf_counter()
+status, error = 0, ""
+try:
+    client.execute()
+except CellExecutionError as exc:
+    status, error = 1, str(exc)
+nbformat.write(nb, target)
+print(json.dumps({"seconds": time.perf_counter() - start, "error": error}))
+sys.exit(status)
+"""
+
+
+def read_notebook(path: Path) -> nbformat.NotebookNode:
+    return nbformat.read(path, as_version=4)
+
+
+def code_cells(nb: nbformat.NotebookNode) -> list[tuple[int, nbformat.NotebookNode]]:
+    return [(i, c) for i, c in enumerate(nb.cells) if c.cell_type == "code"]
+
+
+def is_check(cell: nbformat.NotebookNode) -> bool:
+    return cell.cell_type == "code" and cell.source.lstrip().startswith("# check")
+
+
+def test01_every_notebook_has_its_percent_script_and_vice_versa():
+    assert NOTEBOOKS, "no tutorials found"
+    assert [p.stem for p in NOTEBOOKS] == [p.stem for p in SCRIPTS]
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+def test02_notebook_is_committed_without_outputs(path):
+    nb = read_notebook(path)
+    for i, cell in code_cells(nb):
+        assert cell.outputs == [], f"{path.name} cell {i} has outputs: clear them before committing"
+        assert cell.execution_count is None, f"{path.name} cell {i} has an execution count"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+def test03_notebook_matches_its_percent_script(path):
+    nb = read_notebook(path)
+    script = jupytext.read(path.with_suffix(".py"))
+    assert nb.metadata.get("jupytext", {}).get("formats") == PAIRING
+    assert script.metadata.get("jupytext", {}).get("formats") == PAIRING
+    assert nb.metadata.get("kernelspec", {}).get("name") == "python3"
+    in_nb = [(c.cell_type, c.source.strip()) for c in nb.cells]
+    in_script = [(c.cell_type, c.source.strip()) for c in script.cells]
+    for i, (a, b) in enumerate(zip(in_nb, in_script, strict=False)):
+        assert a == b, f"{path.name} cell {i} differs from {path.stem}.py: run `jupytext --sync {path}`"
+    assert len(in_nb) == len(in_script), f"{path.name}: cell counts differ; run `jupytext --sync {path}`"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+def test04_notebook_follows_the_cell_conventions(path):
+    """docs/guides/tutorials.md: title, setup, prose before code, a check after each computation."""
+    nb = read_notebook(path)
+    cells = nb.cells
+    number = int(path.name[:2])
+    assert cells[0].cell_type == "markdown" and cells[0].source.startswith(f"# {number}. "), "title cell"
+    code = code_cells(nb)
+    setup_index, setup = code[0]
+    assert "%matplotlib inline" in setup.source and re.search(r"^SEED = \d+", setup.source, re.M), (
+        "the first code cell selects the inline backend and fixes SEED"
+    )
+    assert sum(is_check(c) for _, c in code) >= 2, "at least two check cells"
+    for i, cell in code:
+        before = cells[i - 1]
+        after = cells[i + 1] if i + 1 < len(cells) else None
+        where = f"{path.name} cell {i}"
+        assert "pyplot" not in cell.source and "plt." not in cell.source, (
+            f"{where}: figures come from the library's plotting helpers"
+        )
+        if is_check(cell):
+            assert before.cell_type == "code" and not is_check(before), (
+                f"{where}: a check follows its computation"
+            )
+            assert re.search(r"^\s*assert ", cell.source, re.M), f"{where}: a check cell asserts"
+            continue
+        assert before.cell_type == "markdown" and before.source.strip(), f"{where}: prose comes first"
+        if i != setup_index and not PLOT_CALL.search(cell.source):
+            assert after is not None and is_check(after), f"{where}: a computing cell is followed by a check"
+
+
+def _kernel_environment() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("MPLBACKEND", None)  # the notebooks select the inline backend themselves
+    env["JUPYTER_PLATFORM_DIRS"] = "1"  # the platformdirs layout, without jupyter_core's deprecation notice
+    env["PYDEVD_DISABLE_FILE_VALIDATION"] = "1"  # ipykernel's debugger: no frozen-modules notice
+    return env
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
+    executed = tmp_path / path.name
+    run = subprocess.run(
+        [sys.executable, "-c", RUNNER, str(path), str(executed), str(TUTORIALS), str(CELL_TIMEOUT)],
+        capture_output=True,
+        text=True,
+        env=_kernel_environment(),
+        timeout=10 * CELL_TIMEOUT,
+        check=False,
+    )
+    report = json.loads(run.stdout.strip().splitlines()[-1]) if run.stdout.strip() else {}
+    assert run.returncode == 0, report.get("error") or run.stderr[-4000:]
+    nb = read_notebook(executed)
+    for i, cell in code_cells(nb):
+        for out in cell.outputs:
+            assert out.output_type != "error", (
+                f"{path.name} cell {i}: {out.get('ename')}: {out.get('evalue')}"
+            )
+            text = out.get("text", "")
+            assert not (out.output_type == "stream" and out.name == "stderr"), (
+                f"{path.name} cell {i} wrote to stderr:\n{text}"
+            )
