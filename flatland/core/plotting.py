@@ -163,7 +163,9 @@ def panel_figure(
         curves = fig.add_subplot(grid[1, :])
     else:
         aspect = primal.shape[0] / max(primal.shape[1], 1)
-        fig, axes = plt.subplots(1, columns, figsize=(2.6 * columns, 2.6 * aspect + 0.9))
+        fig, axes = plt.subplots(
+            1, columns, figsize=(2.6 * columns, 2.6 * aspect + 0.9), layout="constrained"
+        )
         axes, curves = list(np.atleast_1d(axes)), None
     _film(axes[0], primal, PRIMAL, primal_norm, "primal")
     mappable = None
