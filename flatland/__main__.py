@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from flatland.core.cli import Package
 from flatland.core.cli import main as _main
 
-__all__ = ["PACKAGE", "main"]
+__all__ = ["PACKAGE", "STUDIES", "main"]
 
 
 def _textbook_section(args: argparse.Namespace) -> str:
@@ -22,12 +22,45 @@ def _textbook_section(args: argparse.Namespace) -> str:
     return textbook_table(seed=args.seed)
 
 
+STUDIES = {
+    "kappa": {
+        "problem": {"integral": "two_steps", "theta": 1.0},
+        "methods": [
+            {"method": "naive"},
+            {"method": "boundary"},
+            {"method": "finite_difference", "h": [0.01, 0.1]},
+            {"method": "reparam", "kappa": [1, 10, 100, 1000, 10000], "paired": [False, True]},
+        ],
+        "n": 50000,
+        "trials": 20,
+        "seed": 3,
+        "level": 0.99,
+    },
+    "shadow": {
+        "problem": {"scene": "shadow", "param": "occluder.translate.x"},
+        "methods": [
+            {"method": "naive"},
+            {"method": "boundary"},
+            {"method": "finite_difference", "h": 0.01},
+            {"method": "reparam", "kappa": [10, 100, 1000, 10000, 100000]},
+        ],
+        "spp": 16,
+        "trials": 16,
+        "seed": 1,
+        "reference": {"spp": 4096},
+    },
+}
+"""Built-in studies (``python -m flatland study kappa``): the κ trade-off of DESIGN 2.7 on the
+two-step integral against its closed form, and the methods on the shadow scene (the sum of the
+derivative image) against a 4096-spp boundary reference."""
+
 PACKAGE = Package(
     "flatland",
     demo_scene="shadow",
     demo_param="occluder.translate.x",
     demo_spp=256,
     demo_sections=(_textbook_section,),
+    studies=STUDIES,
 )
 """What the shared command line needs to know about flatland."""
 

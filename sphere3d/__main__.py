@@ -14,7 +14,24 @@ from collections.abc import Sequence
 from flatland.core.cli import Package
 from flatland.core.cli import main as _main
 
-__all__ = ["PACKAGE", "main"]
+__all__ = ["PACKAGE", "STUDIES", "main"]
+
+STUDIES = {
+    "shadow": {
+        "problem": {"scene": "shadow", "param": "occluder.translate.x"},
+        "methods": [
+            {"method": "naive"},
+            {"method": "finite_difference", "h": 0.05},
+            {"method": "reparam", "kappa": [100, 1000, 10000]},
+        ],
+        "spp": 4,
+        "trials": 8,
+        "seed": 1,
+        "reference": {"method": "finite_difference", "h": 0.05, "spp": 256},
+    },
+}
+"""Built-in studies (``python -m sphere3d study shadow``): the methods and the κ sweep on the
+shadow scene (the sum of the derivative image) against a 256-spp finite-difference reference."""
 
 PACKAGE = Package(
     "sphere3d",
@@ -23,6 +40,7 @@ PACKAGE = Package(
     demo_spp=32,
     reference_factor=8,
     reference_options=(("h", 0.05),),
+    studies=STUDIES,
 )
 """What the shared command line needs to know about sphere3d."""
 

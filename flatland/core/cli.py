@@ -28,8 +28,8 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import Any, NoReturn
@@ -71,6 +71,9 @@ class Package:
         trading an O(h²) bias for less variance).
     demo_sections : tuple of callables
         Extra text sections printed by ``demo``, each called with the parsed arguments.
+    studies : mapping
+        Built-in study configurations by name: ``study NAME`` runs one when no file
+        ``NAME`` exists.
     """
 
     name: str
@@ -80,6 +83,7 @@ class Package:
     reference_factor: int = 16
     reference_options: tuple[tuple[str, Any], ...] = ()
     demo_sections: tuple[Callable[[argparse.Namespace], str], ...] = ()
+    studies: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def module(self, part: str) -> ModuleType:
         """``<name>.<part>``, imported on first use (matplotlib only once there is a figure to draw)."""
@@ -245,7 +249,10 @@ def _gradient(pkg: Package, args: argparse.Namespace) -> int:
 def _study(pkg: Package, args: argparse.Namespace) -> int:
     from flatland.core.study import load_config, run_study
 
-    config = load_config(args.config, package=pkg.name, seed=args.seed, samples=args.spp)
+    source: Any = args.config
+    if not Path(source).exists() and source in pkg.studies:
+        source = pkg.studies[args.config]
+    config = load_config(source, package=pkg.name, seed=args.seed, samples=args.spp, name=_stem(args.config))
     out = Path(args.out)
     cache = Path(args.cache_dir) if args.cache_dir else out / ".cache" / "reparam-lab"
     result = run_study(
@@ -306,8 +313,9 @@ def _parser(pkg: Package) -> _Parser:
     common(gradient, "samples per pixel (default 64)", 64)
     gradient.set_defaults(func=_gradient)
 
-    study = verbs.add_parser("study", help="run a study CONFIG (JSON): CSV and figures")
-    study.add_argument("config", metavar="CONFIG", help="study configuration (JSON file)")
+    study = verbs.add_parser("study", help="run a study CONFIG (JSON file or built-in name): CSV and figures")
+    builtin = f"; built-in: {', '.join(pkg.studies)}" if pkg.studies else ""
+    study.add_argument("config", metavar="CONFIG", help=f"study configuration: a JSON file{builtin}")
     study.add_argument("--workers", type=int, default=None, help="worker processes")
     study.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
     study.add_argument("--cache-dir", default=None, help="reference cache (default OUT/.cache/reparam-lab)")

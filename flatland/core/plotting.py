@@ -189,19 +189,30 @@ def panel_figure(
 
 # ---------------------------------------------------------------------------------------- study figures
 def _series(rows: Sequence[Any]) -> dict[str, list[Any]]:
-    """Rows that vary ``kappa``, grouped by everything else (method, other options, sample count)."""
-    groups: dict[str, list[Any]] = {}
+    """Rows that vary ``kappa``, grouped by everything else (method, other options, sample count).
+
+    Keyed by a label showing the method, the other options the configuration set, and n.
+    """
+    groups: dict[tuple[Any, ...], list[Any]] = {}
+    labels: dict[tuple[Any, ...], str] = {}
     for r in rows:
-        options = r.cell.options_dict
+        cell = r.cell
+        options = cell.options_dict
         if options.get("kappa") is None:
             continue
-        rest = [r.cell.method] + [
+        key = (cell.method, tuple((k, repr(v)) for k, v in cell.options if k != "kappa"), cell.n)
+        shown = [
             k if v is True else f"{k}={v}"
-            for k, v in options.items()
-            if k != "kappa" and v not in (None, False)
+            for k, v in cell.options
+            if k != "kappa" and k in cell.given and v is not None and v is not False
         ]
-        groups.setdefault(" ".join(rest) + f" n={r.cell.n}", []).append(r)
-    return {k: sorted(v, key=lambda r: r.cell.options_dict["kappa"]) for k, v in groups.items() if len(v) > 1}
+        labels[key] = " ".join([cell.method, *shown, f"n={cell.n}"])
+        groups.setdefault(key, []).append(r)
+    return {
+        labels[k]: sorted(v, key=lambda r: r.cell.options_dict["kappa"])
+        for k, v in groups.items()
+        if len(v) > 1
+    }
 
 
 def has_kappa_series(rows: Sequence[Any]) -> bool:

@@ -61,6 +61,7 @@ Example configuration (JSON)::
 
 from __future__ import annotations
 
+import copy
 import csv
 import hashlib
 import importlib
@@ -162,12 +163,16 @@ class Problem:
 
 @dataclass(frozen=True)
 class Cell:
-    """One point of the grid: a method, its (validated, defaults filled) options and a sample count."""
+    """One point of the grid: a method, its (validated, defaults filled) options and a sample count.
+
+    ``given`` names the options the configuration set (the label shows only those).
+    """
 
     index: int
     method: str
     options: tuple[tuple[str, Any], ...]
     n: int
+    given: tuple[str, ...] = ()
 
     @property
     def options_dict(self) -> dict[str, Any]:
@@ -176,10 +181,10 @@ class Cell:
 
     @property
     def label(self) -> str:
-        """``method`` plus the options that are set, e.g. ``reparam kappa=100 paired``."""
+        """``method`` plus the options the configuration set, e.g. ``reparam kappa=100 paired``."""
         parts = [self.method]
         for k, v in self.options:
-            if v is None or v is False:
+            if k not in self.given or v is None or v is False:
                 continue
             parts.append(k if v is True else f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}")
         return " ".join(parts)
@@ -252,24 +257,31 @@ class StudyConfig:
 
 
 def load_config(
-    path: str | os.PathLike,
+    source: str | os.PathLike | Mapping[str, Any],
     *,
     package: str = "flatland",
     seed: int | None = None,
     samples: int | None = None,
+    name: str | None = None,
 ) -> StudyConfig:
-    """Read and validate a study configuration file (JSON); its stem is the default name.
+    """Read and validate a study configuration: a JSON file (its stem is the default name) or a dict.
 
-    ``seed`` replaces the file's seed; ``samples`` replaces every sample count of
-    the grid (``n`` or ``spp``, swept or not) with one value.
+    ``seed`` replaces the configuration's seed; ``samples`` replaces every sample
+    count of the grid (``n`` or ``spp``, swept or not) with one value.
     """
-    path = Path(path)
-    text = path.read_text(encoding="utf-8")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as e:
-        where = f"line {e.lineno}, column {e.colno}"
-        raise ValidationError(str(path), f"invalid JSON: {e.msg} ({where})") from None
+    if isinstance(source, Mapping):
+        data: Any = copy.deepcopy(dict(source))
+        base_dir = None
+        name = name or "study"
+    else:
+        path = Path(source)
+        text = path.read_text(encoding="utf-8")
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as e:
+            where = f"line {e.lineno}, column {e.colno}"
+            raise ValidationError(str(path), f"invalid JSON: {e.msg} ({where})") from None
+        base_dir, name = path.parent, name or path.stem
     if isinstance(data, dict):
         if seed is not None:
             data["seed"] = seed
@@ -279,7 +291,9 @@ def load_config(
             for entry in data.get("methods") or ():
                 if isinstance(entry, dict):
                     entry.pop(count, None)
-    return StudyConfig.from_dict(data, package=package, base_dir=path.parent, name=path.stem)
+            if isinstance(data.get("reference"), dict):
+                data["reference"].pop(count, None)  # back to its default, 16 × the cells' count
+    return StudyConfig.from_dict(data, package=package, base_dir=base_dir, name=name)
 
 
 def _reject_unknown(prefix: str, data: Mapping[str, Any], known: Iterable[str]) -> None:
@@ -379,7 +393,7 @@ def _expand_cells(data: Any, problem: Problem, default_n: int | None) -> tuple[C
             chosen = dict(zip(keys, combo, strict=True))
             n = check_int(f"{where}.{count}", chosen.pop(count))
             method, options = _resolve(table, where, entry["method"], chosen)
-            cells.append(Cell(len(cells), method, tuple(options.items()), n))
+            cells.append(Cell(len(cells), method, tuple(options.items()), n, tuple(sorted(chosen))))
     return tuple(cells)
 
 

@@ -192,3 +192,10 @@ def test11_bad_study_configuration_names_the_field(tmp_path, capsys):
     )
     assert main(["study", str(path), "--out", str(tmp_path)]) == 2
     assert capsys.readouterr().err.startswith("error: methods[0].kappa: must be > 0")
+
+
+def test12_builtin_study_by_name_with_overrides(tmp_path, capsys):
+    assert main(["study", "kappa", "--spp", "500", "--seed", "4", "--out", str(tmp_path), "--quiet"]) == 0
+    rows = read_csv(tmp_path / "kappa.csv")
+    assert len(rows) == 14 and all(r["n"] == 500 and r["seed"] == 4 and r["trials"] == 20 for r in rows)
+    assert "reparam kappa=10000 paired" in capsys.readouterr().out
