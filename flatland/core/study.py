@@ -521,7 +521,8 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
         from flatland.integrals import get_integral
 
         return Reference(float(get_integral(problem.integral).derivative(problem.theta)), 0.0, "closed form")
-    label = f"{spec.method} {problem.count_name}={spec.n} seed={spec.seed}"
+    options = "".join(f" {k}={v}" for k, v in spec.options if v is not None)
+    label = f"{spec.method}{options} {problem.count_name}={spec.n} seed={spec.seed}"
     path = Path(cache_dir) / f"{_cache_key(problem, spec)}.npz" if cache_dir is not None else None
     if path is not None and path.is_file():
         with np.load(path) as data:

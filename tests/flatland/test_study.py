@@ -153,7 +153,7 @@ def test08_monte_carlo_reference_is_cached_by_its_inputs(tmp_path, monkeypatch):
     config = _config(reference={"method": "finite_difference", "h": 0.01, "n": 20000, "seed": 3}, trials=2)
     first = study.resolve_reference(config, tmp_path)
     files = list(tmp_path.glob("*.npz"))
-    assert len(files) == 1 and first.source.startswith("finite_difference n=20000")
+    assert len(files) == 1 and first.source.startswith("finite_difference h=0.01 n=20000")
     assert "cached" not in first.source
 
     def fail(*args):
