@@ -1,0 +1,35 @@
+"""Central finite differences of whole images, with common random numbers.
+
+Not part of the paper: the reference the other methods are checked against.
+"""
+
+from __future__ import annotations
+
+from flatland.core.contract import Option
+from flatland.core.validate import check_positive
+from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
+
+__all__ = ["finite_difference"]
+
+
+@GRADIENT_METHODS.register("finite_difference", Option("h", 1e-3, check_positive))
+def finite_difference(job: Job, h: float) -> BatchResult:
+    """``[Î(θ0 + h) - Î(θ0 - h)] / 2h`` per pixel and batch, every estimate from the same samples.
+
+    The three renders (at θ0 for the value, θ0 ± h for the difference) draw the same
+    primary samples (the ``"samples"`` stream per batch) and differ only in the
+    bound geometry: common random numbers, so the difference only sees samples
+    whose integrand changed, those within about ``h |c'|`` of a moving discontinuity.
+
+    Assumes nothing about continuity. Biased by the truncation error: its
+    expectation is exactly ``[I(θ0 + h) - I(θ0 - h)] / 2h = I'(θ0) + h² I'''(θ0) / 6 + ...``,
+    and where a pixel's I(θ) has a kink within h of θ0 (a discontinuity crossing the
+    edge of a box filter) the error is O(1) in h. Its variance grows like 1 / h at
+    discontinuities (like 1 / h² without common random numbers). Cost: three primal
+    renders.
+    """
+    base = run(job, job.geometry(0.0), Hooks())
+    plus = run(job, job.geometry(h), Hooks())
+    minus = run(job, job.geometry(-h), Hooks())
+    # per-batch central difference: common random numbers cancel everything that did not move
+    return BatchResult(base.value, (plus.value - minus.value) / (2.0 * h))

@@ -1,0 +1,170 @@
+"""Choosing the point a reparameterization follows, from probe rays (Loubet et al. 2019, Sec. 4.3).
+
+The 2D form of DESIGN 2.8. Per sample, a few probe rays are traced inside the
+kernel's support from the integral's origin o (the camera, or a shading point):
+
+- probe 0 is paired with the *last* probe that hits a different shape (a miss
+  counts as "no shape"); without such a probe, probe 0's hit is used;
+- if only one of the pair hits, its hit point is used;
+- if both hit, the tangent line (p0, n0) *occludes* p1 when it separates p1 from o:
+  ``(n0·(p1 − p0)) (n0·(o − p0)) < 0``, and likewise for (p1, n1); if exactly one
+  occludes the other, the point on the occluder is used;
+- otherwise, nearly parallel normals (``|n0·n1| > 0.99``) use p0, and else the two
+  tangent lines are intersected (a corner where two shapes meet), falling back to
+  p0 when they are parallel or the intersection lies behind o;
+- no probe hits: no point, the transform is the identity.
+
+The chosen point is *attached* (:func:`flatland.geometry.attached_points`): it moves
+with its shape, and the intersection of two tangent lines is recomputed from the
+attached points and normals, so its derivative is the corner's. The choice itself
+is made on values only: it is θ-free, as a change of variables must be.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual
+from flatland.geometry import attached_points
+from flatland.scene import Geometry
+
+__all__ = ["PARALLEL", "Choice", "choose_points"]
+
+PARALLEL = 0.99
+"""|n0·n1| above which two tangent lines count as parallel (DESIGN 2.8)."""
+
+
+@dataclass(frozen=True)
+class Choice:
+    """Per sample: whether a point was chosen (``ok``) and the attached point (Dual, (n, 2))."""
+
+    ok: np.ndarray
+    point: Any
+    code: np.ndarray  # -1 none, 0 probe 0's point, 1 the partner's point, 2 tangent-line intersection
+
+
+def _dot(a: Any, b: Any) -> Any:
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
+
+
+def _nearest_switch(shape: np.ndarray, chosen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row, the probe on ``chosen``'s shape that sits next to a probe on another shape.
+
+    Probes are in angular (film) order. Returns that probe's index (``chosen`` itself
+    where every probe sees the same shape) and its neighbour across the switch (-1
+    where there is none).
+    """
+    n, n_probes = shape.shape
+    rows = np.arange(n)
+    same = shape == shape[rows, chosen][:, None]
+    best, across = chosen.copy(), np.full(n, -1)
+    dist = np.full(n, n_probes + 1)
+    for k in range(n_probes):  # a handful of probes, each vectorized over the rows
+        for nb in (k - 1, k + 1):
+            if 0 <= nb < n_probes:
+                ok = same[:, k] & ~same[:, nb]
+                closer = ok & (np.abs(k - chosen) < dist)
+                best = np.where(closer, k, best)
+                across = np.where(closer, nb, across)
+                dist = np.where(closer, np.abs(k - chosen), dist)
+    return best, across
+
+
+Tracer = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def choose_points(
+    geom: Geometry,
+    origins: np.ndarray,
+    prim: np.ndarray,
+    coord: np.ndarray,
+    dirs0: np.ndarray,
+    probe_params: np.ndarray | None = None,
+    trace: Tracer | None = None,
+    refine: int = 0,
+) -> Choice:
+    """Apply the heuristic to probe hits ``prim``/``coord`` of shape (n, P) from ``origins`` (n, 2).
+
+    ``dirs0`` (n, 2) is a direction inside the kernel's support (the kernel centre),
+    used to reject tangent-line intersections behind the origin. Probes must be in
+    angular (or film) order. When one shape is to be followed, the hit used is the
+    one on that shape *next to the switch* to another shape, the nearest probe to the
+    discontinuity the probes bracket; with ``refine`` > 0 the bracket is bisected
+    that many times (``trace(rows, params) -> (prim, coord)`` traces probes at the
+    parameters ``params`` (film coordinates or angles, like ``probe_params``)).
+    """
+    n, n_probes = prim.shape
+    rows = np.arange(n)
+    shape = np.where(prim >= 0, geom.prim_shape[np.maximum(prim, 0)], -1)
+    differs = shape != shape[:, :1]
+    has_partner = differs.any(axis=1)
+    # index of the last probe whose shape differs from probe 0's
+    partner = np.where(has_partner, n_probes - 1 - np.argmax(differs[:, ::-1], axis=1), 0)
+    prim0, coord0 = prim[:, 0], coord[:, 0]
+    prim1, coord1 = prim[rows, partner], coord[rows, partner]
+    hit0, hit1 = prim0 >= 0, (prim1 >= 0) & has_partner
+
+    # every probe on one primitive (or none hits): nothing in sight to follow, the identity
+    uniform = np.all(prim == prim[:, :1], axis=1)
+    code = np.full(n, -1)
+    code[hit0 & ~hit1 & ~uniform] = 0
+    code[~hit0 & hit1] = 1
+    both = np.flatnonzero(hit0 & hit1)
+    if both.size:
+        p0, n0 = attached_points(geom.detached(), prim0[both], coord0[both])
+        p1, n1 = attached_points(geom.detached(), prim1[both], coord1[both])
+        o = origins[both]
+        occludes01 = _dot(n0, p1 - p0) * _dot(n0, o - p0) < 0.0  # line 0 separates p1 from o
+        occludes10 = _dot(n1, p0 - p1) * _dot(n1, o - p1) < 0.0
+        sub = np.where(occludes01 & ~occludes10, 0, np.where(occludes10 & ~occludes01, 1, 2))
+        parallel = np.abs(_dot(n0, n1)) > PARALLEL
+        sub = np.where((sub == 2) & parallel, 0, sub)
+        # the corner: p0 + s e0 on line 0 with (p0 + s e0 - p1)·n1 = 0, e0 = n0 turned by 90 degrees
+        e0 = np.stack([-n0[:, 1], n0[:, 0]], axis=1)
+        den = _dot(e0, n1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = p0 + (_dot(p1 - p0, n1) / den)[:, None] * e0
+        ahead = _dot(q - o, dirs0[both]) > 0.0
+        sub = np.where((sub == 2) & ~(np.isfinite(q).all(axis=1) & ahead), 0, sub)
+        code[both] = sub
+
+    # one shape to follow: use its hit next to the switch (nearest the discontinuity), refined by bisection
+    single = np.flatnonzero((code == 0) | (code == 1))
+    chosen = np.where(code == 1, partner, 0)
+    # switch between shapes, or between primitives of one shape (a polygon's faces) without a partner
+    key = np.where(has_partner[single][:, None], shape[single], prim[single])
+    best, across = _nearest_switch(key, chosen[single])
+    prim_f, coord_f = prim[single, best].copy(), coord[single, best].copy()
+    if refine and trace is not None and probe_params is not None:
+        live = np.flatnonzero(across >= 0)
+        r = single[live]
+        lo = probe_params[r, best[live]]  # on the followed shape
+        hi = probe_params[r, across[live]]  # on another shape (or nothing)
+        by_shape = has_partner[r]
+        target = key[live, best[live]]
+        for _ in range(refine):
+            mid = 0.5 * (lo + hi)
+            p_mid, c_mid = trace(r, mid)
+            on = (
+                np.where(by_shape, np.where(p_mid >= 0, geom.prim_shape[np.maximum(p_mid, 0)], -1), p_mid)
+                == target
+            )
+            prim_f[live] = np.where(on, p_mid, prim_f[live])
+            coord_f[live] = np.where(on, c_mid, coord_f[live])
+            lo, hi = np.where(on, mid, lo), np.where(on, hi, mid)
+
+    point = Dual(np.zeros((n, 2))) if geom.differentiable else np.zeros((n, 2))
+    if single.size:
+        point[single] = attached_points(geom, prim_f, coord_f)[0]
+    corner = np.flatnonzero(code == 2)
+    if corner.size:
+        p0, n0 = attached_points(geom, prim0[corner], coord0[corner])
+        p1, n1 = attached_points(geom, prim1[corner], coord1[corner])
+        e0 = np.stack([-n0[:, 1], n0[:, 0]], axis=1)
+        # attached corner: its derivative follows both moving tangent lines
+        point[corner] = p0 + (_dot(p1 - p0, n1) / _dot(e0, n1))[:, None] * e0
+    return Choice(code >= 0, point, code)

@@ -1,0 +1,573 @@
+"""Flatland scenes: shapes, materials, emitters, a pinhole camera and named parameters.
+
+A scene is a plain dict (or a JSON file of the same shape), validated on load::
+
+    {"name": "shadow",
+     "camera": {"position": [x, y], "direction": [dx, dy], "fov": 0.9,
+                "pixels": 64, "filter": "tent"},
+     "sky": 0.0,
+     "shapes": [{"name": "floor", "type": "segment", "points": [[-3, 0], [3, 0]],
+                 "albedo": 0.8},
+                {"name": "light", "type": "segment", "points": [[0.5, 2], [-0.5, 2]],
+                 "emission": 6.0, "one_sided": true, "fade": 0.1},
+                {"name": "ball", "type": "circle", "center": [0, 1], "radius": 0.3}],
+     "parameters": ["light.translate.x", "ball.scale"]}
+
+Shapes are made of line segments (``segment``: 2 points, ``polyline``: >= 2 points,
+``polygon``: >= 3 points, closed) or are circles. Each has a diffuse ``albedo`` in
+[0, 1] (BRDF albedo/2, DESIGN 3) and an ``emission`` radiance >= 0. Emission is
+two-sided unless ``one_sided`` is true; a one-sided segment emits toward the right of
+its direction a → b (outward for a counter-clockwise polygon), a circle outward. A
+``segment`` emitter may ``fade`` linearly to zero over that fraction (<= 0.5) of its
+length at both ends, so its own edge is not a moving discontinuity (DESIGN 2.8).
+Rays that escape see the constant ``sky`` radiance. The camera is a pinhole with a 1D
+film: film coordinate t looks along normalize(forward + t · right) (DESIGN 3), right
+being forward turned clockwise; the ``pixels`` cover t in [-tan(fov/2), tan(fov/2)]
+left to right, each integrated against its ``filter`` (``box`` one pixel wide,
+``tent`` of radius one pixel, ``gaussian`` of standard deviation half a pixel).
+
+Parameters bind a scalar θ to one scene quantity. θ is an offset applied to the
+scene as loaded, and gradients are taken at θ = 0:
+
+=============================  =================================================
+``NAME.translate.x`` / ``.y``  add θ to every point (or the centre) of the shape
+``NAME.rotate``                rotate by θ radians about the shape's centre (the
+                               mean of its points; not for circles)
+``NAME.scale``                 scale by 1 + θ about the shape's centre (a circle's
+                               radius)
+``NAME.vertex.K.x`` / ``.y``   add θ to point K of a segment, polyline or polygon
+``NAME.emission``              add θ to the shape's emitted radiance
+``NAME.albedo``                add θ to the shape's albedo
+``camera.translate.x`` / ``.y``  move the camera
+``camera.rotate``              turn the camera by θ radians (counter-clockwise)
+=============================  =================================================
+
+:func:`bind` turns (scene, parameter, θ) into :class:`Geometry`, the flat arrays of
+segments, circles and materials that the ray caster and renderer use; with θ a
+:class:`~flatland.core.dual.Dual` every θ-dependent array is a Dual.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach
+from flatland.core.validate import ValidationError, check_bool, check_choice, check_finite, check_int
+
+__all__ = [
+    "FILTERS",
+    "SHAPE_TYPES",
+    "Camera",
+    "Geometry",
+    "Parameter",
+    "Scene",
+    "Shape",
+    "bind",
+    "list_scenes",
+    "load_scene",
+    "parse_parameter",
+]
+
+SHAPE_TYPES = ("segment", "polyline", "polygon", "circle")
+FILTERS = ("box", "tent", "gaussian")
+_MIN_POINTS = {"segment": 2, "polyline": 2, "polygon": 3}
+_TOP_KEYS = ("name", "description", "camera", "sky", "shapes", "parameters")
+_CAMERA_KEYS = ("position", "direction", "fov", "pixels", "filter")
+_COMMON_SHAPE_KEYS = ("name", "type", "albedo", "emission", "one_sided")
+_SHAPE_KEYS = {
+    "segment": (*_COMMON_SHAPE_KEYS, "points", "fade"),
+    "polyline": (*_COMMON_SHAPE_KEYS, "points"),
+    "polygon": (*_COMMON_SHAPE_KEYS, "points"),
+    "circle": (*_COMMON_SHAPE_KEYS, "center", "radius"),
+}
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+
+
+# ------------------------------------------------------------------ scene description
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole camera with a 1D film (see the module docstring)."""
+
+    position: tuple[float, float]
+    direction: tuple[float, float]
+    fov: float
+    pixels: int
+    filter: str
+
+    @property
+    def half_width(self) -> float:
+        """Film half-width tan(fov / 2)."""
+        return math.tan(0.5 * self.fov)
+
+    @property
+    def pixel_width(self) -> float:
+        """Width Δt of one pixel in film coordinates."""
+        return 2.0 * self.half_width / self.pixels
+
+    def pixel_centers(self) -> np.ndarray:
+        """Film coordinates of the pixel centres, left to right."""
+        return -self.half_width + (np.arange(self.pixels) + 0.5) * self.pixel_width
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One shape: segments (``points``) or a circle (``center``, ``radius``), and its material."""
+
+    name: str
+    type: str
+    points: tuple[tuple[float, float], ...] = ()
+    center: tuple[float, float] | None = None
+    radius: float | None = None
+    albedo: float = 0.0
+    emission: float = 0.0
+    one_sided: bool = False
+    fade: float = 0.0
+
+    def segments(self) -> list[tuple[int, int]]:
+        """Index pairs (i, j) of the points joined by segments (a polygon closes)."""
+        n = len(self.points)
+        pairs = [(i, i + 1) for i in range(n - 1)]
+        return [*pairs, (n - 1, 0)] if self.type == "polygon" else pairs
+
+    def centre(self) -> np.ndarray:
+        """The centre rotations and scalings act about: the mean of the points, or the circle's centre."""
+        if self.type == "circle":
+            return np.array(self.center, dtype=np.float64)
+        return np.mean(np.array(self.points, dtype=np.float64), axis=0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated flatland scene; build one with :func:`load_scene`."""
+
+    name: str
+    camera: Camera
+    sky: float
+    shapes: tuple[Shape, ...]
+    parameters: tuple[str, ...] = ()
+    description: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scene as a JSON-ready dict; ``load_scene(scene.to_dict()) == scene``."""
+        cam = self.camera
+        shapes = []
+        for s in self.shapes:
+            d: dict[str, Any] = {"name": s.name, "type": s.type}
+            if s.type == "circle":
+                d["center"] = list(s.center)
+                d["radius"] = s.radius
+            else:
+                d["points"] = [list(p) for p in s.points]
+            d.update(albedo=s.albedo, emission=s.emission, one_sided=s.one_sided)
+            if s.type == "segment":
+                d["fade"] = s.fade
+            shapes.append(d)
+        return {
+            "name": self.name,
+            "description": self.description,
+            "camera": {
+                "position": list(cam.position),
+                "direction": list(cam.direction),
+                "fov": cam.fov,
+                "pixels": cam.pixels,
+                "filter": cam.filter,
+            },
+            "sky": self.sky,
+            "shapes": shapes,
+            "parameters": list(self.parameters),
+        }
+
+    def shape(self, name: str) -> Shape:
+        """The shape called ``name``."""
+        for s in self.shapes:
+            if s.name == name:
+                return s
+        raise ValidationError("shape", f"no shape named {name!r} in scene {self.name!r}")
+
+    def with_camera(self, **changes: Any) -> Scene:
+        """A copy with camera fields changed (validated), e.g. ``scene.with_camera(pixels=32)``."""
+        d = self.to_dict()
+        d["camera"].update(changes)
+        return load_scene(d)
+
+
+# ------------------------------------------------------------------ validation
+def _check_keys(path: str, d: Any, allowed: tuple[str, ...], required: tuple[str, ...]) -> None:
+    if not isinstance(d, Mapping):
+        raise ValidationError(path or "scene", f"must be a mapping (JSON object), got {d!r}")
+    for key, value in d.items():
+        if key not in allowed:
+            where = f"{path}.{key}" if path else str(key)
+            raise ValidationError(where, f"unknown key (value {value!r}); allowed keys: {', '.join(allowed)}")
+    for key in required:
+        if key not in d:
+            raise ValidationError(f"{path}.{key}" if path else key, "is required")
+
+
+def _check_point(path: str, value: Any) -> tuple[float, float]:
+    if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ValidationError(path, f"must be a point [x, y], got {value!r}")
+    return (check_finite(f"{path}[0]", value[0]), check_finite(f"{path}[1]", value[1]))
+
+
+def _check_name(path: str, value: Any) -> str:
+    if not isinstance(value, str) or not _NAME.match(value) or value == "camera":
+        raise ValidationError(
+            path, f"must be a name of letters, digits, '_' or '-' (not 'camera', no dots), got {value!r}"
+        )
+    return value
+
+
+def _check_range(path: str, value: Any, lo: float, hi: float) -> float:
+    out = check_finite(path, value)
+    if not lo <= out <= hi:
+        raise ValidationError(path, f"must lie in [{lo}, {hi}], got {value!r}")
+    return out
+
+
+def _check_camera(d: Any) -> Camera:
+    _check_keys("camera", d, _CAMERA_KEYS, ("position", "direction", "fov", "pixels"))
+    position = _check_point("camera.position", d["position"])
+    direction = _check_point("camera.direction", d["direction"])
+    length = math.hypot(*direction)
+    if not length > 1e-12:
+        raise ValidationError("camera.direction", f"must be a non-zero vector, got {d['direction']!r}")
+    fov = check_finite("camera.fov", d["fov"])
+    if not 0.0 < fov < math.pi:
+        raise ValidationError("camera.fov", f"must lie in (0, π) radians, got {d['fov']!r}")
+    pixels = check_int("camera.pixels", d["pixels"])
+    filt = check_choice("camera.filter", d.get("filter", "tent"), FILTERS)
+    return Camera(position, (direction[0] / length, direction[1] / length), fov, pixels, filt)
+
+
+def _check_shape(i: int, d: Any) -> Shape:
+    path = f"shapes[{i}]"
+    if not isinstance(d, Mapping):
+        raise ValidationError(path, f"must be a mapping (JSON object), got {d!r}")
+    kind = d.get("type")
+    if kind not in SHAPE_TYPES:
+        raise ValidationError(
+            f"{path}.type", f"unknown shape type {kind!r}; choose from {', '.join(SHAPE_TYPES)}"
+        )
+    required = ("name", "type", "center", "radius") if kind == "circle" else ("name", "type", "points")
+    _check_keys(path, d, _SHAPE_KEYS[kind], required)
+    name = _check_name(f"{path}.name", d["name"])
+    albedo = check_finite(f"{path}.albedo", d.get("albedo", 0.0))
+    if not 0.0 <= albedo <= 1.0:
+        raise ValidationError(f"{path}.albedo", f"must lie in [0, 1], got {d['albedo']!r}")
+    emission = check_finite(f"{path}.emission", d.get("emission", 0.0))
+    if emission < 0.0:
+        raise ValidationError(f"{path}.emission", f"must be >= 0, got {d['emission']!r}")
+    one_sided = check_bool(f"{path}.one_sided", d.get("one_sided", False))
+    if kind == "circle":
+        center = _check_point(f"{path}.center", d["center"])
+        radius = check_finite(f"{path}.radius", d["radius"])
+        if radius <= 0.0:
+            raise ValidationError(f"{path}.radius", f"must be > 0, got {d['radius']!r}")
+        return Shape(name, kind, (), center, radius, albedo, emission, one_sided)
+    raw = d["points"]
+    if isinstance(raw, str | bytes | Mapping) or not hasattr(raw, "__len__"):
+        raise ValidationError(f"{path}.points", f"must be a list of points [x, y], got {raw!r}")
+    if kind == "segment" and len(raw) != 2:
+        raise ValidationError(f"{path}.points", f"a segment has exactly 2 points, got {len(raw)}")
+    if len(raw) < _MIN_POINTS[kind]:
+        raise ValidationError(
+            f"{path}.points", f"a {kind} needs >= {_MIN_POINTS[kind]} points, got {len(raw)}"
+        )
+    points = tuple(_check_point(f"{path}.points[{k}]", p) for k, p in enumerate(raw))
+    fade = _check_range(f"{path}.fade", d.get("fade", 0.0), 0.0, 0.5)
+    shape = Shape(name, kind, points, None, None, albedo, emission, one_sided, fade)
+    scale = max(1.0, float(np.max(np.abs(np.array(points)))))
+    for a, b in shape.segments():
+        if math.dist(points[a], points[b]) <= 1e-9 * scale:
+            raise ValidationError(
+                f"{path}.points[{b}]",
+                f"zero-length segment: point {b} {list(points[b])} equals point {a} {list(points[a])}",
+            )
+    return shape
+
+
+def _from_dict(d: Any) -> Scene:
+    _check_keys("", d, _TOP_KEYS, ("name", "camera", "shapes"))
+    name = d["name"]
+    if not isinstance(name, str) or not name:
+        raise ValidationError("name", f"must be a non-empty string, got {name!r}")
+    description = d.get("description", "")
+    if not isinstance(description, str):
+        raise ValidationError("description", f"must be a string, got {description!r}")
+    camera = _check_camera(d["camera"])
+    sky = check_finite("sky", d.get("sky", 0.0))
+    if sky < 0.0:
+        raise ValidationError("sky", f"must be >= 0, got {d['sky']!r}")
+    raw_shapes = d["shapes"]
+    if isinstance(raw_shapes, str | bytes | Mapping) or not hasattr(raw_shapes, "__len__") or not raw_shapes:
+        raise ValidationError("shapes", f"must be a non-empty list of shapes, got {raw_shapes!r}")
+    shapes = tuple(_check_shape(i, s) for i, s in enumerate(raw_shapes))
+    seen: dict[str, int] = {}
+    for i, s in enumerate(shapes):
+        if s.name in seen:
+            raise ValidationError(
+                f"shapes[{i}].name", f"duplicate shape name {s.name!r} (also shapes[{seen[s.name]}])"
+            )
+        seen[s.name] = i
+    scene = Scene(name, camera, sky, shapes, (), description)
+    raw_params = d.get("parameters", [])
+    if isinstance(raw_params, str | bytes | Mapping) or not hasattr(raw_params, "__len__"):
+        raise ValidationError("parameters", f"must be a list of parameter names, got {raw_params!r}")
+    params = tuple(parse_parameter(scene, p, field=f"parameters[{k}]").name for k, p in enumerate(raw_params))
+    return replace(scene, parameters=params)
+
+
+def _scene_dir() -> Any:
+    return resources.files("flatland") / "scenes"
+
+
+def list_scenes() -> tuple[str, ...]:
+    """Names of the built-in scenes (``flatland/scenes/*.json``), sorted."""
+    return tuple(sorted(p.name[:-5] for p in _scene_dir().iterdir() if p.name.endswith(".json")))
+
+
+def load_scene(source: Any) -> Scene:
+    """A validated :class:`Scene` from a built-in name, a ``.json`` path, a dict or a Scene.
+
+    Raises
+    ------
+    ValidationError
+        One error naming the bad field's path and value, e.g.
+        ``shapes[2].radius: must be > 0, got -1.0``.
+    """
+    if isinstance(source, Scene):
+        return source
+    if isinstance(source, Mapping):
+        return _from_dict(source)
+    if isinstance(source, str) and source in list_scenes():
+        return _from_dict(json.loads((_scene_dir() / f"{source}.json").read_text(encoding="utf-8")))
+    if isinstance(source, str | Path) and str(source).endswith(".json"):
+        path = Path(source)
+        if not path.is_file():
+            raise ValidationError("scene", f"no such scene file {str(source)!r}")
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as err:
+            raise ValidationError("scene", f"{str(source)!r} is not valid JSON: {err}") from None
+        return _from_dict(data)
+    raise ValidationError(
+        "scene",
+        f"unknown scene {source!r}: not a built-in ({', '.join(list_scenes())}), a .json path or a dict",
+    )
+
+
+# ------------------------------------------------------------------ parameters
+@dataclass(frozen=True)
+class Parameter:
+    """A parsed parameter name: what θ moves (see the module docstring's table)."""
+
+    name: str
+    target: str  # shape name or "camera"
+    kind: str  # translate, rotate, scale, vertex, emission, albedo
+    axis: int = -1  # 0 for x, 1 for y (translate, vertex)
+    index: int = -1  # vertex index
+
+
+def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
+    """Check ``name`` against ``scene`` and parse it; one ValidationError naming ``field`` otherwise."""
+    if not isinstance(name, str):
+        raise ValidationError(field, f"must be a parameter name like 'occluder.translate.x', got {name!r}")
+    parts = name.split(".")
+    axes = {"x": 0, "y": 1}
+    shapes = {s.name: s for s in scene.shapes}
+
+    def bad(why: str) -> ValidationError:
+        return ValidationError(field, f"unknown parameter {name!r}: {why}")
+
+    target, rest = parts[0], parts[1:]
+    if target == "camera":
+        if len(rest) == 2 and rest[0] == "translate" and rest[1] in axes:
+            return Parameter(name, "camera", "translate", axis=axes[rest[1]])
+        if rest == ["rotate"]:
+            return Parameter(name, "camera", "rotate")
+        raise bad("the camera has translate.x, translate.y and rotate")
+    if target not in shapes:
+        raise bad(f"no shape {target!r} (shapes: {', '.join(shapes)}; or 'camera')")
+    shape = shapes[target]
+    if len(rest) == 2 and rest[0] == "translate" and rest[1] in axes:
+        return Parameter(name, target, "translate", axis=axes[rest[1]])
+    if rest in (["scale"], ["emission"], ["albedo"]):
+        return Parameter(name, target, rest[0])
+    if rest == ["rotate"]:
+        if shape.type == "circle":
+            raise bad("a circle does not change when rotated about its centre")
+        return Parameter(name, target, "rotate")
+    if len(rest) == 3 and rest[0] == "vertex" and rest[2] in axes and rest[1].isdigit():
+        k = int(rest[1])
+        if shape.type == "circle" or k >= len(shape.points):
+            raise bad(f"shape {target!r} has {len(shape.points)} vertices")
+        return Parameter(name, target, "vertex", axis=axes[rest[2]], index=k)
+    raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, emission or albedo")
+
+
+# ------------------------------------------------------------------ bound geometry
+@dataclass(frozen=True)
+class Geometry:
+    """A scene as flat arrays at one parameter value (Duals where θ enters).
+
+    Primitives are numbered segments first (0..S-1), then circles (S..S+C-1).
+    ``vertices`` are the shapes' points (segment endpoints, each once per shape),
+    the candidate discontinuities of the boundary method together with circle
+    tangent points.
+    """
+
+    seg_a: Any  # (S, 2)
+    seg_b: Any  # (S, 2)
+    circ_c: Any  # (C, 2)
+    circ_r: Any  # (C,)
+    prim_shape: np.ndarray  # (S + C,) int
+    emission: Any  # (S + C,)
+    albedo: Any  # (S + C,)
+    one_sided: np.ndarray  # (S + C,) bool
+    fade: np.ndarray  # (S + C,) float
+    vertices: Any  # (V, 2)
+    cam_o: Any  # (2,)
+    cam_f: Any  # (2,)
+    cam_r: Any  # (2,)
+    sky: float
+    camera: Camera
+    shape_names: tuple[str, ...] = field(default=())
+
+    @property
+    def n_seg(self) -> int:
+        return int(np.shape(detach(self.seg_a))[0])
+
+    @property
+    def n_circ(self) -> int:
+        return int(np.shape(detach(self.circ_r))[0])
+
+    @property
+    def differentiable(self) -> bool:
+        """True when some array is a Dual (bound with a Dual θ)."""
+        return any(isinstance(getattr(self, f.name), Dual) for f in fields(self))
+
+    def detached(self) -> Geometry:
+        """The same geometry with every derivative dropped (for tracing and jump values)."""
+        return replace(self, **{f.name: detach(getattr(self, f.name)) for f in fields(self)})
+
+    def emitters(self) -> np.ndarray:
+        """Indices of primitives with emission > 0 (at this parameter value)."""
+        return np.flatnonzero(detach(self.emission) > 0.0)
+
+
+def _rotation(points: Any, centre: np.ndarray, angle: Any) -> Any:
+    c, s = np.cos(angle), np.sin(angle)
+    dx, dy = points[:, 0] - centre[0], points[:, 1] - centre[1]
+    return np.stack([centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy], axis=1)
+
+
+def _moved_points(shape: Shape, p: Parameter | None, theta: Any) -> Any:
+    pts = np.array(shape.points, dtype=np.float64)
+    if p is None or p.target != shape.name:
+        return pts
+    unit = np.zeros(2)
+    if p.kind == "translate":
+        unit[p.axis] = 1.0
+        return pts + theta * unit
+    if p.kind == "rotate":
+        return _rotation(pts, shape.centre(), theta)
+    if p.kind == "scale":
+        ctr = shape.centre()
+        return ctr + (1.0 + theta) * (pts - ctr)
+    if p.kind == "vertex":
+        mask = np.zeros_like(pts)
+        mask[p.index, p.axis] = 1.0
+        return pts + theta * mask
+    return pts
+
+
+def bind(scene: Scene, param: str | Parameter | None = None, theta: Any = 0.0) -> Geometry:
+    """The scene's :class:`Geometry` with parameter ``param`` set to offset ``theta``.
+
+    ``theta`` may be a float (finite differences) or a Dual (``variable(0.0)``, the
+    gradient methods); with ``param=None`` every array is plain.
+    """
+    p = parse_parameter(scene, param) if isinstance(param, str) else param
+    seg_a, seg_b, seg_shape, seg_fade, seg_one = [], [], [], [], []
+    circ_c, circ_r, circ_shape, circ_one = [], [], [], []
+    vertices = []
+    for k, s in enumerate(scene.shapes):
+        if s.type == "circle":
+            c = np.array(s.center, dtype=np.float64)
+            r: Any = s.radius
+            if p is not None and p.target == s.name and p.kind == "translate":
+                unit = np.zeros(2)
+                unit[p.axis] = 1.0
+                c = c + theta * unit
+            if p is not None and p.target == s.name and p.kind == "scale":
+                r = s.radius * (1.0 + theta)
+            circ_c.append(np.stack([c[0], c[1]]))
+            circ_r.append(np.stack([r]))
+            circ_shape.append(k)
+            circ_one.append(s.one_sided)
+            continue
+        pts = _moved_points(s, p, theta)
+        pairs = np.array(s.segments())
+        seg_a.append(pts[pairs[:, 0]])
+        seg_b.append(pts[pairs[:, 1]])
+        seg_shape += [k] * len(pairs)
+        seg_fade += [s.fade] * len(pairs)
+        seg_one += [s.one_sided] * len(pairs)
+        vertices.append(pts)
+    empty2 = np.zeros((0, 2))
+    seg_a_all = np.concatenate(seg_a) if seg_a else empty2
+    seg_b_all = np.concatenate(seg_b) if seg_b else empty2
+    circ_c_all = np.stack(circ_c) if circ_c else empty2
+    circ_r_all = np.concatenate(circ_r) if circ_r else np.zeros(0)
+    prim_shape = np.array(seg_shape + circ_shape, dtype=np.int64)
+    emission: Any = np.array([scene.shapes[k].emission for k in prim_shape])
+    albedo: Any = np.array([scene.shapes[k].albedo for k in prim_shape])
+    if p is not None and p.kind in ("emission", "albedo"):
+        mask = np.array([scene.shapes[k].name == p.target for k in prim_shape], dtype=np.float64)
+        if p.kind == "emission":
+            emission = emission + theta * mask
+        else:
+            albedo = albedo + theta * mask
+    cam = scene.camera
+    o: Any = np.array(cam.position, dtype=np.float64)
+    angle: Any = math.atan2(cam.direction[1], cam.direction[0])
+    if p is not None and p.target == "camera":
+        if p.kind == "translate":
+            unit = np.zeros(2)
+            unit[p.axis] = 1.0
+            o = o + theta * unit
+        else:
+            angle = angle + theta
+    if p is not None and p.target == "camera" and p.kind == "rotate":
+        f = np.stack([np.cos(angle), np.sin(angle)])
+    else:
+        f = np.array(cam.direction, dtype=np.float64)
+    r_vec = np.stack([f[1], -f[0]])  # right = forward turned clockwise
+    return Geometry(
+        seg_a=seg_a_all,
+        seg_b=seg_b_all,
+        circ_c=circ_c_all,
+        circ_r=circ_r_all,
+        prim_shape=prim_shape,
+        emission=emission,
+        albedo=albedo,
+        one_sided=np.array(seg_one + circ_one, dtype=bool),
+        fade=np.array(seg_fade + [0.0] * len(circ_shape), dtype=np.float64),
+        vertices=np.concatenate(vertices) if vertices else empty2,
+        cam_o=o,
+        cam_f=f,
+        cam_r=r_vec,
+        sky=float(scene.sky),
+        camera=cam,
+        shape_names=tuple(s.name for s in scene.shapes),
+    )
