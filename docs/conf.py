@@ -40,7 +40,7 @@ extensions = [
     "project_docs",
 ]
 
-API_PACKAGES = ("flatland", "sphere3d")
+project_api_packages = API_PACKAGES = ("flatland", "sphere3d")
 """Packages in the API reference, each documented recursively when it can be imported."""
 
 project_docs.write_api_index(DOCS / "api" / "index.rst", API_PACKAGES)

@@ -248,3 +248,53 @@ def test06_the_guides_example_registers_in_its_own_table_only(example):
     assert example.EXAMPLE_METHODS.names == ("edge_sampling",)
     with pytest.raises(ValueError, match="edge_sampling"):
         estimate("step", 0.5, "edge_sampling", n=10)
+
+
+# ------------------------------------------------------------------ the site's Sphinx extension
+def build_tiny_site(tmp_path, page: str) -> str:
+    """Build a one-page site with docs/_ext/project_docs.py; return its warnings and HTML."""
+    import io
+    import sys
+
+    from sphinx.application import Sphinx
+
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "conf.py").write_text(
+        "extensions = ['myst_parser', 'project_docs']\n"
+        "html_static_path = []\nproject_api_packages = ('flatland',)\n",
+        encoding="utf-8",
+    )
+    (src / "index.md").write_text(page, encoding="utf-8")
+    sys.path.insert(0, str(DOCS / "_ext"))
+    try:
+        warnings = io.StringIO()
+        app = Sphinx(src, src, tmp_path / "out", tmp_path / "doctrees", "html", status=None, warning=warnings)
+        app.build()
+    finally:
+        sys.path.remove(str(DOCS / "_ext"))
+    return warnings.getvalue(), (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
+
+
+def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tmp_path):
+    page = "\n".join(
+        [
+            "# Page",
+            "",
+            "```{py:function} flatland.estimators.reparam.follow_nearest(domain, discontinuities, points)",
+            "```",
+            "",
+            "```{implements} DESIGN 2.5",
+            "flatland.estimators.reparam.follow_nearest",
+            "flatland.no_such_function",
+            "```",
+            "",
+            "See {func}`flatland.also_missing`.",
+        ]
+    )
+    warnings, html = build_tiny_site(tmp_path, page)
+    assert "DESIGN 2.5 in the code" in html
+    assert 'href="#flatland.estimators.reparam.follow_nearest"' in html
+    assert "flatland.no_such_function cannot be imported" in warnings
+    assert "reference target not found: flatland.also_missing" in warnings
+    assert warnings.count("WARNING") == 3  # the bad name: not importable, and no page to link to

@@ -34,16 +34,20 @@ IDS = [nb.stem for nb in NOTEBOOKS]
 PAIRING = "ipynb,py:percent"
 CELL_TIMEOUT = 240  # seconds per cell; the whole course is budgeted at 5 minutes on 2 cores
 PLOT_CALL = re.compile(r"\bplot_[a-z_]+\(")
+ANSI = re.compile(r"\x1b\[[0-9;]*m")  # colour codes in IPython tracebacks
 
 RUNNER = r"""
 import json, sys, time
 import nbformat
+from jupyter_client.manager import KernelManager
 from nbclient import NotebookClient
 from nbclient.exceptions import CellExecutionError
 
-source, target, workdir, timeout = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+source, target, workdir, sockets, timeout = sys.argv[1:6]
 nb = nbformat.read(source, as_version=4)
-client = NotebookClient(nb, timeout=timeout, kernel_name="python3", resources={"metadata": {"path": workdir}})
+# IPC sockets in a private folder: no TCP ports to race for with other processes on the machine
+kernel = KernelManager(kernel_name="python3", transport="ipc", ip=sockets)
+client = NotebookClient(nb, km=kernel, timeout=int(timeout), resources={"metadata": {"path": workdir}})
 start = time.perf_counter()
 status, error = 0, ""
 try:
@@ -138,8 +142,18 @@ def _kernel_environment() -> dict[str, str]:
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
 def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
     executed = tmp_path / path.name
+    sockets = tmp_path / "kernel"
     run = subprocess.run(
-        [sys.executable, "-c", RUNNER, str(path), str(executed), str(TUTORIALS), str(CELL_TIMEOUT)],
+        [
+            sys.executable,
+            "-c",
+            RUNNER,
+            str(path),
+            str(executed),
+            str(TUTORIALS),
+            str(sockets),
+            str(CELL_TIMEOUT),
+        ],
         capture_output=True,
         text=True,
         env=_kernel_environment(),
@@ -147,7 +161,7 @@ def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
         check=False,
     )
     report = json.loads(run.stdout.strip().splitlines()[-1]) if run.stdout.strip() else {}
-    assert run.returncode == 0, report.get("error") or run.stderr[-4000:]
+    assert run.returncode == 0, ANSI.sub("", report.get("error") or run.stderr[-4000:])
     nb = read_notebook(executed)
     for i, cell in code_cells(nb):
         for out in cell.outputs:

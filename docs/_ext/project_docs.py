@@ -43,6 +43,8 @@ the module's ``__all__`` (helpers that are public by name only) are skipped.
 from __future__ import annotations
 
 import importlib
+import inspect
+import pkgutil
 import re
 import shutil
 import sys
@@ -53,6 +55,8 @@ from typing import Any
 from docutils import nodes
 from sphinx import addnodes
 from sphinx.application import Sphinx
+from sphinx.errors import PycodeError
+from sphinx.pycode import ModuleAnalyzer
 from sphinx.util import logging
 from sphinx.util.docutils import SphinxDirective
 
@@ -233,9 +237,76 @@ def write_api_index(path: Path, packages: Iterable[str]) -> list[str]:
             continue  # an empty folder imports as a namespace package: nothing to document
         found.append(name)
     text = API_INDEX.format(entries="\n".join(f"   {name}" for name in found))
+    path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists() or path.read_text(encoding="utf-8") != text:
         path.write_text(text, encoding="utf-8")
     return found
+
+
+def shadowed_modules(packages: Iterable[str]) -> list[str]:
+    """Submodules hidden by a same-named attribute of their package (``sphere3d.render`` the function).
+
+    ``import sphere3d.render`` binds the package attribute ``render`` to the function the
+    package re-exports, so autosummary documents the function under the module's name
+    and the module's own page is lost. :func:`_document_shadowed_modules` writes those
+    pages itself.
+    """
+    found = []
+    for package in packages:
+        try:
+            pkg = importlib.import_module(package)
+        except ImportError:
+            continue
+        for info in pkgutil.walk_packages(getattr(pkg, "__path__", []), package + "."):
+            if any(part.startswith("_") for part in info.name.split(".")):
+                continue
+            parent, _, leaf = info.name.rpartition(".")
+            attr = getattr(sys.modules.get(parent), leaf, None)
+            if attr is not None and not inspect.ismodule(attr):
+                found.append(info.name)
+    return found
+
+
+def module_page(name: str) -> str:
+    """reStructuredText of one module's API page, as ``_templates/autosummary/module.rst`` writes it."""
+    module = importlib.import_module(name)
+    public = getattr(module, "__all__", None)
+    defined = [
+        (n, o)
+        for n, o in vars(module).items()
+        if not n.startswith("_")
+        and getattr(o, "__module__", None) == name
+        and (public is None or n in public)
+        and (inspect.isclass(o) or inspect.isfunction(o))
+    ]
+    classes = [n for n, o in defined if inspect.isclass(o)]
+    functions = [n for n, o in defined if inspect.isfunction(o)]
+    try:
+        attributes = sorted({a for ns, a in ModuleAnalyzer.for_module(name).find_attr_docs() if not ns})
+    except PycodeError:
+        attributes = []
+    attributes = [a for a in attributes if not a.startswith("_")]
+    lines = [name, "=" * len(name), "", f".. automodule:: {name}", ""]
+    if attributes or classes or functions:
+        lines += [".. rubric:: Contents", "", ".. autosummary::", "   :nosignatures:", ""]
+        lines += [f"   {n}" for n in attributes + classes + functions] + [""]
+    for n in attributes:
+        lines += [f".. autodata:: {n}", "   :no-value:", ""]
+    for n in classes:
+        lines += [f".. autoclass:: {n}", "   :members:", "   :show-inheritance:", ""]
+    for n in functions:
+        lines += [f".. autofunction:: {n}", ""]
+    return "\n".join(lines)
+
+
+def _document_shadowed_modules(app: Sphinx) -> None:
+    """Replace autosummary's page of a shadowed module (it documents the function) by the module's page."""
+    generated = Path(app.srcdir) / "api" / "generated"
+    for name in shadowed_modules(app.config.project_api_packages):
+        page = generated / f"{name}.rst"
+        text = module_page(name)
+        if page.exists() and page.read_text(encoding="utf-8") != text:
+            page.write_text(text, encoding="utf-8")
 
 
 def copy_tutorials(source: Path, target: Path) -> list[Path]:
@@ -265,7 +336,10 @@ def _forget_environment_after_warnings(app: Sphinx, exception: Exception | None)
 
 def setup(app: Sphinx) -> dict[str, Any]:
     """Register the directive and the event handlers."""
+    app.setup_extension("sphinx.ext.autodoc")  # its events are connected below
+    app.add_config_value("project_api_packages", PROJECT_PACKAGES, "env")
     app.add_directive("implements", Implements)
+    app.connect("builder-inited", _document_shadowed_modules, priority=900)  # after autosummary (500)
     app.connect("missing-reference", _resolve_project_reference, priority=900)
     app.connect("autodoc-process-docstring", _process_docstring, priority=400)  # before napoleon (500)
     app.connect("autodoc-process-docstring", _plain_types, priority=600)  # after napoleon
