@@ -53,14 +53,14 @@ def test01_demo_writes_the_panel_and_the_error_table(tmp_path):
 
 
 def test02_render_and_gradient_write_png_and_npy(tmp_path, scene_file):
+    """render in a subprocess, gradient in-process (the same command code)."""
     result = run("render", scene_file, "--spp", 4, "--out", tmp_path)
     assert result.returncode == 0, result.stderr
     image = np.load(tmp_path / "small_shadow.npy")
     assert image.shape == (H, W) and image.dtype.names == ("value", "stderr")
     assert (tmp_path / "small_shadow.png").stat().st_size > 3_000
-    result = run("gradient", scene_file, "--param", "occluder.translate.x", "--method", "finite_difference",
-                 "--h", 0.05, "--spp", 4, "--out", tmp_path)  # fmt: skip
-    assert result.returncode == 0, result.stderr
+    argv = ["gradient", str(scene_file), "--param", "occluder.translate.x", "--method", "finite_difference"]
+    assert main([*argv, "--h", "0.05", "--spp", "4", "--out", str(tmp_path)]) == 0  # in-process
     stem = tmp_path / "small_shadow_occluder.translate.x_finite_difference"
     data = np.load(stem.with_suffix(".npy"))
     assert data.shape == (H, W) and data.dtype.names == (
