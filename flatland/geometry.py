@@ -287,9 +287,9 @@ def silhouette_angles(geom: Geometry, origins: Any) -> tuple[Any, np.ndarray]:
     if np.shape(detach(geom.vertices))[0]:
         v = geom.vertices[None, :, :] - o[:, None, :]
         vv = detach(v)
-        len2 = vv[..., 0] ** 2 + vv[..., 1] ** 2
-        parts.append(angle_of(v))
-        masks.append(len2 > 1e-18)
+        apart = vv[..., 0] ** 2 + vv[..., 1] ** 2 > 1e-18
+        parts.append(angle_of(np.where(apart[..., None], v, 1.0)))
+        masks.append(apart)
     if geom.n_circ:
         p = geom.circ_c[None, :, :] - o[:, None, :]
         dist = np.sqrt(p[..., 0] * p[..., 0] + p[..., 1] * p[..., 1])
@@ -298,7 +298,7 @@ def silhouette_angles(geom: Geometry, origins: Any) -> tuple[Any, np.ndarray]:
         # tangent directions from o: angle(c - o) -+ arcsin(r / |c - o|); 0 where o is inside
         ratio = np.where(outside, r / np.where(outside, dist, 1.0), 0.0)
         beta = np.arcsin(ratio)
-        base = angle_of(p)
+        base = angle_of(np.where(outside[..., None], p, 1.0))
         parts += [base - beta, base + beta]
         masks += [outside, outside]
     if not parts:

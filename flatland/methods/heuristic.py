@@ -1,7 +1,8 @@
 """Choosing the point a reparameterization follows, from probe rays (Loubet et al. 2019, Sec. 4.3).
 
 The 2D form of DESIGN 2.8. Per sample, a few probe rays are traced inside the
-kernel's support from the integral's origin o (the camera, or a shading point):
+kernel's support from the integral's origin o (the camera, or a shading point), in
+angular (film) order:
 
 - probe 0 is paired with the *last* probe that hits a different shape (a miss
   counts as "no shape"); without such a probe, probe 0's hit is used;
@@ -14,10 +15,31 @@ kernel's support from the integral's origin o (the camera, or a shading point):
   p0 when they are parallel or the intersection lies behind o;
 - no probe hits: no point, the transform is the identity.
 
+Three refinements, each measured to matter in flatland and each keeping the choice
+θ-free (all of it is made on values, so it stays a valid change of variables):
+
+- *Nothing to follow.* When every probe hits the same primitive (or none hits),
+  no discontinuity is in sight and the transform is the identity. Following the
+  hit point anyway is unbiased too, but it adds the kernel weight's derivative
+  (variance) everywhere a surface moves in the image, e.g. everywhere for a moving
+  camera.
+- *The hit next to the switch.* When one shape is followed, the hit used is the one
+  on that shape adjacent (in probe order) to a probe that sees something else: the
+  probe hit nearest the discontinuity the probes bracket. An attached point moves
+  like the silhouette only to first order in its distance from it (exactly, under
+  translation), so under rotation or vertex motion the far hits are biased.
+- *Bisection* (``refine`` steps): the bracket between that hit and its neighbour is
+  halved by tracing its midpoint, moving the followed point toward the
+  discontinuity; each step costs one ray per sample that has a bracket.
+
 The chosen point is *attached* (:func:`flatland.geometry.attached_points`): it moves
 with its shape, and the intersection of two tangent lines is recomputed from the
-attached points and normals, so its derivative is the corner's. The choice itself
-is made on values only: it is θ-free, as a change of variables must be.
+attached points and normals, so its derivative is the corner's.
+
+Known failure (kept, it is the heuristic's): the occlusion test treats each tangent
+line as an infinite surface, so a small blocker whose edge line happens to separate
+an emitter from o is taken to occlude it; when the emitter's edge is a discontinuity
+(an unfaded emitter) and the blocker moves, that edge is then treated as moving.
 """
 
 from __future__ import annotations

@@ -2,12 +2,14 @@
 
 Loubet et al. 2019: Sec. 3.2 (change of variables), 4.1 (in 2D a rotation of
 directions is a translation of the angle, and the film is a line), 4.2 (convolution
-kernels), 4.3 (choosing the transform by ray tracing, DESIGN 2.8), and the paired
-samples of the authors' implementation (DESIGN 2.9).
+kernels), 4.3 (choosing the transform by ray tracing, DESIGN 2.8,
+:mod:`flatland.methods.heuristic`), and the paired samples of the authors'
+implementation (DESIGN 2.9).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -26,7 +28,7 @@ from flatland.integrator import (
     filter_blurred,
     run,
 )
-from flatland.methods.heuristic import choose_points
+from flatland.methods.heuristic import Choice, choose_points
 from flatland.sampling import sample_von_mises
 
 __all__ = ["ReparamHooks", "default_kappa_film", "reparam"]
@@ -42,129 +44,103 @@ def default_kappa_film(pixel_width: float) -> float:
 
 
 class ReparamHooks(Hooks):
-    """Film and direction translations that follow the point chosen by probe rays (DESIGN 2.8).
+    """Film and angle translations following the point the probes choose, inside convolution kernels.
 
-    Film (kernel: Gaussian of variance 1/κ_film on t): the kernel centre ω ~ N(t, 1/κ_film)
-    is drawn around the film sample t (the joint density p(t) k(t, ω) read in the
-    reverse order, which keeps the primal samples the naive ones), probes ~ N(ω,
-    1/κ_film) pick an attached point p, and t is evaluated at ``T(t) = t + Δ`` with
-    ``Δ = t_p(θ) - detach(t_p(θ))``, t_p the film coordinate of p. Directions (kernel:
-    von Mises of concentration κ on the angle) the same way around each direction
-    sample φ, with ``Δ = angle(p - x(θ)) - detach(...)`` from the moving shading point.
+    Film: kernel g = N(0, 1/κ_film) on t. Directions: von Mises of concentration κ on
+    the angle. Unpaired, the kernel is read in the reverse order (the joint density
+    p(y) k(y, ω) of DESIGN 2.7 with y the primary sample, ω ~ k(·, y) the centre),
+    which keeps every evaluation point's value that of the naive estimator. Probes at
+    ω + σ · spread · linspace(-1, 1, probes) pick an attached point p (DESIGN 2.8), and
+    the sample is evaluated at ``T(y) = y + Δ`` with ``Δ = c_p(θ) - detach(c_p(θ))``,
+    c_p the film coordinate of p or its angle seen from the (moving) shading point.
     The weight ``k(T y, ω) / detach(k(T y, ω))`` (value 1) carries the kernel's derivative.
     """
 
     def __init__(
         self, kappa: float, kappa_film: float, probes: int, spread: float, refine: int, paired: bool
-    ) -> None:
-        self.kappa, self.kappa_film, self.probes, self.paired = kappa, kappa_film, probes, paired
-        self.refine = refine
-        # probe offsets in kernel standard deviations, evenly spaced over [-spread, spread]
+    ):
+        self.kappa, self.kappa_film, self.paired, self.refine = kappa, kappa_film, paired, refine
+        # probe offsets in kernel standard deviations, evenly spaced over [-spread, spread], in order
         self.offsets = spread * (np.linspace(-1.0, 1.0, probes) if probes > 1 else np.zeros(1))
 
-    # --------------------------------------------------------------------- film
-    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray) -> Members:
-        n, sigma = t.size, 1.0 / np.sqrt(self.kappa_film)
-        geom = ctx.geom
-        density = None
-        if self.paired:
-            # the pair's kernel centre ω = t + σz has density q = k_j ⊛ N(0, σ²) (closed form), which
-            # covers the kernel-blurred integrand beyond the filter's support; members μ_j ~ k(·, ω)
-            center = t + sigma * ctx.rng("kernel").standard_normal(n)
-            mu = center[:, None] + sigma * ctx.rng("kernel").standard_normal((n, 2))
-            cam = geom.camera
-            density = filter_blurred(cam.filter, center - cam.pixel_centers()[pixel], cam.pixel_width, sigma)
-        else:  # reverse order: the member is the primary sample, the centre ω ~ k(·, t)
-            center = t + sigma * ctx.rng("kernel").standard_normal(n)
-            mu = t[:, None]
-        probes = center[:, None] + sigma * self.offsets
-        o0 = detach(geom.cam_o)
-        d = detach(film_direction(ctx.geom0, probes.reshape(-1)))
-        hits = cast(ctx.geom0, o0, d)
-        origins = np.broadcast_to(o0, (n, 2))
-        dir_c = detach(film_direction(ctx.geom0, center))
-
-        def trace(rows: np.ndarray, t_probe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            h = cast(ctx.geom0, o0, detach(film_direction(ctx.geom0, t_probe)))
-            return h.prim, h.coord
-
-        choice = choose_points(
-            geom,
+    def _choose(
+        self, ctx: Context, origins: np.ndarray, centre_dirs: np.ndarray, probes: np.ndarray,
+        trace: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    ) -> Choice:  # fmt: skip
+        n, m = probes.shape
+        prim, coord = trace(np.repeat(np.arange(n), m), probes.reshape(-1))
+        return choose_points(
+            ctx.geom,
             origins,
-            hits.prim.reshape(n, -1),
-            hits.coord.reshape(n, -1),
-            dir_c,
+            prim.reshape(n, m),
+            coord.reshape(n, m),
+            centre_dirs,
             probes,
             trace,
             self.refine,
+        )
+
+    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray) -> Members:
+        n, sigma, geom = t.size, 1.0 / np.sqrt(self.kappa_film), ctx.geom
+        center = t + sigma * ctx.rng("kernel").standard_normal(n)
+        density = None
+        if self.paired:
+            # ω = t + σz has density q = k_j ⊛ N(0, σ²) (closed form); unlike k_j itself it covers the
+            # kernel-blurred integrand beyond the filter's support. Members μ_j ~ k(·, ω).
+            mu = center[:, None] + sigma * ctx.rng("kernel").standard_normal((n, 2))
+            cam = geom.camera
+            density = filter_blurred(cam.filter, center - cam.pixel_centers()[pixel], cam.pixel_width, sigma)
+        else:
+            mu = t[:, None]
+        o0 = detach(geom.cam_o)
+
+        def trace(rows: np.ndarray, t_probe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            hits = cast(ctx.geom0, o0, detach(film_direction(ctx.geom0, t_probe)))
+            return hits.prim, hits.coord
+
+        probes = center[:, None] + sigma * self.offsets
+        choice = self._choose(
+            ctx, np.broadcast_to(o0, (n, 2)), film_direction(ctx.geom0, center), probes, trace
         )
         v = choice.point - geom.cam_o
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (DESIGN 2.5)
-        shift = np.where(ok, t_p - detach(t_p), 0.0)
-        points = mu + shift[:, None]
-        offset = points - center[:, None]
-        # w = k(T y, ω) / detach(k(T y, ω)), Gaussian kernel: exp(-κ/2 (x² - detach(x²)))   (DESIGN 2.7)
-        sq = offset * offset
-        weights = np.exp(-0.5 * self.kappa_film * (sq - detach(sq)))
-        return Members(points, weights, self.paired, density)
+        points = mu + np.where(ok, t_p - detach(t_p), 0.0)[:, None]
+        sq = (points - center[:, None]) ** 2
+        # w = k(T y, ω) / detach(k(T y, ω)) = exp(-κ/2 (x² - detach(x²))) for the Gaussian   (DESIGN 2.7)
+        return Members(points, np.exp(-0.5 * self.kappa_film * (sq - detach(sq))), self.paired, density)
 
-    # --------------------------------------------------------------- directions
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray) -> Members:
         n, kappa = phi.size, self.kappa
         x0 = detach(x)
-        if self.paired:
+        if self.paired:  # ω = φ (the primary sample), members μ_j ~ vM(ω, κ)
             center = phi
-            u = ctx.rng("kernel").random((n, 2))
-            mu = sample_von_mises(u, phi[:, None], kappa)
-        else:
+            mu = sample_von_mises(ctx.rng("kernel").random((n, 2)), phi[:, None], kappa)
+        else:  # reverse order: ω ~ vM(φ, κ), the member is φ itself
             center = sample_von_mises(ctx.rng("kernel").random(n), phi, kappa)
             mu = phi[:, None]
-        probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ: the von Mises width
-        hits = cast(
-            ctx.geom0,
-            np.repeat(x0, self.probes, axis=0),
-            direction(probes.reshape(-1)),
-            np.repeat(ignore, self.probes),
-        )
 
         def trace(rows: np.ndarray, phi_probe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            h = cast(ctx.geom0, x0[rows], direction(phi_probe), ignore[rows])
-            return h.prim, h.coord
+            hits = cast(ctx.geom0, x0[rows], direction(phi_probe), ignore[rows])
+            return hits.prim, hits.coord
 
-        choice = choose_points(
-            ctx.geom,
-            x0,
-            hits.prim.reshape(n, -1),
-            hits.coord.reshape(n, -1),
-            direction(center),
-            probes,
-            trace,
-            self.refine,
-        )
-        v = choice.point - x
-        v_safe = np.where(choice.ok[:, None], v, direction(center))
-        angle = angle_of(v_safe)
+        probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
+        choice = self._choose(ctx, x0, direction(center), probes, trace)
+        angle = angle_of(np.where(choice.ok[:, None], choice.point - x, direction(center)))
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (DESIGN 2.6)
-        shift = np.where(choice.ok, angle - detach(angle), 0.0)
-        points = mu + shift[:, None]
+        points = mu + np.where(choice.ok, angle - detach(angle), 0.0)[:, None]
         c = np.cos(points - center[:, None])
         # von Mises weight exp(κ (cos(T y - ω) - detach(cos(T y - ω))))   (DESIGN 2.7)
-        weights = np.exp(kappa * (c - detach(c)))
-        return Members(points, weights, self.paired)
+        return Members(points, np.exp(kappa * (c - detach(c))), self.paired)
 
 
-def _check_kappa_film(name: str, value: Any) -> float:
-    return check_positive(name, value)
-
-
-def _check_probes(name: str, value: Any) -> int:
-    return check_int(name, value, minimum=1)
-
-
-def _check_refine(name: str, value: Any) -> int:
+def _check_int0(name: str, value: Any) -> int:
     return check_int(name, value, minimum=0)
+
+
+def _check_int1(name: str, value: Any) -> int:
+    return check_int(name, value, minimum=1)
 
 
 def _check_spread(name: str, value: Any) -> float:
@@ -174,10 +150,10 @@ def _check_spread(name: str, value: Any) -> float:
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, check_positive),
-    Option("kappa_film", None, _check_kappa_film),
-    Option("probes", 4, _check_probes),
+    Option("kappa_film", None, check_positive),
+    Option("probes", 4, _check_int1),
     Option("spread", 3.0, _check_spread),
-    Option("refine", 0, _check_refine),
+    Option("refine", 2, _check_int0),
     Option("paired", False, check_bool),
 )
 def reparam(
@@ -188,44 +164,54 @@ def reparam(
     Options
     -------
     kappa : float
-        Von Mises concentration of the kernel on shading directions (default 1000,
-        about 1.8 degrees wide; the authors' BSDF value).
+        Von Mises concentration of the shading kernel (default 1000, σ ≈ 1.8°).
     kappa_film : float, optional
-        Concentration (1 / variance) of the Gaussian kernel on the film coordinate;
-        default :func:`default_kappa_film` of the pixel width.
+        1 / variance of the Gaussian film kernel; default :func:`default_kappa_film`.
     probes : int
-        Probe rays per sample (default 4).
+        Probe rays per sample (default 4), evenly spaced over ±``spread`` kernel
+        standard deviations around the kernel centre.
+    spread : float
+        Probe span in kernel standard deviations (default 3). The paper draws probes
+        from the kernel itself; then for a lone edge all P probes land on the side
+        away from it with probability E[Φ(Z)^P] = 1 / (P + 1), a bias of 20% of the
+        edge's term at P = 4 (measured). A span of ±3σ misses only edges beyond it,
+        2 (1 - Φ(3)) = 0.3%.
+    refine : int
+        Bisection steps toward the discontinuity the probes bracket (default 2;
+        see :mod:`flatland.methods.heuristic`).
     paired : bool
-        Two evaluations per sample share one transform and serve as each other's
-        control variate (DESIGN 2.9). The kernel is then used in the paper's order
-        (the primary sample is the kernel centre), so the value is a different,
-        still unbiased, estimate than the naive one, at twice the cost per level.
+        Two evaluations share one transform and serve as each other's control
+        variate (DESIGN 2.9), at twice the cost per level. The kernel is then used in
+        the paper's order (ω is the outer sample), so the value is a different
+        estimate from the naive one. On the film ω = t + σz with its closed-form
+        density k_j ⊛ g (sampling ω from k_j itself would miss the blurred integrand
+        outside a tent's support: measured 34% bias). For directions ω is the
+        cosine or emitter sample; the blurred integrand reaching behind the horizon
+        is then missed, a bias of order 1/κ relative (cos ~ σ there).
 
-    Every film sample t (pixel integral, translation of t) and every direction
-    sample φ, cosine- or emitter-sampled (shading integral, translation of the
-    angle), gets its own transform from :class:`ReparamHooks`; the samples, their
-    densities and the MIS weights stay those of the naive estimator at θ0 (θ-free
-    functions of the untransformed sample), which keeps the MIS decomposition exact
-    for every θ. Without ``paired`` the transform's value is the identity, so the
-    image value is bit-identical to the naive one for the same seed (DESIGN 2.5).
+    Every film sample (pixel integral, translation of t) and every direction sample,
+    cosine- or emitter-sampled (shading integral, translation of the angle), gets its
+    own transform; the samples, their densities and the MIS weights stay the naive
+    estimator's at θ0 (θ-free functions of the untransformed sample, which keeps the
+    MIS decomposition exact for every θ). Unpaired, the transform's value is the
+    identity: the image value equals the naive one bit for bit (DESIGN 2.5).
 
     Emitter samples: the authors used one transform per shading point, from the mean
-    of the occluded shadow rays' hits, for all light samples, and faded emitters.
-    Here every emitter sample is reparameterized like a cosine sample, by its own
-    kernel and probes; fading (``fade`` on segment emitters) still matters, because a
-    transform that follows an occluder leaves the emitter's own edge moving.
+    of the occluded shadow rays' hits, and emitters faded at their ends. Here each
+    emitter sample gets its own kernel and probes like a cosine sample; fading still
+    matters where the transform follows an occluder while an emitter's end (a
+    discontinuity unless faded) lies within the kernel.
 
-    Assumes the pixel filter is continuous (a box filter's edges would become moving
+    Assumes a continuous pixel filter (a box filter's edges would become moving
     discontinuities, DESIGN 2.11: refused) and that one translation follows every
-    discontinuity within a kernel's reach. Biased where it does not: two
-    discontinuities moving differently inside one kernel (the ``two_occluders``
-    scene, an occluder's shadow edge near an emitter's unfaded edge), a probe pair
-    that picks the wrong point, or an attached point whose motion differs from the
-    silhouette's (first order in the kernel width; exact at the tangent point). The
-    bias falls as κ grows, while the variance of the kernel weight's derivative
-    (κ sin(y - ω) Δ', about √κ per sample) rises: the trade-off of DESIGN 2.7. The
-    tent filter's log-derivative grows like 1 / distance at its support edge, a
-    mildly heavy tail; the Gaussian filter has none.
+    discontinuity within a kernel. Biased where it does not: discontinuities moving
+    differently inside one kernel (``two_occluders``), a wrong pick by the heuristic,
+    an attached point moving unlike the silhouette (first order in its distance from
+    it, exact under translation), an edge beyond the probes. The bias falls as the
+    kernels narrow, while the variance of the weights' derivatives (about √κ per
+    affected sample) grows: the trade-off of DESIGN 2.7. The tent filter's
+    log-derivative grows like 1 / distance near its support's end (a mildly heavy
+    tail); the Gaussian filter's does not.
     """
     if job.point is None and job.scene.camera.filter == "box":
         raise ValidationError(
