@@ -229,7 +229,7 @@ def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") 
     series = _series(rows)
     if not series:
         raise ValueError("rows: no method is run at two or more values of kappa")
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
     for label, group in series.items():
         kappa = [r.cell.options_dict["kappa"] for r in group]
         bias = np.array([r.bias for r in group])
@@ -242,12 +242,12 @@ def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") 
     left.set_yscale("symlog", linthresh=_linthresh([r for group in series.values() for r in group]))
     left.set_xlabel("κ (kernel concentration)")
     left.set_ylabel(f"bias of dI/dθ (±{level:.0%} CI)")
-    left.set_title("bias falls as κ grows")
+    left.set_title("bias (wide kernel: transform misses discontinuities)", fontsize=10)
     right.set_xscale("log")
     right.set_yscale("log")
     right.set_xlabel("κ (kernel concentration)")
     right.set_ylabel("standard deviation per sample")
-    right.set_title("variance rises as κ grows")
+    right.set_title("noise (narrow kernel: large d log k / dθ)", fontsize=10)
     for ax in (left, right):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
