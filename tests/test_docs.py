@@ -298,3 +298,170 @@ def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tm
     assert "flatland.no_such_function cannot be imported" in warnings
     assert "reference target not found: flatland.also_missing" in warnings
     assert warnings.count("WARNING") == 3  # the bad name: not importable, and no page to link to
+
+
+# ------------------------------------------------------------------ the scene-file guide
+SCENE_GUIDE = DOCS / "guides" / "scene_files.md"
+EXAMPLE_SCENE = DOCS / "guides" / "example_scene.json"
+
+
+def test08_the_guides_example_scene_loads_and_renders_every_parameter():
+    from flatland.render import render_gradient
+    from flatland.scene import load_scene
+
+    scene = load_scene(EXAMPLE_SCENE)
+    assert len(scene.parameters) == 5
+    for param in scene.parameters:
+        grad = render_gradient(scene, param, "reparam", spp=2, seed=0, batches=2)
+        assert grad.derivative.shape == (scene.camera.pixels,) and np.all(np.isfinite(grad.derivative))
+
+
+def _mutate(change):
+    import copy
+    import json
+
+    data = copy.deepcopy(json.loads(EXAMPLE_SCENE.read_text(encoding="utf-8")))
+    change(data)
+    return data
+
+
+SCENE_ERRORS = [
+    (lambda d: d["shapes"][1].update(radius=-0.25), "shapes[1].radius: must be > 0, got -0.25"),
+    (
+        lambda d: d["shapes"][2].update(colour="red"),
+        "shapes[2].colour: unknown key (value 'red'); allowed keys: name, type, albedo, emission, "
+        "one_sided, points",
+    ),
+    (
+        lambda d: d["shapes"][0].update(points=[[-3.0, 0.0], [-3.0, 0.0]]),
+        "shapes[0].points[1]: zero-length segment: point 1 [-3.0, 0.0] equals point 0 [-3.0, 0.0]",
+    ),
+    (
+        lambda d: d["camera"].update(filter="sinc"),
+        "camera.filter: must be one of box, tent, gaussian; got 'sinc'",
+    ),
+    (
+        lambda d: d.update(parameters=["ball.rotate"]),
+        "parameters[0]: unknown parameter 'ball.rotate': "
+        "a circle does not change when rotated about its centre",
+    ),
+    (lambda d: d["shapes"][3].update(fade=0.7), "shapes[3].fade: must lie in [0.0, 0.5], got 0.7"),
+]
+
+
+@pytest.mark.parametrize(("change", "message"), SCENE_ERRORS)
+def test09_the_guides_error_messages_are_the_real_ones(change, message):
+    from flatland.scene import load_scene
+
+    with pytest.raises(ValueError) as info:
+        load_scene(_mutate(change))
+    assert str(info.value) == message
+    assert f"`{message}`" in SCENE_GUIDE.read_text(encoding="utf-8")
+
+
+# ------------------------------------------------------------------ docstrings as the site reads them
+SPHINX_ROLES = ("func", "class", "meth", "mod", "data", "attr", "obj", "exc", "any", "doc", "ref", "term")
+SPHINX_DIRECTIVES = (
+    "attribute",
+    "method",
+    "function",
+    "seealso",
+    "versionadded",
+    "deprecated",
+    "autosummary",
+)
+
+
+def _register_sphinx_markup() -> None:
+    """Stand-ins for the Sphinx roles and directives docstrings use, so plain docutils can parse them."""
+    from docutils import nodes
+    from docutils.parsers.rst import Directive, directives, roles
+
+    def literal_role(name, rawtext, text, lineno, inliner, options=None, content=None):
+        return [nodes.literal(rawtext, text)], []
+
+    class Container(Directive):
+        optional_arguments = 10
+        final_argument_whitespace = True
+        has_content = True
+        option_spec = None
+
+        def run(self):
+            node = nodes.container()
+            self.state.nested_parse(self.content, self.content_offset, node)
+            return [node]
+
+    Container.option_spec = type(
+        "AnyOption", (dict,), {"__missing__": lambda self, key: directives.unchanged}
+    )()
+    for name in SPHINX_ROLES:
+        roles.register_local_role(name, literal_role)
+        roles.register_local_role(f"py:{name}", literal_role)
+    for name in SPHINX_DIRECTIVES:
+        directives.register_directive(name, Container)
+
+
+def _as_the_site_reads_it(doc: str, what: str, name: str, obj: Any) -> str:
+    """The docstring after the site's pipe escaping, napoleon and plain-type passes (docs/_ext)."""
+    import sys
+
+    from sphinx.ext.napoleon import Config, NumpyDocstring
+
+    sys.path.insert(0, str(DOCS / "_ext"))
+    try:
+        import project_docs
+    finally:
+        sys.path.remove(str(DOCS / "_ext"))
+    lines = [project_docs._escape_pipes(line) for line in doc.splitlines()]
+    config = Config(napoleon_google_docstring=False, napoleon_use_ivar=False, napoleon_use_param=False,
+                    napoleon_use_rtype=False)  # fmt: skip
+    lines = NumpyDocstring(lines, config, app=None, what=what, name=name, obj=obj).lines()
+    project_docs._plain_types(None, what, name, obj, None, lines)
+    return "\n".join(lines)
+
+
+def _documented(package: str):
+    """(what, qualified name, object) for every docstring the API reference renders."""
+    for modname in public_modules(package):
+        module = importlib.import_module(modname)
+        yield "module", modname, module
+        for attr in exported(module):
+            obj = getattr(module, attr)
+            if getattr(obj, "__module__", None) != modname:
+                continue  # rendered on its defining module's page
+            if inspect.isclass(obj):
+                yield "class", f"{modname}.{attr}", obj
+                for member, value in vars(obj).items():
+                    if member.startswith("_"):
+                        continue
+                    target = value.__func__ if isinstance(value, staticmethod | classmethod) else value
+                    if inspect.isfunction(target) or isinstance(target, property):
+                        yield "method", f"{modname}.{attr}.{member}", target
+            elif inspect.isroutine(obj):
+                yield "function", f"{modname}.{attr}", obj
+
+
+@pytest.mark.parametrize("package", AVAILABLE)
+def test10_every_rendered_docstring_is_valid_restructuredtext(package):
+    """What ``make docs`` would report as a docutils warning (an error under -W), found without Sphinx."""
+    import io
+
+    from docutils.frontend import get_default_settings
+    from docutils.parsers.rst import Parser
+    from docutils.utils import new_document
+
+    _register_sphinx_markup()
+    parser = Parser()
+    settings = get_default_settings(Parser)
+    settings.report_level, settings.halt_level = 2, 5
+    problems = []
+    for what, name, obj in _documented(package):
+        doc = inspect.getdoc(obj)
+        if not doc:
+            continue
+        settings.warning_stream = report = io.StringIO()
+        parser.parse(_as_the_site_reads_it(doc, what, name, obj), new_document(name, settings))
+        if report.getvalue():
+            first = report.getvalue().strip().splitlines()[0]
+            problems.append(f"{name}: {first.removeprefix(name + ':')}")
+    assert not problems, "docstrings the docs build rejects:\n" + "\n".join(problems)
