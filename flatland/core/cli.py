@@ -215,11 +215,10 @@ def _render(pkg: Package, args: argparse.Namespace) -> int:
     render = pkg.module("render")
     scene = _load_scene(pkg, args.scene)
     image = render.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
-    base = Path(args.out) / _stem(args.scene)
-    png = pkg.module("plot").plot_image(
-        image, base.with_suffix(".png"), title=f"{_stem(args.scene)}, {args.spp} spp"
-    )
-    npy = _save_fields(base.with_suffix(".npy"), value=image.value, stderr=image.stderr)
+    name = _stem(args.scene)
+    out = Path(args.out)
+    png = pkg.module("plot").plot_image(image, out / f"{name}.png", title=f"{name}, {args.spp} spp")
+    npy = _save_fields(out / f"{name}.npy", value=image.value, stderr=image.stderr)
     print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
     return 0
 
@@ -231,11 +230,12 @@ def _gradient(pkg: Package, args: argparse.Namespace) -> int:
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
         **_options(args),
     )  # fmt: skip
-    base = Path(args.out) / f"{_stem(args.scene)}_{args.param}_{args.method}"
+    name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
+    out = Path(args.out)
     title = f"{_stem(args.scene)}: d/d {args.param}, {args.method}, {args.spp} spp"
-    png = pkg.module("plot").plot_gradient(g, base.with_suffix(".png"), title=title)
+    png = pkg.module("plot").plot_gradient(g, out / f"{name}.png", title=title)
     npy = _save_fields(
-        base.with_suffix(".npy"),
+        out / f"{name}.npy",
         value=g.value,
         value_stderr=g.value_stderr,
         derivative=g.derivative,

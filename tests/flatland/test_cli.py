@@ -79,9 +79,10 @@ def test04_gradient_writes_value_derivative_and_standard_errors(tmp_path, scene_
         "--spp", 16, "--out", tmp_path,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
-    stem = tmp_path / "small_shadow_occluder.translate.x_reparam"
-    assert stem.with_suffix(".png").stat().st_size > 5_000
-    data = np.load(stem.with_suffix(".npy"))
+    png = tmp_path / "small_shadow_occluder.translate.x_reparam.png"
+    npy = tmp_path / "small_shadow_occluder.translate.x_reparam.npy"
+    assert png.stat().st_size > 5_000
+    data = np.load(npy)
     assert data.dtype.names == ("value", "value_stderr", "derivative", "derivative_stderr")
     assert (
         data.shape == (24,) and np.any(data["derivative"] != 0.0) and np.all(data["derivative_stderr"] >= 0)

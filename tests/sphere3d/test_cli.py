@@ -61,15 +61,16 @@ def test02_render_and_gradient_write_png_and_npy(tmp_path, scene_file):
     assert (tmp_path / "small_shadow.png").stat().st_size > 3_000
     argv = ["gradient", str(scene_file), "--param", "occluder.translate.x", "--method", "finite_difference"]
     assert main([*argv, "--h", "0.05", "--spp", "4", "--out", str(tmp_path)]) == 0  # in-process
-    stem = tmp_path / "small_shadow_occluder.translate.x_finite_difference"
-    data = np.load(stem.with_suffix(".npy"))
+    png = tmp_path / "small_shadow_occluder.translate.x_finite_difference.png"
+    npy = tmp_path / "small_shadow_occluder.translate.x_finite_difference.npy"
+    data = np.load(npy)
     assert data.shape == (H, W) and data.dtype.names == (
         "value",
         "value_stderr",
         "derivative",
         "derivative_stderr",
     )
-    assert np.any(data["derivative"] != 0.0) and stem.with_suffix(".png").stat().st_size > 3_000
+    assert np.any(data["derivative"] != 0.0) and png.stat().st_size > 3_000
 
 
 def test03_study_on_a_scene_pixel(tmp_path, scene_file):
