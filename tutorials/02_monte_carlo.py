@@ -82,8 +82,8 @@ assert abs(plain.value - exact) <= z * plain.value_stderr
 # \sigma^2 = \int \frac{f^2}{p}\,dx - I^2 = \frac{s}{\sqrt{2a}}\,\Phi\!\left(-\theta\sqrt{2a}\right) - I^2 .
 # $$
 #
-# (If $s^2 \le 1/2$ then $a \le 0$ and the integral diverges: a proposal with lighter tails than
-# $f^2$ gives infinite variance, however good its estimates look.) We measure the variance of
+# (If $s^2 \le 1/2$ then $a \le 0$ and the integral diverges: a proposal whose tails fall as fast
+# as $f^2$ or faster gives infinite variance, however good its estimates look.) We measure the variance of
 # $\hat I$ directly: $T = 400$ independent estimates (seeds `SEED + k`) for each of three sample
 # counts $N$.
 
@@ -191,7 +191,8 @@ for name, r in results.items():
 # %%
 # check: every estimate is unbiased and every measured variance matches its prediction, both within
 # z standard errors (z Šidák-corrected over the 2 × 4 comparisons, family-wise level 1e-3); the ideal
-# proposal's weights are all equal to I up to rounding, so its variance is zero
+# proposal's weights are all equal to I up to rounding, so its variance is zero; the binned proposal
+# beats K itself by more than a factor 50 (measured 67, each variance known to better than 1 %)
 z8 = normal_quantile(1 - sidak(1e-3, 8))
 for name, r in results.items():
     if name == "ideal f / I":
