@@ -15,6 +15,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/python -m flatland demo --out out/flatland
+	$(BIN)/python -m sphere3d demo --out out/sphere3d
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
