@@ -34,21 +34,27 @@ the measured times differ.
 
 Statistics per cell (T trials of ``samples`` integrand evaluations each)
 ------------------------------------------------------------------------
-``mean_derivative``      mean of the T trial estimates
-``bias``                 mean - reference, with a Student-t interval (T - 1 degrees
-                         of freedom) of half-width t · sqrt(s²/T + s_ref²) (plus a
-                         floating-point allowance of 64 ε |reference|; a spread of
-                         the trials below that counts as zero variance)
-``variance_per_sample``  s² · samples (s² the variance of the trial estimates), the
-                         variance a single-sample estimate would have
-``seconds_per_sample``   measured wall time (time.perf_counter) / (T · samples)
-``rmse``                 sqrt(mean_k (d_k - reference)²): the error of one trial
-``efficiency``           1 / (variance_per_sample · seconds_per_sample); infinite for
-                         a zero-variance estimator
-``equal_time_rmse``      sqrt(bias² + variance_per_sample · seconds_per_sample / B):
-                         the error expected from a time budget of B seconds
-                         (``"time_budget"``, default 1 s), which unlike efficiency
-                         counts the bias
+``mean_derivative``
+    mean of the T trial estimates
+``bias``
+    mean - reference, with a Student-t interval (T - 1 degrees of freedom) of
+    half-width t · sqrt(s²/T + s_ref²) (plus a floating-point allowance of
+    64 ε abs(reference); a spread of the trials below that counts as zero variance)
+``variance_per_sample``
+    s² · samples (s² the variance of the trial estimates), the variance a
+    single-sample estimate would have
+``seconds_per_sample``
+    measured wall time (time.perf_counter) / (T · samples)
+``rmse``
+    sqrt(mean_k (d_k - reference)²): the error of one trial
+``efficiency``
+    1 / (variance_per_sample · seconds_per_sample); infinite for a zero-variance
+    estimator
+``equal_time_rmse``
+    sqrt(bias² + variance_per_sample · seconds_per_sample / B): the error expected
+    from a time budget of B seconds (``"time_budget"``, default 1 s), which unlike
+    efficiency counts the bias
+
 For scenes a "sample" is one camera sample: spp × pixels.
 
 Configurations are parsed and validated in :mod:`flatland.core.study_config`
