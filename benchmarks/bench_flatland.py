@@ -1,0 +1,68 @@
+"""Flatland renderer: ray-caster throughput and seconds per image (best of 3 runs).
+
+Targets (issue 3): the ``reparam`` gradient image of ``shadow`` at 512 pixels × 64 spp
+in at most 1 s on a 2-core machine, and no method slower than 5× the primal render.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from benchmarks import Row
+from flatland.geometry import cast, direction
+from flatland.render import render, render_gradient
+from flatland.scene import bind, load_scene
+
+RAYS = 1 << 20
+PIXELS, SPP = 512, 64
+PARAM = "occluder.translate.x"
+METHODS = [
+    ("naive", {}),
+    ("finite_difference", {}),
+    ("boundary", {}),
+    ("reparam", {}),
+    ("reparam", {"paired": True}),
+]
+
+
+def _best_seconds(fn, repeats: int = 3) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def run() -> list[Row]:
+    """Rays per second of :func:`flatland.geometry.cast`, and seconds per image per method."""
+    rows = []
+    rng = np.random.default_rng(0)
+    origins = rng.uniform(-2.0, 2.0, (RAYS, 2))
+    dirs = direction(rng.uniform(-np.pi, np.pi, RAYS))
+    for name in ("shadow", "silhouette", "polygon"):
+        geom = bind(load_scene(name))
+        prims = geom.n_seg + geom.n_circ
+        seconds = _best_seconds(lambda g=geom: cast(g, origins, dirs))
+        rows.append(
+            Row("flatland ray caster", f"{name} ({prims} primitives)", RAYS / seconds / 1e6, "M rays/s")
+        )
+
+    scene = load_scene("shadow").with_camera(pixels=PIXELS)
+    primal = _best_seconds(lambda: render(scene, spp=SPP, seed=0))
+    case = f"shadow {PIXELS} px x {SPP} spp"
+    rows.append(Row("flatland images", f"{case}: render (primal)", primal, "s", "1.00x primal"))
+    for method, options in METHODS:
+        seconds = _best_seconds(
+            lambda m=method, o=options: render_gradient(scene, PARAM, method=m, spp=SPP, seed=0, **o)
+        )
+        label = method + "".join(f" {k}={v}" for k, v in options.items())
+        target = " (target <= 1 s)" if (method, options) == ("reparam", {}) else ""
+        rows.append(
+            Row(
+                "flatland images", f"{case}: {label}", seconds, "s", f"{seconds / primal:.2f}x primal{target}"
+            )
+        )
+    return rows
