@@ -21,7 +21,8 @@ methods live in :data:`GRADIENT_METHODS` (one module each in
                        every shading point (the unbiased reference)
 ``reparam``            translations of the film coordinate and of the shading angle
                        chosen by probe rays, with convolution kernels; options
-                       ``kappa``, ``kappa_film``, ``probes``, ``paired``
+                       ``kappa``, ``kappa_film``, ``probes``, ``spread``, ``refine``,
+                       ``paired``
 =====================  ====================================================================
 
 Standard errors come from ``batches`` independent batches of ``spp / batches``
@@ -121,7 +122,8 @@ def render_gradient(
         Independent batches behind the standard errors (must divide spp).
     **options
         Method options: ``h`` (finite_difference); ``kappa``, ``kappa_film``,
-        ``probes``, ``paired`` (reparam).
+        ``probes``, ``spread``, ``refine``, ``paired`` (reparam, see
+        :func:`flatland.methods.reparam.reparam`).
 
     Raises
     ------
@@ -129,9 +131,9 @@ def render_gradient(
         One error naming the field and value: unknown method, option or parameter,
         spp < 1, kappa <= 0, a box filter with ``reparam``, ...
     """
-    job = _job(scene, param, spp, seed, batches)
     if param is None:
         raise ValidationError("param", "is required (a parameter name like 'occluder.translate.x')")
+    job = _job(scene, param, spp, seed, batches)
     result, resolved = _gradient(job, method, options)
     value, value_se = _summary(result.value)
     deriv, deriv_se = _summary(result.derivative)

@@ -33,6 +33,9 @@ __all__ = ["BoundaryHooks", "boundary"]
 EPS_ANGLE = 1e-7
 """Angular offset (radians) of the two rays traced beside a candidate discontinuity."""
 
+MAX_CANDIDATES = 1 << 18
+"""Shading points × candidate discontinuities handled together (bounds memory in vertex-rich scenes)."""
+
 EPS_FILM = 1e-7
 """Film-coordinate offset (relative to 1 + |t|) of the two camera rays beside a candidate."""
 
@@ -49,10 +52,20 @@ class BoundaryHooks(Hooks):
         tracing at c ∓ ε on the detached geometry.
         """
         n = ignore.size
+        out = np.zeros(n)
+        m = np.shape(detach(ctx.geom.vertices))[0] + 2 * ctx.geom.n_circ
+        step = max(1, MAX_CANDIDATES // max(m, 1))
+        for lo in range(0, n, step):  # blocks of shading points: (points x candidates) stays bounded
+            sl = slice(lo, min(n, lo + step))
+            out[sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl])
+        return out
+
+    @staticmethod
+    def _jumps(ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray) -> np.ndarray:
+        n = ignore.size
         phi_c, exists = silhouette_angles(ctx.geom, x)
         if phi_c.shape[1] == 0:
             return np.zeros(n)
-        n0 = detach(normal)
         phi0 = detach(phi_c)
         cos_c = np.cos(phi0 - np.arctan2(n0[:, 1], n0[:, 0])[:, None])
         rows, cols = np.nonzero(exists & (cos_c > 1e-12))

@@ -32,6 +32,8 @@ from functools import cache
 import numpy as np
 import pytest
 
+import flatland.integrator as integrator
+import flatland.methods.boundary as boundary
 from flatland.core.stats import normal_quantile, sidak
 from flatland.render import render_gradient
 from flatland.scene import list_scenes, load_scene
@@ -148,3 +150,14 @@ def test02_reparam_error_against_boundary_is_bounded_per_scene(name, param, reco
     error = r.error_vs(_boundary(name, param))
     record_property("relative_error", error)
     assert error <= BOUNDS[name], (name, param, error)
+
+
+def test03_results_do_not_depend_on_memory_chunks(monkeypatch):
+    """Smaller work items and candidate blocks change only the order of floating-point sums."""
+    scene = load_scene("silhouette").with_camera(pixels=8)
+    whole = render_gradient(scene, "ball.translate.y", method="boundary", spp=64, seed=9)
+    monkeypatch.setattr(integrator, "CHUNK", 100)
+    monkeypatch.setattr(boundary, "MAX_CANDIDATES", 7)
+    pieces = render_gradient(scene, "ball.translate.y", method="boundary", spp=64, seed=9)
+    assert np.allclose(whole.value, pieces.value, rtol=1e-12, atol=1e-15)
+    assert np.allclose(whole.derivative, pieces.derivative, rtol=1e-9, atol=1e-12)
