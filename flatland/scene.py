@@ -29,18 +29,18 @@ left to right, each integrated against its ``filter`` (``box`` one pixel wide,
 Parameters bind a scalar θ to one scene quantity. θ is an offset applied to the
 scene as loaded, and gradients are taken at θ = 0:
 
-=============================  =================================================
-``NAME.translate.x`` / ``.y``  add θ to every point (or the centre) of the shape
-``NAME.rotate``                rotate by θ radians about the shape's centre (the
-                               mean of its points; not for circles)
-``NAME.scale``                 scale by 1 + θ about the shape's centre (a circle's
-                               radius)
-``NAME.vertex.K.x`` / ``.y``   add θ to point K of a segment, polyline or polygon
-``NAME.emission``              add θ to the shape's emitted radiance
-``NAME.albedo``                add θ to the shape's albedo
+===============================  =================================================
+``NAME.translate.x`` / ``.y``    add θ to every point (or the centre) of the shape
+``NAME.rotate``                  rotate by θ radians about the shape's centre (the
+                                 mean of its points; not for circles)
+``NAME.scale``                   scale by 1 + θ about the shape's centre (a circle's
+                                 radius)
+``NAME.vertex.K.x`` / ``.y``     add θ to point K of a segment, polyline or polygon
+``NAME.emission``                add θ to the shape's emitted radiance
+``NAME.albedo``                  add θ to the shape's albedo
 ``camera.translate.x`` / ``.y``  move the camera
-``camera.rotate``              turn the camera by θ radians (counter-clockwise)
-=============================  =================================================
+``camera.rotate``                turn the camera by θ radians (counter-clockwise)
+===============================  =================================================
 
 :func:`bind` turns (scene, parameter, θ) into :class:`Geometry`, the flat arrays of
 segments, circles and materials that the ray caster and renderer use; with θ a
