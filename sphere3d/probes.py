@@ -1,7 +1,15 @@
 """Choosing the rotation by ray tracing: the probe heuristic of Loubet et al. 2019, Sec. 4.3 (DESIGN 2.8).
 
 Inside the support of an integrand a few probe rays (default 4) are traced, and one
-point p is picked whose motion the rotation should follow:
+point p is picked whose motion the rotation should follow. The probes form a
+pattern (:func:`ring_directions`, :func:`ring_offsets`): probe 0 at the kernel's
+centre, the others evenly spaced in azimuth (random phase) on a ring ``spread``
+kernel standard deviations away. Probes drawn at random from the kernel itself
+leave a discontinuity a kernel width away undetected too often: on a spherical cap
+moving rigidly under a κ = 100 or 1000 kernel, random probes lost about a quarter of
+the boundary term (0.057 ± 0.002 and 0.062 ± 0.003 against the exact 0.0787),
+the ring with spread 3 did not (0.074 ± 0.003, 0.084 ± 0.005; 16 M samples each).
+Then:
 
 - pair probe 0 with the *last* probe that hits a different shape (a miss counts as
   its own "shape"); if there is none, probe 0 stands alone;
@@ -27,6 +35,7 @@ is instead the mean of the attached hits of the occluded shadow probes
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -35,14 +44,55 @@ from flatland.core.dual import detach
 from sphere3d.rotation import Rotation
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits, attached_points, face_normals
-from sphere3d.vector import cross, dot, norm
+from sphere3d.vector import cross, dot, frame, norm
 
-__all__ = ["PARALLEL", "follow_probes", "mean_point_direction", "pair_index", "select_points"]
+__all__ = [
+    "PARALLEL",
+    "follow_probes",
+    "mean_point_direction",
+    "pair_index",
+    "ring_directions",
+    "ring_offsets",
+    "select_points",
+    "vmf_spread_angle",
+]
 
 PARALLEL = 0.99
 """|n0·n1| above which the two tangent planes count as parallel (DESIGN 2.8)."""
 DEGENERATE = 1e-6
 """|det| of the plane system below which the intersection is ill-conditioned."""
+
+
+def vmf_spread_angle(kappa: float, spread: float) -> float:
+    """Polar angle of the ring of probes: ``spread`` standard deviations of a vMF(κ) kernel.
+
+    The angle r with P(angle <= r) equal to the Rayleigh probability ``1 - e^{-spread²/2}``
+    of ``spread`` σ (a vMF is a 2D Gaussian of σ = 1/√κ for large κ): from the vMF's
+    radial inverse CDF, ``1 - cos r = -log1p(P expm1(-2κ)) / κ``; r ≈ spread / √κ.
+    """
+    level = -math.expm1(-0.5 * spread * spread)
+    s = min(2.0, -math.log1p(level * math.expm1(-2.0 * kappa)) / kappa)
+    return math.acos(1.0 - s)
+
+
+def ring_directions(centre: np.ndarray, angle: float, count: int, u: np.ndarray) -> np.ndarray:
+    """``count`` probe directions around unit ``centre`` (m, 3): the centre, then a ring at ``angle``.
+
+    Ring probes are evenly spaced in azimuth from the phase 2π ``u`` (m,). Returns (m, count, 3).
+    """
+    t, b = frame(centre)
+    phi = 2.0 * np.pi * (u[:, None] + np.arange(count - 1)[None, :] / max(count - 1, 1))
+    ring = math.cos(angle) * centre[:, None] + math.sin(angle) * (
+        np.cos(phi)[..., None] * t[:, None] + np.sin(phi)[..., None] * b[:, None]
+    )
+    return np.concatenate([centre[:, None], ring], axis=1)
+
+
+def ring_offsets(radius: float, count: int, u: np.ndarray) -> np.ndarray:
+    """Film offsets (m, count, 2) in pixels: the pixel centre, then a ring of ``radius`` (phase 2π ``u``)."""
+    phi = 2.0 * np.pi * (u[:, None] + np.arange(count - 1)[None, :] / max(count - 1, 1))
+    ring = radius * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    return np.concatenate([np.zeros((len(u), 1, 2)), ring], axis=1)
 
 
 def pair_index(shape: np.ndarray) -> np.ndarray:

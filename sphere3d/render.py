@@ -52,7 +52,7 @@ def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    tally = ImageTask(scene, None, spp, seed, batches).evaluate(None)
+    tally = ImageTask(scene, None, spp, seed, batches).evaluate(0.0)
     return Image(
         value=tally.value.mean(axis=0),
         stderr=_stderr(tally.value),
@@ -155,7 +155,7 @@ def irradiance(
     batches = resolve_batches(n, batches, "n")
     task = PointTask(scene, param, point, normal, n, seed, batches)
     if param is None:
-        tally, resolved = task.evaluate(None), {}
+        tally, resolved = task.evaluate(0.0), {}
     else:
         tally, resolved = _run(method, task, options)
     return Estimate(

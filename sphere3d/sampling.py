@@ -11,6 +11,7 @@ area; on the film per pixel² (offsets from the pixel centre in pixel units).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -21,6 +22,7 @@ from sphere3d.vector import cross, dot, frame, norm
 
 __all__ = [
     "FILTERS",
+    "FILTER_STD",
     "filter_radius",
     "filter_value",
     "log_filter_value",
@@ -40,6 +42,7 @@ __all__ = [
     "solid_angle_pdf",
     "triangle_area",
     "triangle_barycentrics",
+    "vmf_hemisphere_fraction",
 ]
 
 FOUR_PI = 4.0 * np.pi
@@ -48,6 +51,8 @@ GAUSSIAN_SIGMA = 0.5
 """Standard deviation of the ``gaussian`` pixel filter, in pixels."""
 GAUSSIAN_RADIUS = 3.0 * GAUSSIAN_SIGMA
 """Where the ``gaussian`` filter (shifted to be continuous) reaches 0, in pixels."""
+FILTER_STD = {"box": math.sqrt(1.0 / 12.0), "tent": math.sqrt(1.0 / 6.0), "gaussian": GAUSSIAN_SIGMA}
+"""Per-axis standard deviation of each pixel filter, in pixels (the gaussian's before truncation)."""
 
 
 def _from_frame(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -112,6 +117,38 @@ def sample_vmf(u: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:
 def log_vmf(omega, mu, kappa: float):
     """log of the vMF density, ``log(κ / (2π (1 - e^{-2κ}))) + κ (μ·ω - 1)``; Dual-aware in ω and μ."""
     return math.log(kappa / (2.0 * np.pi * -math.expm1(-2.0 * kappa))) + kappa * (dot(omega, mu) - 1.0)
+
+
+@functools.lru_cache(maxsize=16)
+def _hemisphere_table(kappa: float, nodes: int = 512, grid: int = 2049) -> tuple[np.ndarray, np.ndarray]:
+    z = np.linspace(-1.0, 1.0, grid)
+    # quadrature in the vMF's radial CDF v (so the nodes follow the density for every κ):
+    # s = 1 - cos(angle to the axis) = -log1p(v expm1(-2κ)) / κ
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    v, w = 0.5 * (x + 1.0), 0.5 * w
+    s = -np.log1p(v * math.expm1(-2.0 * kappa)) / kappa
+    t = 1.0 - s
+    sin_t = np.sqrt(np.maximum(s * (2.0 - s), 0.0))
+    sin_z = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    # on the circle at angle t around the axis, n·ω = t z + sin_t sin_z cos φ > 0 for a fraction acos(a)/π
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = -t[None, :] * z[:, None] / (sin_t[None, :] * sin_z[:, None])
+    a = np.where(np.isfinite(a), a, np.where(t[None, :] * z[:, None] >= 0.0, -1.0, 1.0))
+    fraction = np.arccos(np.clip(a, -1.0, 1.0)) / np.pi
+    return z, fraction @ w
+
+
+def vmf_hemisphere_fraction(z, kappa: float):
+    """C(z) = P(n·ω > 0) for ω ~ vMF(y, κ) with z = n·y: the kernel's mass above a horizon.
+
+    A convolution whose kernel centres are restricted to a hemisphere (an outer
+    cosine sample) loses the mass ``1 - C`` of the kernel near the horizon; dividing by
+    C(n·μ) restores ``∫ k(μ, ω) dω = 1`` over the hemisphere (the authors tabulate the
+    same correction). Tabulated per κ (Gauss–Legendre in the radial CDF, 2049 values
+    of z) and interpolated linearly; ``z`` may be a Dual.
+    """
+    grid, table = _hemisphere_table(float(_check_kappa(kappa)))
+    return np.interp(z, grid, table)
 
 
 def pdf_vmf(omega: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:

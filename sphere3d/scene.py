@@ -18,10 +18,19 @@ the side its normals face) and ``fade`` (emitter border fade, rectangle and disk
 only); type-specific keys are listed in :data:`SHAPE_KEYS`. ``fov`` is the
 horizontal field of view in radians; ``sky`` the constant environment radiance.
 
-Parameters (the θ of a gradient) are named like ``occluder.translate.x``:
-``NAME.translate.x|y|z``, ``NAME.rotate.x|y|z``, ``NAME.scale``, ``NAME.albedo``,
-``NAME.emission``, ``camera.translate.x|y|z`` (moves position and look-at together)
-and ``sky.emission``. θ0 is the value the scene file gives.
+Parameters bind a scalar θ to one scene quantity, as in flatland: θ is an offset
+applied to the scene as loaded, and gradients are taken at θ = 0:
+
+==================================  ==============================================
+``NAME.translate.x`` / ``.y`` / ``.z``  add θ to the shape's position
+``NAME.rotate.x`` / ``.y`` / ``.z``     add θ radians to that rotation angle (about
+                                        the shape's centre)
+``NAME.scale``                          scale by 1 + θ about the shape's centre
+``NAME.emission``                       add θ to the emitted radiance
+``NAME.albedo``                         add θ to the albedo
+``camera.translate.x`` / ``.y`` / ``.z``  move the camera (position and look-at)
+``sky.emission``                        add θ to the sky radiance
+==================================  ==============================================
 
 Bad input raises one :class:`~flatland.core.validate.ValidationError` naming the
 field path and the value, e.g. ``shapes[2].radius: must be > 0, got -1.0``.
@@ -324,21 +333,8 @@ class Scene:
         """Index of the shape called ``name``."""
         return [s.name for s in self.shapes].index(name)
 
-    def param_value(self, param: str) -> float:
-        """θ0: the value of ``param`` in this scene."""
-        param = self.check_param(param)
-        owner, _, rest = param.partition(".")
-        if owner == "camera":
-            return float(self.camera.position[AXES.index(rest[-1])])
-        if owner == "sky":
-            return float(self.sky)
-        shape = self.shapes[self.shape_index(owner)]
-        kind, _, axis = rest.partition(".")
-        value = getattr(shape, kind)
-        return float(value[AXES.index(axis)] if axis else value)
-
-    def state(self, param: str | None = None, theta: Any = None, tracer: str = "embree"):
-        """The scene's geometry and materials with ``param`` set to ``theta`` (a float or a Dual).
+    def state(self, param: str | None = None, theta: Any = 0.0, tracer: str = "embree"):
+        """The scene's geometry and materials with ``param`` offset by ``theta`` (a float or a Dual).
 
         See :class:`sphere3d.state.SceneState`.
         """

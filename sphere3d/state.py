@@ -1,8 +1,9 @@
 """A scene evaluated at one parameter value θ: world-space triangles, materials, camera, tracer.
 
 :func:`build_state` is where θ enters (DESIGN 4, "scene + parameter → θ as a Dual"):
-the parameter's field is replaced by ``theta`` — a float (finite differences, plain
-renders) or a :class:`~flatland.core.dual.Dual` (``variable(θ0)`` for the gradient) —
+the parameter's offset ``theta`` is applied to its field — a float (finite
+differences, plain renders) or a :class:`~flatland.core.dual.Dual` (``variable(0.0)``
+for the gradient, taken at θ = 0 as in flatland) —
 and every quantity computed from it (vertex positions, the camera origin, albedos,
 emissions, the total emitter area) carries the tangent. The tracer is built from
 the detached triangles: rays are traced at θ0 and re-attached to these Duals.
@@ -138,13 +139,13 @@ class SceneState:
         return self.emission[self.shape_of[triangle]] * fade
 
 
-def _with(values: tuple[float, ...], index: int, theta: Any) -> Any:
-    """``values`` as a vector with component ``index`` replaced by ``theta``."""
-    return np.stack([theta if i == index else float(v) for i, v in enumerate(values)])
+def _offset(values: tuple[float, ...], index: int, theta: Any) -> Any:
+    """``values`` as a vector with ``theta`` added to component ``index``."""
+    return np.stack([float(v) + theta if i == index else float(v) for i, v in enumerate(values)])
 
 
 def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embree") -> SceneState:
-    """The :class:`SceneState` of ``scene`` with ``param`` set to ``theta`` (see module docstring)."""
+    """The :class:`SceneState` of ``scene`` with ``param`` offset by ``theta`` (see module docstring)."""
     if param is not None:
         param = scene.check_param(param)
     owner, kind, axis = None, None, None
@@ -152,15 +153,15 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         owner, _, rest = param.partition(".")
         kind, _, axis_name = rest.partition(".")
         axis = AXES.index(axis_name) if axis_name else None
-        if theta is None:
-            theta = scene.param_value(param)
 
     triangles, shape_of, uv, fade_kind, fade, albedo, emission = [], [], [], [], [], [], []
     for index, s in enumerate(scene.shapes):
         mine = owner == s.name
-        translate = _with(s.translate, axis, theta) if mine and kind == "translate" else np.array(s.translate)
-        rotate = _with(s.rotate, axis, theta) if mine and kind == "rotate" else np.array(s.rotate)
-        scale = theta if mine and kind == "scale" else s.scale
+        translate = (
+            _offset(s.translate, axis, theta) if mine and kind == "translate" else np.array(s.translate)
+        )
+        rotate = _offset(s.rotate, axis, theta) if mine and kind == "rotate" else np.array(s.rotate)
+        scale = s.scale * (1.0 + theta) if mine and kind == "scale" else s.scale
         # world = translate + R (scale · local): rotation and scale act about the centre
         world = translate + (scale * s.mesh.vertices) @ np.swapaxes(euler_matrix(rotate), -1, -2)
         triangles.append(world[s.mesh.faces])
@@ -169,14 +170,14 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         uv.append(s.mesh.uv[s.mesh.faces])
         fade_kind.append(np.full(n, s.mesh.fade_kind))
         fade.append(np.full(n, s.fade))
-        albedo.append(theta if mine and kind == "albedo" else s.albedo)
-        emission.append(theta if mine and kind == "emission" else s.emission)
+        albedo.append(s.albedo + theta if mine and kind == "albedo" else s.albedo)
+        emission.append(s.emission + theta if mine and kind == "emission" else s.emission)
 
     triangles = np.concatenate(triangles)
     shape_of = np.concatenate(shape_of)
     albedo = np.stack(albedo)
     emission = np.stack(emission)
-    sky = theta if owner == "sky" else np.float64(scene.sky)
+    sky = scene.sky + theta if owner == "sky" else np.float64(scene.sky)
     if isinstance(theta, Dual):
         # one code path: with a Dual θ every scene quantity is a Dual (most with zero tangent)
         triangles, albedo, emission, sky = (
@@ -192,7 +193,7 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
 
     cam = scene.camera
     forward, right, up = cam.frame()
-    origin = _with(cam.position, axis, theta) if owner == "camera" else np.array(cam.position)
+    origin = _offset(cam.position, axis, theta) if owner == "camera" else np.array(cam.position)
     if isinstance(theta, Dual) and not isinstance(origin, Dual):
         origin = Dual(origin)
     camera = CameraState(

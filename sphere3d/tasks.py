@@ -35,7 +35,7 @@ __all__ = ["CHUNK", "ImageTask", "PointTask", "Tally", "resolve_batches"]
 
 CHUNK = 1 << 15
 """Camera samples per memory chunk (a loop over chunks, vectorized inside)."""
-MAX_BATCHES = 8
+MAX_BATCHES = 16
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ class Tally:
 
 
 def resolve_batches(samples: int, batches: Any, field: str = "spp") -> int:
-    """Number of batches: given (must divide ``samples``), or the largest divisor of it up to 8."""
+    """Number of batches: given (must divide ``samples``), or the largest divisor of it up to 16."""
     if batches is None:
         return max(b for b in range(1, min(MAX_BATCHES, samples) + 1) if samples % b == 0)
     batches = check_int("batches", batches)
@@ -75,11 +75,6 @@ class ImageTask:
     tracer: str = "embree"
 
     @property
-    def theta0(self) -> float:
-        """The parameter's value in the scene (0 when there is no parameter)."""
-        return self.scene.param_value(self.param) if self.param is not None else 0.0
-
-    @property
     def shape(self) -> tuple[int, int]:
         return (self.scene.camera.height, self.scene.camera.width)
 
@@ -104,7 +99,7 @@ class ImageTask:
         return est - others * (weight - detach(weight))
 
     def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
-        """Render every pixel with θ = ``theta`` (float or Dual) under ``transforms``."""
+        """Render every pixel with the parameter offset by ``theta`` (float or Dual) under ``transforms``."""
         transforms = transforms or Identity()
         state = self.scene.state(self.param, theta, self.tracer)
         height, width = self.shape
@@ -159,15 +154,11 @@ class PointTask:
         return tuple(x / length for x in out) if unit else out
 
     @property
-    def theta0(self) -> float:
-        return self.scene.param_value(self.param) if self.param is not None else 0.0
-
-    @property
     def shape(self) -> tuple[()]:
         return ()
 
     def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
-        """Estimate E at the point with θ = ``theta`` under ``transforms``."""
+        """Estimate E at the point with the parameter offset by ``theta`` under ``transforms``."""
         transforms = transforms or Identity()
         state = self.scene.state(self.param, theta, self.tracer)
         per_batch = self.n // self.batches

@@ -11,22 +11,22 @@ from sphere3d.tasks import ImageTask, PointTask, Tally
 
 @GRADIENT_METHODS.register("finite_difference", Option("h", 1e-2, check_positive))
 def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
-    """``[Î(θ0 + h) - Î(θ0 - h)] / 2h`` per batch, the same samples at both ends.
+    """``[Î(h) - Î(-h)] / 2h`` per batch (θ is the parameter's offset), the same samples at both ends.
 
-    Three plain renders (θ0 for the value, θ0 ± h for the difference), each with the
+    Three plain renders (θ = 0 for the value, ±h for the difference), each with the
     primary samples of the same seed, so the difference only sees the samples whose
     integrand changed: visibility flips within ``h |c'|`` of a moving edge, and the
     smooth change of everything else. Assumes nothing about continuity; biased by
     the truncation error ``h² I'''/6 + O(h⁴)`` (per pixel), with a variance that grows
     like 1/h at edges. Not part of the paper: the reference the other methods are
-    checked against. For ``*.scale`` parameters θ0 - h must stay > 0.
+    checked against. For ``*.scale`` parameters (scale by 1 + θ) h must be < 1.
     """
-    theta0 = task.theta0
-    param = task.param or ""
-    if param.endswith(".scale") and theta0 - h <= 0.0:
-        raise ValidationError("h", f"must be < the scale {theta0!r} (θ0 - h must stay > 0), got {h!r}")
-    plus = task.evaluate(theta0 + h, Identity())
-    minus = task.evaluate(theta0 - h, Identity())
-    value = task.evaluate(theta0, Identity())
+    if (task.param or "").endswith(".scale") and h >= 1.0:
+        raise ValidationError(
+            "h", f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r}"
+        )
+    plus = task.evaluate(h, Identity())
+    minus = task.evaluate(-h, Identity())
+    value = task.evaluate(0.0, Identity())
     # per-batch central difference: common random numbers cancel everything that did not move
     return Tally(value=value.value, derivative=(plus.value - minus.value) / (2.0 * h))

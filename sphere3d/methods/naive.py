@@ -12,8 +12,8 @@ from sphere3d.tasks import ImageTask, PointTask, Tally
 def naive(task: ImageTask | PointTask) -> Tally:
     """Forward-mode derivative of the Monte Carlo estimator (Loubet et al. 2019, Sec. 3.1).
 
-    θ enters as ``variable(θ0)``; rays are traced detached and every hit is
-    re-attached to the θ-dependent geometry (:mod:`sphere3d.tracing`), so the
+    θ, the parameter's offset, enters as ``variable(0.0)``; rays are traced detached
+    and every hit is re-attached to the θ-dependent geometry (:mod:`sphere3d.tracing`), so the
     derivative includes the motion of shading points, normals, distances, the
     emitters' sampled points and the materials. Assumes the integrand is continuous
     in θ at every sample. Where visibility changes with θ — silhouettes seen by the
@@ -22,4 +22,4 @@ def naive(task: ImageTask | PointTask) -> Tally:
     them, and the estimate converges to the interior term alone: biased by minus the
     boundary term of the Leibniz rule (Sec. 3.2, DESIGN 2.4). The value is unbiased.
     """
-    return task.evaluate(variable(task.theta0), Identity())
+    return task.evaluate(variable(0.0), Identity())

@@ -18,14 +18,22 @@ from flatland.core.dual import detach, variable
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from sphere3d.integrator import Shading
 from sphere3d.methods._common import GRADIENT_METHODS
-from sphere3d.probes import follow_probes, mean_point_direction
+from sphere3d.probes import (
+    follow_probes,
+    mean_point_direction,
+    ring_directions,
+    ring_offsets,
+    vmf_spread_angle,
+)
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
+    FILTER_STD,
+    filter_radius,
     sample_cosine_hemisphere,
-    sample_filter,
     sample_mesh,
     sample_vmf,
     triangle_barycentrics,
+    vmf_hemisphere_fraction,
 )
 from sphere3d.state import SceneState
 from sphere3d.tasks import ImageTask, PointTask, Tally
@@ -50,20 +58,29 @@ class ReparamTransforms:
         density itself (Sec. 4.1 over a support too large for it: biased).
     probes : int
         Probe rays per transform.
+    spread : float
+        Radius of the ring of probes around a kernel's centre, in kernel standard
+        deviations (:mod:`sphere3d.probes`).
     paired : bool
         Two kernel samples per outer sample share one rotation (DESIGN 2.9).
     """
 
     kappa: float | None
     probes: int
+    spread: float
     paired: bool
 
     def camera(
         self, state: SceneState, rows: np.ndarray, cols: np.ndarray, rng: np.random.Generator
     ) -> Rotation:
-        """Pixel integral (small support): one rotation per pixel from probes drawn from its filter."""
+        """Pixel integral (small support): one rotation per pixel from a ring of probes on its footprint.
+
+        Probe 0 at the pixel centre, the others on a circle of ``spread`` filter
+        standard deviations (at most the filter's radius), random phase.
+        """
         cam = state.camera
-        s = sample_filter(rng.random((rows.size, self.probes, 2)), cam.filter)
+        radius = min(self.spread * FILTER_STD[cam.filter], filter_radius(cam.filter))
+        s = ring_offsets(radius, self.probes, rng.random(rows.size))
         d = cam.directions(cols[:, None] + 0.5 + s[..., 0], rows[:, None] + 0.5 + s[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
         return follow_probes(state, cam.origin, d, hits)
@@ -107,16 +124,15 @@ class ReparamTransforms:
         return Rotation.following(target, found)
 
     def _probe_rotation(self, shading: Shading, centre: np.ndarray, rng: np.random.Generator) -> Rotation:
-        """One rotation per shading point from probes in the kernel lobe around ``centre``.
+        """One rotation per shading point from a ring of probes around the kernel ``centre``.
 
-        Without a kernel (``kappa`` None) the probes come from the cosine lobe instead.
+        Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
         m = len(shading)
-        u = rng.random((m, self.probes, 2))
         if self.kappa is None:
-            d = sample_cosine_hemisphere(u, detach(shading.n)[:, None])
+            d = sample_cosine_hemisphere(rng.random((m, self.probes, 2)), detach(shading.n)[:, None])
         else:
-            d = sample_vmf(u, centre[:, None], self.kappa)
+            d = ring_directions(centre, vmf_spread_angle(self.kappa, self.spread), self.probes, rng.random(m))
         hits = shading.state.tracer.intersect(shading.origin[:, None], d)
         # a probe below the horizon sees only the surface it leaves, where the integrand is 0
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
@@ -161,7 +177,11 @@ class ReparamTransforms:
             weight = self._kernel_weight(rotated, mu)
             weight = np.where(np.abs(detach(weight)) < SMALL_WEIGHT, 1.0 + 0.0 * weight, weight)
             w.append(weight)
-            e.append(shading.evaluate_bsdf(member, rotated, shading.trace(member)) * weight / pdf)
+            # centres ω are cosine samples, confined to the hemisphere: 1 / C(n·Rμ) restores the kernel
+            # mass that lies below the horizon, ∫_H k(y, ω) dω = C(n·y)   (sampling.vmf_hemisphere_fraction)
+            mass = vmf_hemisphere_fraction(dot(rotated, detach(shading.n)), self.kappa)
+            mass = np.where(detach(mass) > 0.0, mass, 1.0)  # C = 0 only far below the horizon, where f = 0
+            e.append(shading.evaluate_bsdf(member, rotated, shading.trace(member)) * weight / (pdf * mass))
         # each weight's derivative has zero mean given ω and is independent of the other member:
         # a control variate scaled by the other member's estimate                      (DESIGN 2.9)
         return 0.5 * (e[0] - e[1] / w[1] * (w[0] - detach(w[0]))) + 0.5 * (
@@ -178,13 +198,20 @@ def _check_probes(name: str, value: Any) -> int:
     return check_int(name, value, minimum=1)
 
 
+def _check_spread(name: str, value: Any) -> float:
+    return check_positive(name, value, allow_zero=True)
+
+
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, _check_kappa),
     Option("probes", 4, _check_probes),
+    Option("spread", 3.0, _check_spread),
     Option("paired", False, check_bool),
 )
-def reparam(task: ImageTask | PointTask, kappa: float | None, probes: int, paired: bool) -> Tally:
+def reparam(
+    task: ImageTask | PointTask, kappa: float | None, probes: int, spread: float, paired: bool
+) -> Tally:
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
     Each integral's samples ω are evaluated at R(θ)·ω, R the identity at θ0 that moves
@@ -194,8 +221,8 @@ def reparam(task: ImageTask | PointTask, kappa: float | None, probes: int, paire
       batch, picked from ``probes`` camera rays drawn from the filter by the
       heuristic of Sec. 4.3 (:mod:`sphere3d.probes`); the filter weight carries the
       derivative of k·J under the rotation, so it needs a continuous filter (tent,
-      gaussian): with ``box`` the footprint's edge moves and the gradient is biased
-      (DESIGN 2.11);
+      gaussian): with ``box`` the footprint's edge would move and bias the gradient
+      (DESIGN 2.11), so a box filter is refused, as in flatland;
     - **emitter sampling**: one rotation per shading point following the mean of the
       attached hits of ``probes`` occluded shadow rays (the authors' implementation);
       exact when one rigid occluder casts the shadow onto a small emitter, biased when
@@ -213,6 +240,13 @@ def reparam(task: ImageTask | PointTask, kappa: float | None, probes: int, paire
     kernel samples around it share the rotation, and the control variate of DESIGN 2.9
     reduces the variance of the kernel weights (a different, still unbiased primal).
     """
+    if isinstance(task, ImageTask) and task.scene.camera.filter == "box":
+        raise ValidationError(
+            "camera.filter",
+            "the reparam method needs a continuous pixel filter, got 'box': reparameterizing the film "
+            "moves samples across the box's edges, which become moving discontinuities (DESIGN 2.11); "
+            "use 'tent' or 'gaussian'",
+        )
     if paired and kappa is None:
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
-    return task.evaluate(variable(task.theta0), ReparamTransforms(kappa, probes, paired))
+    return task.evaluate(variable(0.0), ReparamTransforms(kappa, probes, spread, paired))

@@ -1,0 +1,84 @@
+"""The differentiable rotation of DESIGN 2.6, property by property (hypothesis).
+
+R(a → b) = c I + [v]× + v vᵀ / (1 + c) with v = a × b, c = a · b. Checked for random
+unit vectors: it is a rotation (orthonormal, det +1) taking a to b; with b = ω_p a
+Dual and a = detach(ω_p) it is the identity in value — exactly, sample for sample —
+and its derivative moves ω_p0 like ω_p (∂R/∂θ ω_p0 = ∂ω_p/∂θ), with a skew-symmetric
+∂R/∂θ (the derivative of R Rᵀ = I). Tolerances are floating-point ones (1e-12 on unit
+vectors), no statistics involved.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import assume, given
+from hypothesis import strategies as st
+
+from flatland.core.dual import Dual, detach, tangent
+from sphere3d.rotation import Rotation, rotate, rotation_matrix
+from sphere3d.vector import normalize
+
+finite = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
+vectors = st.tuples(finite, finite, finite).map(np.array)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    assume(np.linalg.norm(v) > 1e-3)
+    return v / np.linalg.norm(v)
+
+
+@given(vectors, vectors)
+def test01_rotation_matrix_is_orthonormal_with_det_one(a, b):
+    a, b = _unit(a), _unit(b)
+    assume(a @ b > -0.99)  # the construction is singular only for antiparallel a, b
+    r = rotation_matrix(a, b)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    assert abs(np.linalg.det(r) - 1.0) < 1e-12
+
+
+@given(vectors, vectors, vectors)
+def test02_rotation_takes_a_to_b_and_rotate_matches_the_matrix(a, b, w):
+    a, b = _unit(a), _unit(b)
+    assume(a @ b > -0.99)
+    np.testing.assert_allclose(rotation_matrix(a, b) @ a, b, atol=1e-12)
+    np.testing.assert_allclose(rotate(a, b, w), rotation_matrix(a, b) @ w, atol=1e-12)
+
+
+@given(vectors, vectors, vectors)
+def test03_identity_in_value_exactly(p, p_dot, w):
+    omega_p = normalize(Dual(_unit(p), p_dot))
+    omega = _unit(w)
+    rotated = Rotation.following(omega_p[None]).apply(omega[None])
+    assert np.array_equal(detach(rotated)[0], omega)  # bit for bit: the primal is unchanged
+    np.testing.assert_allclose(detach(rotation_matrix(detach(omega_p), omega_p)), np.eye(3), atol=1e-15)
+
+
+@given(vectors, vectors)
+def test04_derivative_moves_the_followed_direction_exactly(p, p_dot):
+    # ω_p(θ) = normalize(p + θ ṗ): ∂R/∂θ ω_p0 must equal ∂ω_p/∂θ (DESIGN 2.6)
+    omega_p = normalize(Dual(_unit(p), p_dot))
+    rotated = Rotation.following(omega_p[None]).apply(detach(omega_p)[None])
+    np.testing.assert_allclose(tangent(rotated)[0], tangent(omega_p), atol=1e-12)
+
+
+@given(vectors, vectors, vectors)
+def test05_derivative_is_skew_and_matches_finite_differences(p, p_dot, w):
+    a = _unit(p)
+    omega_p = normalize(Dual(a, p_dot))
+    r_dot = tangent(rotation_matrix(detach(omega_p), omega_p))
+    np.testing.assert_allclose(r_dot, -r_dot.T, atol=1e-12)  # d(R Rᵀ)/dθ = 0 at R = I
+    omega = _unit(w)
+    h = 1e-6
+    plus = rotate(a, normalize(a + h * p_dot), omega)
+    minus = rotate(a, normalize(a - h * p_dot), omega)
+    rotated = Rotation.following(omega_p[None]).apply(omega[None])
+    np.testing.assert_allclose(tangent(rotated)[0], (plus - minus) / (2 * h), atol=1e-6)
+
+
+def test06_inactive_rotations_are_the_identity_also_in_derivative():
+    omega_p = Dual(np.array([[0.0, 0.0, 0.0], [0.0, 0.6, 0.8]]), np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+    rotation = Rotation.following(omega_p, np.array([True, False]))  # row 0: zero vector; row 1: masked
+    assert not rotation.active.any()
+    out = rotation.apply(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]))
+    assert np.array_equal(tangent(out), np.zeros((2, 3)))
+    assert np.array_equal(tangent(Rotation.identity((3,)).apply(np.eye(3))), np.zeros((3, 3)))
