@@ -1,0 +1,181 @@
+"""The tutorial figures: each helper draws exactly the data it is given, where it promises.
+
+The helpers compute nothing, so the tests read the data back from the matplotlib artists
+(line coordinates, band edges at ± z · stderr, image arrays and colour limits) and
+compare it with the input; they also check that figures stay out of pyplot's global
+list, that result objects are unpacked as documented, that bad input raises one
+ValidationError naming the argument, and that a figure renders to a non-blank PNG.
+"""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from flatland import plot_tutorials as ptu
+from flatland.core.image import GradientImage, Image
+from flatland.core.stats import normal_quantile
+from flatland.core.validate import ValidationError
+
+RNG = np.random.default_rng(20191117)
+
+
+def gradient_image(shape, scale=1.0):
+    return GradientImage(
+        value=RNG.random(shape),
+        derivative=scale * RNG.standard_normal(shape),
+        value_stderr=np.full(shape, 0.01),
+        derivative_stderr=np.full(shape, 0.1),
+        param="p",
+        method="m",
+        spp=4,
+        seed=0,
+        batches=4,
+    )
+
+
+def test01_helpers_return_figures_outside_pyplot():
+    before = plt.get_fignums()
+    film = np.linspace(-1, 1, 8)
+    figs = [
+        ptu.plot_grid(2),
+        ptu.plot_film({"a": film}),
+        ptu.plot_gradient_panel(film, {"g": film}),
+        ptu.plot_gradient_panel(np.ones((3, 4)), {"g": np.zeros((3, 4))}),
+        ptu.plot_descent({"run": [3.0, 1.0]}, {"run": [0.0, 0.2]}, target=0.3),
+    ]
+    assert all(isinstance(f, Figure) for f in figs)
+    assert plt.get_fignums() == before
+
+
+def test02_plot_grid_makes_the_panels_row_by_row_with_their_titles():
+    fig = ptu.plot_grid(3, 2, titles=["a", "b", "c", "d"], title="grid")
+    assert len(fig.axes) == 6
+    assert [ax.get_title() for ax in fig.axes] == ["a", "b", "c", "d", "", ""]
+    rows = [ax.get_subplotspec().rowspan.start for ax in fig.axes]
+    cols = [ax.get_subplotspec().colspan.start for ax in fig.axes]
+    assert rows == [0, 0, 0, 1, 1, 1] and cols == [0, 1, 2, 0, 1, 2]
+    with pytest.raises(ValidationError, match="titles"):
+        ptu.plot_grid(1, titles=["a", "b"])
+    with pytest.raises(ValidationError, match="ncols"):
+        ptu.plot_grid(0)
+
+
+def test03_plot_film_draws_each_series_over_the_pixel_index_with_z_stderr_bands():
+    values = np.array([0.0, 1.0, -2.0, 0.5])
+    stderr = np.array([0.1, 0.2, 0.3, 0.4])
+    level = 0.99
+    fig = ptu.plot_film({"with band": (values, stderr), "bare": 2 * values}, level=level, marks=[1.5])
+    ax = fig.axes[0]
+    curve, bare = ax.lines[0], ax.lines[1]
+    np.testing.assert_array_equal(curve.get_xdata(), np.arange(4))
+    np.testing.assert_array_equal(curve.get_ydata(), values)
+    np.testing.assert_array_equal(bare.get_ydata(), 2 * values)
+    assert len(ax.collections) == 1  # only the series with a standard error has a band
+    z = normal_quantile(level)
+    vertices = ax.collections[0].get_paths()[0].vertices
+    for j in range(values.size):  # at pixel j the band spans values ± z stderr
+        ys = vertices[np.isclose(vertices[:, 0], j), 1]
+        np.testing.assert_allclose([ys.min(), ys.max()], values[j] + np.array([-z, z]) * stderr[j])
+    assert any(line.get_xdata()[0] == 1.5 for line in ax.lines[2:])  # the mark
+
+
+def test04_plot_film_unpacks_result_objects_and_skips_non_finite_bands():
+    g = gradient_image(6)
+    image = Image(value=np.arange(6.0), stderr=np.full(6, np.inf), spp=1, seed=0, batches=1)
+    fig = ptu.plot_film({"gradient": g, "image": image})
+    ax = fig.axes[0]
+    np.testing.assert_array_equal(ax.lines[0].get_ydata(), g.derivative)
+    np.testing.assert_array_equal(ax.lines[1].get_ydata(), image.value)
+    # the image's standard errors are infinite (one batch): its band is empty
+    assert len(ax.collections) == 2 and ax.collections[1].get_paths() == []
+
+
+def test05_plot_film_rejects_mismatched_input_naming_the_series():
+    with pytest.raises(ValidationError, match=r"curves\['b'\]"):
+        ptu.plot_film({"a": np.zeros(4), "b": np.zeros(5)})
+    with pytest.raises(ValidationError, match=r"curves\['a'\].*stderr"):
+        ptu.plot_film({"a": (np.zeros(4), np.zeros(3))})
+    with pytest.raises(ValidationError, match="1D film"):
+        ptu.plot_film({"a": np.zeros((2, 2))})
+    with pytest.raises(ValidationError, match="tuple"):
+        ptu.plot_film({"a": (np.zeros(2), np.zeros(2), np.zeros(2))})
+
+
+def test06_the_1d_panel_has_strips_on_one_symmetric_scale_and_the_curves_below():
+    primal = np.linspace(0.0, 2.0, 10)
+    small, large = 0.1 * RNG.standard_normal(10), gradient_image(10, scale=5.0)
+    fig = ptu.plot_gradient_panel(primal, {"small": small, "large": large}, title="panel")
+    strips = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in strips] == ["primal", "small", "large"]
+    np.testing.assert_array_equal(strips[0].images[0].get_array()[0], primal)
+    assert strips[0].images[0].get_cmap().name == ptu.PRIMAL
+    limit = np.max(np.abs(np.concatenate([small, large.derivative])))
+    for ax, data in zip(strips[1:], [small, large.derivative], strict=True):
+        im = ax.images[0]
+        assert im.get_cmap().name == ptu.DIVERGING
+        assert im.norm.vmin == -limit and im.norm.vmax == limit  # shared and centred on zero
+        np.testing.assert_array_equal(im.get_array()[0], data)
+        assert im.get_extent()[:2] == [-0.5, 9.5]  # pixel j centred on x = j, like the curves
+    curves = [ax for ax in fig.axes if ax.get_xlabel() == "pixel" and not ax.images]
+    assert len(curves) == 1 and len(curves[0].collections) == 1  # one band: only `large` has stderr
+    np.testing.assert_array_equal(curves[0].lines[1].get_ydata(), large.derivative)
+
+
+def test07_the_2d_panel_draws_images_and_accepts_image_objects():
+    g = gradient_image((4, 5))
+    fig = ptu.plot_gradient_panel(g, {"reparam": g, "zero": np.zeros((4, 5))})
+    images = [ax for ax in fig.axes if ax.images]
+    assert len(images) == 3
+    np.testing.assert_array_equal(images[0].images[0].get_array(), g.value)
+    np.testing.assert_array_equal(images[1].images[0].get_array(), g.derivative)
+    assert images[2].images[0].norm.vmax == np.max(np.abs(g.derivative))
+    assert not [ax for ax in fig.axes if ax.lines]  # no curve row for a 2D film
+
+
+def test08_the_panel_rejects_shapes_that_do_not_match_the_primal():
+    with pytest.raises(ValidationError, match=r"gradients\['g'\]"):
+        ptu.plot_gradient_panel(np.zeros(4), {"g": np.zeros(5)})
+    with pytest.raises(ValidationError, match="primal"):
+        ptu.plot_gradient_panel(np.zeros((2, 2, 2)), {})
+
+
+def test09_an_all_zero_derivative_gets_a_unit_colour_scale():
+    fig = ptu.plot_gradient_panel(np.ones(3), {"naive": np.zeros(3)})
+    strip = [ax for ax in fig.axes if ax.images][1]
+    assert strip.images[0].norm.vmin == -1.0 and strip.images[0].norm.vmax == 1.0
+
+
+def test10_plot_descent_draws_loss_and_parameter_per_iteration_with_the_target():
+    loss = {"reparam": [4.0, 1.0, 0.1], "naive": [4.0, 4.0, 4.0]}
+    theta = {"reparam": [0.0, 0.2, 0.3], "naive": [0.0, 0.0, 0.0]}
+    fig = ptu.plot_descent(loss, theta, target=0.3, title="descent")
+    left, right = fig.axes
+    assert left.get_yscale() == "log"
+    np.testing.assert_array_equal(left.lines[0].get_ydata(), loss["reparam"])
+    np.testing.assert_array_equal(right.lines[1].get_ydata(), theta["naive"])
+    np.testing.assert_array_equal(right.lines[0].get_xdata(), [0, 1, 2])
+    assert right.lines[0].get_color() == left.lines[0].get_color()  # one colour per run
+    assert right.lines[-1].get_ydata()[0] == 0.3  # the target line
+    with pytest.raises(ValidationError, match="params"):
+        ptu.plot_descent(loss, {"reparam": [0.0, 0.1, 0.2]})
+    with pytest.raises(ValidationError, match=r"params\['naive'\]"):
+        ptu.plot_descent(loss, {"reparam": theta["reparam"], "naive": [0.0]})
+
+
+def test11_figures_render_to_non_blank_pngs():
+    film = np.sin(np.linspace(0, 3, 16))
+    figs = [
+        ptu.plot_gradient_panel(np.abs(film), {"a": film, "b": -film}),
+        ptu.plot_gradient_panel(np.outer(film, film), {"a": np.outer(film, -film)}),
+        ptu.plot_descent({"r": [1.0, 0.5]}, {"r": [0.0, 0.1]}),
+    ]
+    for fig in figs:
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png")
+        data = plt.imread(io.BytesIO(buffer.getvalue()))
+        assert data.std() > 0.01
