@@ -112,6 +112,11 @@ for name, (image, gradients) in results.items():
 # %%
 ptu.plot_gradient_panel(*results["flatland"], title=f"flatland silhouette: d/d {PARAM}")
 
+# %% [markdown]
+# The same call on the sphere's result: the derivative lives on the box's outline, positive on the
+# side it moves away from (the sky, brighter than the box, takes its place) and negative on the
+# side it moves into.
+
 # %%
 ptu.plot_gradient_panel(*results["sphere3d"], title=f"sphere3d silhouette: d/d {PARAM}")
 
