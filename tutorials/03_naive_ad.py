@@ -221,8 +221,8 @@ assert np.allclose(boundary_image.derivative, derivative_cf, rtol=0.0, atol=1e-9
 # The pixel's estimate, as a function of $\theta$ with its samples fixed, is a staircase too:
 # render the scene with the bar moved by offsets on a fine grid, each time with the same seed
 # (the same 16 film samples per pixel), and follow the pixel that contains the bar's left end.
-# It drops by $1/16$ each time the bar's edge passes one of its samples. Next to it, the
-# textbook staircase from above.
+# It jumps by $1/16$ each time the bar's edge passes one of its samples (upward here: the bar moves
+# right and uncovers the backdrop). Next to it, the textbook staircase from above.
 
 # %%
 pixel = edge_pixels[0]
