@@ -330,7 +330,7 @@ print(f"reparam vs boundary: largest z over the pixels {z_shadow.max():.2f} (t q
 # %%
 # check: reparam agrees with boundary at every pixel within t standard errors (15 degrees of freedom,
 # two-sided, family-wise 1e-3 Šidák-corrected over 32 pixels), its primal is naive's bit for bit, and naive
-# is off (relative error above 0.2; measured 0.29, with reparam at 0.07)
+# is off (relative error above 0.2; measured 0.29, reparam 0.06)
 assert np.all(z_shadow <= t32)
 assert np.array_equal(methods["reparam"].value, methods["naive"].value)
 assert methods["naive"].error_vs(reference) > 0.2
