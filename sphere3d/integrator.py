@@ -160,10 +160,8 @@ class PixelSamples:
 class Transforms(Protocol):
     """How a method changes variables in the renderer's integrals (see the module docstring)."""
 
-    def camera(
-        self, state: SceneState, rows: np.ndarray, cols: np.ndarray, rng: np.random.Generator
-    ) -> Rotation:
-        """One rotation per pixel (for one batch) of the pixel integral."""
+    def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
+        """One rotation per (batch, pixel) of the pixel integral, given one uniform ``u`` each."""
         ...
 
     def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
@@ -187,9 +185,7 @@ class Transforms(Protocol):
 class Identity:
     """No change of variables: the renderer as it stands (the naive estimator, Sec. 3.1)."""
 
-    def camera(
-        self, state: SceneState, rows: np.ndarray, cols: np.ndarray, rng: np.random.Generator
-    ) -> Rotation:
+    def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
         return Rotation.identity(rows.shape)
 
     def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:

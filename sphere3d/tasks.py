@@ -12,6 +12,9 @@ the method, and anything a method draws in addition comes from other streams
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,6 +39,8 @@ __all__ = ["CHUNK", "ImageTask", "PointTask", "Tally", "resolve_batches"]
 CHUNK = 1 << 15
 """Camera samples per memory chunk (a loop over chunks, vectorized inside)."""
 MAX_BATCHES = 16
+WORKERS = min(2, os.cpu_count() or 1)
+"""Threads over memory chunks (2: the machines this is written for have two cores)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,18 @@ def resolve_batches(samples: int, batches: Any, field: str = "spp") -> int:
     if samples % batches:
         raise ValidationError("batches", f"must divide {field}={samples}, got {batches}")
     return batches
+
+
+def _map(func: Callable[[int], Any], items: range) -> list[Any]:
+    """``[func(i) for i in items]``, on up to :data:`WORKERS` threads (numpy and Embree release the GIL).
+
+    Each chunk draws from its own named streams, so the result does not depend on
+    the number of threads or the order they finish in.
+    """
+    if WORKERS <= 1 or len(items) <= 1:
+        return [func(i) for i in items]
+    with ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        return list(pool.map(func, items))
 
 
 def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
@@ -99,35 +116,53 @@ class ImageTask:
         return est - others * (weight - detach(weight))
 
     def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
-        """Render every pixel with the parameter offset by ``theta`` (float or Dual) under ``transforms``."""
+        """Render every pixel with the parameter offset by ``theta`` (float or Dual) under ``transforms``.
+
+        All batches of a range of pixels are processed together (one vectorized call
+        per memory chunk); batch b's primary uniforms come from
+        ``stream(seed, "samples", b, chunk)`` and its camera rotations from
+        ``stream(seed, "probes.camera", b)``, so every batch is independent.
+        """
         transforms = transforms or Identity()
         state = self.scene.state(self.param, theta, self.tracer)
         height, width = self.shape
-        per_batch = self.spp // self.batches
+        batches, per_batch = self.batches, self.spp // self.batches
         pixels = np.arange(height * width)
         rows_all, cols_all = np.divmod(pixels, width)
-        chunk_pixels = max(1, CHUNK // per_batch)
-        means = []
-        for b in range(self.batches):
-            # one rotation per pixel and batch for the pixel integral, from its own probe stream
-            camera = transforms.camera(state, rows_all, cols_all, stream(self.seed, "probes.camera", b))
-            parts = []
-            for c, start in enumerate(range(0, height * width, chunk_pixels)):  # memory chunks
-                pix = np.repeat(pixels[start : start + chunk_pixels], per_batch)
-                u = stream(self.seed, "samples", b, c).random((pix.size, PRIMARY_UNIFORMS))
-                est = pixel_samples(
-                    state,
-                    transforms,
-                    rows_all[pix],
-                    cols_all[pix],
-                    u,
-                    camera.take(pix),
-                    stream(self.seed, "kernel", b, c),
-                    stream(self.seed, "probes", b, c),
-                )
-                parts.append(np.mean(self._control_variate(est, per_batch), axis=1))
-            means.append(np.concatenate(parts))
-        return _tally(means, self.shape)
+        # one rotation per pixel and batch for the pixel integral, from its own probe streams
+        camera_u = np.stack(
+            [stream(self.seed, "probes.camera", b).random(pixels.size) for b in range(batches)]
+        )
+        camera = transforms.camera(
+            state, np.tile(rows_all, batches), np.tile(cols_all, batches), camera_u.ravel()
+        )
+        chunk_pixels = max(1, CHUNK // self.spp)
+
+        def chunk(c: int) -> np.ndarray:
+            pix = pixels[c * chunk_pixels : (c + 1) * chunk_pixels]
+            # sample order: batch, pixel, sample
+            u = np.concatenate(
+                [
+                    stream(self.seed, "samples", b, c).random((pix.size * per_batch, PRIMARY_UNIFORMS))
+                    for b in range(batches)
+                ]
+            )
+            sample_pix = np.tile(np.repeat(pix, per_batch), batches)
+            sample_rot = np.repeat(np.arange(batches) * pixels.size, pix.size * per_batch) + sample_pix
+            est = pixel_samples(
+                state,
+                transforms,
+                rows_all[sample_pix],
+                cols_all[sample_pix],
+                u,
+                camera.take(sample_rot),
+                stream(self.seed, "kernel", c),
+                stream(self.seed, "probes", c),
+            )
+            return np.mean(self._control_variate(est, per_batch), axis=1).reshape(batches, pix.size)
+
+        parts = _map(chunk, range(-(-pixels.size // chunk_pixels)))
+        return _tally(list(np.concatenate(parts, axis=1)), self.shape)
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,10 @@ def dot(a: Any, b: Any) -> Any:
 
 
 def cross(a: Any, b: Any) -> Any:
-    """Row-wise cross product over the last axis."""
-    return np.cross(a, b)
+    """Row-wise cross product over the last axis (by components: ``np.cross`` copies its inputs)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def norm(a: Any) -> Any:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.contract import Option
-from flatland.core.dual import detach, variable
+from flatland.core.dual import detach, tangent, variable
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from sphere3d.integrator import Shading
 from sphere3d.methods._common import GRADIENT_METHODS
@@ -70,9 +70,7 @@ class ReparamTransforms:
     spread: float
     paired: bool
 
-    def camera(
-        self, state: SceneState, rows: np.ndarray, cols: np.ndarray, rng: np.random.Generator
-    ) -> Rotation:
+    def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
         """Pixel integral (small support): one rotation per pixel from a ring of probes on its footprint.
 
         Probe 0 at the pixel centre, the others on a circle of ``spread`` filter
@@ -80,10 +78,10 @@ class ReparamTransforms:
         """
         cam = state.camera
         radius = min(self.spread * FILTER_STD[cam.filter], filter_radius(cam.filter))
-        s = ring_offsets(radius, self.probes, rng.random(rows.size))
+        s = ring_offsets(radius, self.probes, u)
         d = cam.directions(cols[:, None] + 0.5 + s[..., 0], rows[:, None] + 0.5 + s[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
-        return follow_probes(state, cam.origin, d, hits)
+        return follow_probes(state, cam.origin, detach(cam.origin), d, hits)
 
     def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
         """Emitter sampling: one rotation per shading point from ``probes`` shadow rays (Sec. 4.3).
@@ -116,7 +114,10 @@ class ReparamTransforms:
             hits = state.tracer.intersect(shading.origin[s, None], w[s], tmax[s])
             points = attached_points(state.triangles[np.where(occluded[s], hits.triangle, 0)], hits.u, hits.v)
             target[s], found[s] = mean_point_direction(shading.x[s], points, occluded[s])
-        f = np.flatnonzero(~shadowed & usable.any(axis=1))
+        # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
+        emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
+        moving = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_move
+        f = np.flatnonzero(~shadowed & usable.any(axis=1) & moving)
         if f.size:  # no shadow edge: the mean attached probe point on the emitters
             b1, b2 = triangle_barycentrics(u[f, :, 1:3])
             points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)
@@ -136,8 +137,9 @@ class ReparamTransforms:
         hits = shading.state.tracer.intersect(shading.origin[:, None], d)
         # a probe below the horizon sees only the surface it leaves, where the integrand is 0
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
-        hits = hits.without(dot(d, detach(shading.n)[:, None]) <= 0.0)
-        return follow_probes(shading.state, shading.x, d, hits)
+        normal = detach(shading.n)
+        hits = hits.without(dot(d, normal[:, None]) <= 0.0)
+        return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal)
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
         """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (DESIGN 2.7)."""

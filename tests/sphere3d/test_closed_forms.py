@@ -1,0 +1,162 @@
+"""Closed forms for the irradiance E = ∫ L_i cos θ dω at a point, value and derivative.
+
+- Constant sky, nothing above the horizon: E = π L exactly, for every sample.
+- A black triangle under the sky: E = L (π - Φ), Φ its projected solid angle by
+  Lambert's polygon formula, differentiated with Duals for the triangle's translation.
+- A uniform rectangular emitter: E = L Φ (Lambert again); a faded one by a
+  high-order quadrature of L fade cos θ_x cos θ_y / d² over its area.
+
+Statistical comparisons use |estimate - exact| <= Z · stderr with Z the two-sided
+99.99 % normal quantile (Šidák over the ~10 comparisons of the file gives a
+family-wise level of about 1e-3); seeds are fixed. Where the reparameterization is
+biased by construction the bias is measured (numbers in the docstrings) and bounded.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import sphere3d as s3
+from flatland.core.dual import detach, tangent, variable
+from flatland.core.stats import normal_quantile
+from sphere3d.vector import cross, dot, norm, normalize
+
+Z = normal_quantile(0.9999)
+SKY = 1.5
+TRIANGLE = np.array([[0.0, -0.5, 1.0], [0.9, 0.0, 1.0], [0.0, 0.5, 1.0]])
+ORIGIN, UP = [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]
+CAMERA = {"position": [0, -3, 1], "look_at": [0, 0, 0], "fov": 0.8, "width": 8, "height": 8}
+
+
+def lambert(vertices, normal=(0.0, 0.0, 1.0)):
+    """Projected solid angle of a polygon seen from the origin: ½ |Σ γ_i n·u_i| (Dual-aware)."""
+    a = normalize(vertices)
+    normal = np.asarray(normal)
+    total = 0.0
+    for i in range(len(vertices)):
+        c = cross(a[i], a[(i + 1) % len(vertices)])
+        total = total + np.arccos(dot(a[i], a[(i + 1) % len(vertices)])) * dot(c, normal) / norm(c)
+    return np.abs(0.5 * total)
+
+
+def _triangle_scene():
+    shapes = [
+        {"name": "tri", "type": "mesh", "vertices": TRIANGLE.tolist(), "faces": [[0, 1, 2]], "albedo": 0.0}
+    ]
+    return {"name": "triangle", "camera": CAMERA, "sky": SKY, "shapes": shapes}
+
+
+def _triangle_exact(axis):
+    return SKY * (np.pi - lambert(TRIANGLE + np.eye(3)[axis] * variable(0.0)))
+
+
+def test01_open_sky_gives_pi_times_its_radiance_for_every_sample():
+    scene = {
+        "name": "open",
+        "camera": CAMERA,
+        "sky": SKY,
+        "shapes": [{"name": "floor", "type": "rectangle", "translate": [0, 0, -1]}],
+    }
+    for method in ("naive", "reparam"):
+        e = s3.irradiance(scene, ORIGIN, UP, "sky.emission", method=method, n=4096)
+        assert e.value == pytest.approx(np.pi * SKY, rel=1e-13) and e.value_stderr < 1e-12
+        assert e.derivative == pytest.approx(np.pi, rel=1e-13)
+
+
+def test02_black_triangle_value_is_sky_times_pi_minus_lambert():
+    e = s3.irradiance(_triangle_scene(), ORIGIN, UP, n=1 << 18, seed=1)
+    exact = detach(_triangle_exact(0))
+    assert abs(e.value - exact) <= Z * e.value_stderr
+
+
+@pytest.mark.parametrize("axis", [2, 0], ids=["translate.z", "translate.x"])
+def test03_black_triangle_derivative_reparam_close_naive_zero(axis):
+    """The triangle moving up (z: it shrinks in view) or sideways (x).
+
+    ``naive`` differentiates visibility as a step: exactly 0, the whole derivative is
+    missing. ``reparam`` (defaults: κ = 1000, 4 probes) is within 10 % plus Z standard
+    errors. Measured with 8 × 2^21 samples: translate.z -7.6 % ± 0.4 % (0.4753 ± 0.0019
+    against 0.5144), translate.x -4.8 % ± 1.7 % (0.2780 ± 0.0049 against 0.2920). The
+    bias is the probes' (a kernel whose 4 probes all miss the triangle near a corner
+    follows nothing): with ``probes=8`` translate.z is -2.9 % ± 0.5 %.
+    """
+    exact = float(tangent(_triangle_exact(axis)))
+    param = f"tri.translate.{'xyz'[axis]}"
+    naive = s3.irradiance(_triangle_scene(), ORIGIN, UP, param, method="naive", n=1 << 16, seed=2)
+    assert naive.derivative == 0.0
+    e = s3.irradiance(_triangle_scene(), ORIGIN, UP, param, method="reparam", n=1 << 20, seed=3)
+    assert abs(e.derivative - exact) <= Z * e.derivative_stderr + 0.10 * abs(exact)
+    assert abs(e.derivative - exact) < abs(naive.derivative - exact) / 3
+
+
+def _light_scene(fade):
+    light = {
+        "name": "light", "type": "rectangle", "size": [0.6, 0.4], "translate": [0.5, 0.2, 1.5],
+        "rotate": [np.pi, 0.0, 0.0], "emission": 5.0, "albedo": 0.0, "fade": fade,
+    }  # fmt: skip
+    return {"name": "lit", "camera": CAMERA, "sky": 0.0, "shapes": [light]}
+
+
+def _light_exact(fade, nodes=48):
+    """E for the rectangle light of :func:`_light_scene` moving by θ in x, as a Dual."""
+    theta = variable(0.0)
+    if fade == 0.0:
+        c = np.array([0.5, 0.2, 1.5]) + np.array([1.0, 0.0, 0.0]) * theta
+        half = np.array([[-0.3, -0.2, 0.0], [0.3, -0.2, 0.0], [0.3, 0.2, 0.0], [-0.3, 0.2, 0.0]])
+        corners = c + half
+        return 5.0 * lambert(corners)
+    # Gauss–Legendre on the pieces where the fade is smooth: E = ∫ L fade z² / d⁴ dA
+    g, w = np.polynomial.legendre.leggauss(nodes)
+    breaks = [-1.0, -1.0 + fade, 1.0 - fade, 1.0]
+    u = np.concatenate([0.5 * (a + b) + 0.5 * (b - a) * g for a, b in itertools.pairwise(breaks)])
+    wu = np.concatenate([0.5 * (b - a) * w for a, b in itertools.pairwise(breaks)])
+    uu, vv = np.meshgrid(u, u, indexing="ij")
+
+    def smooth(t):
+        t = np.clip(t, 0.0, 1.0)
+        return t * t * (3 - 2 * t)
+
+    weight = smooth((1 - np.abs(uu)) / fade) * smooth((1 - np.abs(vv)) / fade)
+    px, py, pz = 0.5 + theta + 0.3 * uu, 0.2 + 0.2 * vv, 1.5
+    d2 = px * px + py * py + pz * pz
+    return np.sum(5.0 * weight * pz * pz / (d2 * d2) * np.outer(wu, wu)) * 0.3 * 0.2
+
+
+def test04_rectangle_light_value_is_radiance_times_lambert():
+    # emitter and cosine sampling combined by MIS: unbiased for the value
+    e = s3.irradiance(_light_scene(0.0), ORIGIN, UP, n=1 << 18, seed=4)
+    assert abs(e.value - detach(_light_exact(0.0))) <= Z * e.value_stderr
+    faded = s3.irradiance(_light_scene(0.25), ORIGIN, UP, n=1 << 18, seed=4)
+    assert abs(faded.value - detach(_light_exact(0.25))) <= Z * faded.value_stderr
+
+
+def test05_faded_light_moving_derivative_matches_quadrature():
+    """A light whose radiance fades to 0 at its border has no moving edge: naive and reparam both
+    agree with the quadrature. Measured (2^20 samples): exact -0.23497; naive -0.2326 ± 0.0025;
+    reparam -0.2343 ± 0.0008 (following the light's mean probe point keeps its samples on the light,
+    a third of naive's standard error)."""
+    exact = float(tangent(_light_exact(0.25)))
+    for method in ("naive", "reparam"):
+        e = s3.irradiance(
+            _light_scene(0.25), ORIGIN, UP, "light.translate.x", method=method, n=1 << 19, seed=5
+        )
+        assert abs(e.derivative - exact) <= Z * e.derivative_stderr, method
+
+
+def test06_unfaded_light_moving_shows_the_bias_of_one_rotation():
+    """Without a fade the light's border is a discontinuity of large support. One rotation per
+    shading point (the authors' emitter rule) moves the whole light like its mean point, which
+    misses how the light's image stretches: measured (2^20 samples) reparam -0.0798 ± 0.0007
+    against the exact -0.3007 (73 % low); naive misses every edge and gives 0. The test asserts
+    the bias is there and of that size, and that the faded light of test05 has none."""
+    exact = float(tangent(_light_exact(0.0)))
+    naive = s3.irradiance(
+        _light_scene(0.0), ORIGIN, UP, "light.translate.x", method="naive", n=1 << 16, seed=6
+    )
+    assert abs(naive.derivative) < 1e-12
+    e = s3.irradiance(_light_scene(0.0), ORIGIN, UP, "light.translate.x", method="reparam", n=1 << 18, seed=6)
+    assert e.derivative - exact > Z * e.derivative_stderr  # biased towards 0
+    assert 0.6 < 1.0 - e.derivative / exact < 0.85

@@ -1,0 +1,133 @@
+"""The render API: results, exact identities, reproducibility, and one clear error per bad input.
+
+Exact checks first: parameters that enter linearly (an albedo, an emission) have a
+derivative image equal to the image divided by the parameter, sample for sample; the
+reparameterized primal is the naive one bit for bit; same seed, same image, whatever
+the number of threads. Then the method table and its errors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sphere3d as s3
+from flatland.core.validate import ValidationError
+from sphere3d import tasks
+
+
+def _small(name: str, size: int = 12, **camera) -> dict:
+    d = s3.load_scene(name).to_dict()
+    d["camera"].update(width=size, height=size, **camera)
+    return d
+
+
+def test01_api_exports_and_methods():
+    assert s3.GRADIENT_METHODS.names == ("naive", "finite_difference", "reparam")
+    for name in ("Dual", "detach", "variable", "Image", "GradientImage", "Estimate", "relative_error"):
+        assert hasattr(s3, name)
+    image = s3.render(_small("shadow"), spp=4, seed=3)
+    assert isinstance(image, s3.Image) and image.value.shape == (12, 12) == image.stderr.shape
+    assert image.batches == 4 and image.spp == 4 and image.scene == "shadow"
+    g = s3.render_gradient(_small("shadow"), "occluder.translate.x", spp=8, seed=3, kappa=300.0)
+    assert isinstance(g, s3.GradientImage) and g.derivative.shape == (12, 12)
+    assert dict(g.options) == {"kappa": 300.0, "probes": 4, "spread": 3.0, "paired": False}
+    assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
+
+
+@pytest.mark.parametrize("method", ["naive", "reparam"])
+def test02_linear_parameters_have_the_image_over_the_parameter_as_derivative(method):
+    # direct illumination is linear in the floor's albedo when only the floor reflects, and in
+    # the light's emission when nothing else emits: dI/dθ = I / θ per sample, up to rounding
+    d = _small("shadow")
+    d["shapes"][1]["albedo"] = 0.0
+    g = s3.render_gradient(d, "floor.albedo", method=method, spp=8, seed=1)
+    np.testing.assert_allclose(g.derivative * 0.7, g.value, rtol=1e-12, atol=1e-15)
+    g = s3.render_gradient(d, "light.emission", method=method, spp=8, seed=1)
+    np.testing.assert_allclose(g.derivative * 6.0, g.value, rtol=1e-12, atol=1e-15)
+    e = s3.irradiance("shadow", [1.0, -1.0, 0.0], [0.0, 0.0, 1.0], "light.emission", method=method, n=4096)
+    assert e.derivative * 6.0 == pytest.approx(e.value, rel=1e-12)
+
+
+@pytest.mark.parametrize("scene, param", [("shadow", "occluder.translate.x"), ("sky", "camera.translate.x")])
+def test03_reparam_primal_is_bit_identical_to_naive(scene, param):
+    naive = s3.render_gradient(_small(scene), param, method="naive", spp=16, seed=5)
+    reparam = s3.render_gradient(_small(scene), param, method="reparam", spp=16, seed=5)
+    assert np.array_equal(naive.value, reparam.value)
+    assert np.array_equal(naive.value_stderr, reparam.value_stderr)
+    assert not np.array_equal(naive.derivative, reparam.derivative)  # the methods do differ
+    point = [
+        s3.irradiance(scene, [0.5, -0.4, 0.0], [0, 0, 1], param, method=m, n=2048, seed=2)
+        for m in ("naive", "reparam")
+    ]
+    assert point[0].value == point[1].value
+
+
+def test04_same_seed_same_image_whatever_the_threads(monkeypatch):
+    d = _small("two_occluders")
+    first = s3.render_gradient(d, "left.translate.x", spp=16, seed=9)
+    monkeypatch.setattr(tasks, "WORKERS", 1)
+    again = s3.render_gradient(d, "left.translate.x", spp=16, seed=9)
+    assert np.array_equal(first.derivative, again.derivative) and np.array_equal(first.value, again.value)
+    other = s3.render_gradient(d, "left.translate.x", spp=16, seed=10)
+    assert not np.array_equal(first.value, other.value)
+
+
+def test05_standard_errors_come_from_the_batches():
+    d = _small("sky", 8)
+    g = s3.render_gradient(d, "occluder.translate.x", method="naive", spp=32, batches=4, seed=0)
+    one = s3.render_gradient(d, "occluder.translate.x", method="naive", spp=32, batches=1, seed=0)
+    assert g.batches == 4 and np.all(np.isfinite(g.value_stderr)) and np.all(np.isinf(one.value_stderr))
+    # more samples per pixel, smaller standard errors (about 1/√4 for 4 times the samples)
+    big = s3.render(d, spp=128, batches=4, seed=1)
+    small = s3.render(d, spp=32, batches=4, seed=1)
+    assert np.median(big.stderr / small.stderr) < 0.8
+
+
+def test06_finite_difference_agrees_with_naive_where_nothing_is_discontinuous():
+    # an albedo changes no visibility: both methods estimate the same derivative, and with common
+    # random numbers the central difference of a linear function is exact up to rounding
+    d = _small("shadow")
+    fd = s3.render_gradient(d, "floor.albedo", method="finite_difference", spp=8, seed=4, h=0.05)
+    naive = s3.render_gradient(d, "floor.albedo", method="naive", spp=8, seed=4)
+    np.testing.assert_allclose(fd.derivative, naive.derivative, rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(fd.value, s3.render(d, spp=8, seed=4).value)
+
+
+BAD = [
+    (dict(method="boundary"), "'boundary'; choose from naive, finite_difference, reparam"),
+    (dict(kappa=0.0), "kappa: must be > 0, got 0.0"),
+    (dict(kappa=float("nan")), "kappa: must be finite"),
+    (dict(probes=0), "probes: must be an integer >= 1, got 0"),
+    (dict(spread=-1.0), "spread: must be >= 0, got -1.0"),
+    (dict(paired=1), "paired: must be True or False, got 1"),
+    (dict(kappa=None, paired=True), "paired: needs a convolution kernel"),
+    (dict(method="finite_difference", h=-0.1), "h: must be > 0, got -0.1"),
+    (dict(method="naive", kappa=10.0), "kappa: is not an option of method 'naive'"),
+    (dict(spp=0), "spp: must be an integer >= 1, got 0"),
+    (dict(spp=10, batches=4), "batches: must divide spp=10, got 4"),
+    (dict(seed=-1), "seed: must be an integer >= 0, got -1"),
+    (dict(param="occluder.wobble"), "param: unknown parameter 'occluder.wobble'; choose from"),
+]
+
+
+@pytest.mark.parametrize("kwargs, message", BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test07_bad_arguments_raise_one_error_naming_the_field(kwargs, message):
+    kwargs = {"param": "occluder.translate.x", "spp": 4, **kwargs}
+    with pytest.raises(ValidationError) as info:
+        s3.render_gradient(_small("shadow", 4), **kwargs)
+    assert message in str(info.value)
+
+
+def test08_reparam_refuses_the_box_filter_and_fd_a_too_large_scale_step():
+    with pytest.raises(
+        ValidationError, match=r"camera\.filter: the reparam method needs a continuous pixel filter"
+    ):
+        s3.render_gradient(_small("shadow", 4, filter="box"), "occluder.translate.x", spp=4)
+    s3.render_gradient(_small("shadow", 4, filter="box"), "occluder.translate.x", method="naive", spp=4)
+    with pytest.raises(ValidationError, match="h: must be < 1 for a scale parameter"):
+        s3.render_gradient(_small("shadow", 4), "occluder.scale", method="finite_difference", spp=4, h=1.5)
+    with pytest.raises(ValidationError, match=r"normal: must not be zero"):
+        s3.irradiance("shadow", [0, 0, 0], [0, 0, 0])
+    with pytest.raises(ValidationError, match=r"point\[1\]: must be finite"):
+        s3.irradiance("shadow", [0, float("inf"), 0], [0, 0, 1])
