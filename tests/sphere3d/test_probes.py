@@ -1,0 +1,145 @@
+"""The probe heuristic of DESIGN 2.8 on hand-made configurations, one case per rule.
+
+Scene: a big background wall at z = -2 and a small square occluder at z = -1 (both
+facing the origin), plus a concave corner of two walls meeting at a right angle at
+(x, y) = (6, -2), seen from inside. Probe rays start at the origin. Each test builds probe directions that
+hit known surfaces and checks which point the heuristic follows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from flatland.core.dual import Dual, detach, tangent, variable
+from sphere3d.probes import (
+    mean_point_direction,
+    pair_index,
+    ring_directions,
+    ring_offsets,
+    select_points,
+    vmf_spread_angle,
+)
+from sphere3d.scene import load_scene
+from sphere3d.vector import normalize
+
+CAMERA = {"position": [0, 0, 5], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov": 0.8, "width": 4, "height": 4}
+SCENE = {
+    "name": "probes",
+    "camera": CAMERA,
+    "shapes": [
+        {"name": "wall", "type": "rectangle", "size": [8, 8], "translate": [0, 0, -2]},
+        {"name": "square", "type": "rectangle", "size": [0.5, 0.5], "translate": [0, 0, -1]},
+        # a concave corner at x = 6: the floor of the corner (normal +x) and its side (normal +y)
+        {
+            "name": "left",
+            "type": "rectangle",
+            "size": [4, 4],
+            "translate": [6, 0, -2],
+            "rotate": [0, -math.pi / 2, 0],
+        },
+        {
+            "name": "right",
+            "type": "rectangle",
+            "size": [4, 4],
+            "translate": [4, -2, -2],
+            "rotate": [math.pi / 2, 0, 0],
+        },
+    ],
+}
+WALL, SQUARE, LEFT, RIGHT = 0, 1, 2, 3
+
+
+def _select(directions, param="square.translate.x"):
+    scene = load_scene(SCENE)
+    state = scene.state(param, variable(0.0))
+    d = normalize(np.asarray(directions, dtype=float))[None]
+    hits = state.tracer.intersect(np.zeros(3), d)
+    point, found = select_points(state, Dual(np.zeros((1, 3))), np.zeros(3), d, hits)
+    return state, hits, point, found
+
+
+def test01_pair_index_is_the_last_probe_with_another_shape():
+    shapes = np.array([[0, 0, 1, 1], [0, 0, 0, 0], [-1, 2, -1, 3], [1, -1, 1, 1], [-1, -1, -1, -1]])
+    assert pair_index(shapes).tolist() == [3, 0, 3, 1, 0]
+
+
+def test02_no_hit_means_no_point():
+    _, _, _, found = _select([[0.0, 1.0, 0.2], [0.1, 1.0, 0.2]])
+    assert not found[0]
+
+
+def test03_single_hit_is_moved_to_the_silhouette_between_the_pair():
+    # probe 0 hits the square (x in [-0.25, 0.25] at z = -1), probe 1 passes beside it and hits the wall:
+    # the square occludes the wall, and its point is moved by bisection towards the edge x = 0.25
+    _, hits, point, found = _select([[0.1, 0.0, -1.0], [0.3, 0.0, -1.0], [0.1, 0.05, -1.0]])
+    assert found[0] and hits.shape[0].tolist() == [SQUARE, WALL, SQUARE]
+    p = detach(point)[0]
+    assert p[2] == pytest.approx(-1.0) and 0.25 - (0.3 - 0.1) / 8 <= p[0] <= 0.25
+    assert tangent(point)[0] == pytest.approx([1.0, 0.0, 0.0])  # attached to the moving square
+
+
+def test04_the_occluder_wins_whichever_probe_hit_it():
+    _, _, point, _ = _select(
+        [[0.3, 0.0, -1.0], [0.1, 0.0, -1.0]]
+    )  # probe 0 on the wall, probe 1 on the square
+    assert detach(point)[0][2] == pytest.approx(-1.0) and 0.2 <= detach(point)[0][0] <= 0.25
+
+
+def test05_two_surfaces_meeting_give_their_crease():
+    # from the origin, inside the corner, neither wall's tangent plane
+    # separates the other hit from the origin, the normals are perpendicular, so the heuristic
+    # intersects the two planes (x = 6 and y = -2) with the plane of the two probe directions
+    _, hits, point, found = _select([[6.0, -1.0, -2.0], [5.0, -2.0, -2.0]])
+    assert hits.shape[0].tolist() == [LEFT, RIGHT] and found[0]
+    p = detach(point)[0]
+    np.testing.assert_allclose(p, [6.0, -2.0, -16.0 / 7.0], atol=1e-12)  # in the plane of the probes
+    np.testing.assert_allclose(tangent(point)[0], 0.0, atol=1e-12)  # neither wall moves with the square
+
+
+def test06_parallel_surfaces_that_do_not_occlude_each_other_give_p0():
+    # two coplanar halves of a wall: neither tangent plane separates the other's hit from the origin
+    # and the normals are parallel, so the point is p0's, moved by bisection to the seam at x = 0
+    halves = [
+        {"name": "west", "type": "rectangle", "size": [2, 2], "translate": [-1, 0, -2]},
+        {"name": "east", "type": "rectangle", "size": [2, 2], "translate": [1, 0, -2]},
+    ]
+    state = load_scene(dict(SCENE, shapes=halves)).state("west.translate.x", variable(0.0))
+    d = normalize(np.array([[[-0.3, 0.0, -1.0], [0.2, 0.0, -1.0]]]))
+    hits = state.tracer.intersect(np.zeros(3), d)
+    point, found = select_points(state, Dual(np.zeros((1, 3))), np.zeros(3), d, hits)
+    assert hits.shape[0].tolist() == [0, 1] and found[0]
+    p = detach(point)[0]
+    assert p[2] == pytest.approx(-2.0) and -2 * 0.5 / 8 <= p[0] <= 0.0  # on the west half, near the seam
+    assert tangent(point)[0].tolist() == [1.0, 0.0, 0.0]
+
+
+def test07_the_rotation_follows_the_direction_from_a_moving_origin():
+    scene = load_scene(SCENE)
+    state = scene.state("square.translate.x", variable(0.0))
+    d = normalize(np.array([[[0.1, 0.0, -1.0], [0.3, 0.0, -1.0]]]))
+    hits = state.tracer.intersect(np.zeros(3), d)
+    origin = Dual(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]))  # the origin moves in y
+    point, _ = select_points(state, origin, np.zeros(3), d, hits)
+    to = point - origin
+    np.testing.assert_allclose(tangent(to)[0], [1.0, -1.0, 0.0])
+
+
+def test08_probe_patterns_and_mean_points():
+    kappa, spread = 1e4, 3.0
+    angle = vmf_spread_angle(kappa, spread)
+    assert angle == pytest.approx(spread / math.sqrt(kappa), rel=1e-3)
+    assert vmf_spread_angle(1.0, 3.0) <= math.pi
+    centre = normalize(np.array([[0.2, -0.3, 0.9], [0.0, 0.0, -1.0]]))
+    d = ring_directions(centre, angle, 4, np.array([0.1, 0.7]))
+    np.testing.assert_allclose(d[:, 0], centre)
+    np.testing.assert_allclose(np.einsum("mpk,mk->mp", d[:, 1:], centre), math.cos(angle), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, atol=1e-14)
+    offsets = ring_offsets(1.5, 4, np.array([0.0]))
+    np.testing.assert_allclose(np.linalg.norm(offsets[0], axis=-1), [0.0, 1.5, 1.5, 1.5])
+    points = Dual(np.array([[[1.0, 0.0, 0.0], [3.0, 0.0, 0.0], [9.0, 9.0, 9.0]]]), np.ones((1, 3, 3)))
+    direction, found = mean_point_direction(Dual(np.zeros((1, 3))), points, np.array([[True, True, False]]))
+    assert found[0] and detach(direction)[0].tolist() == [2.0, 0.0, 0.0]
+    assert tangent(direction)[0].tolist() == [1.0, 1.0, 1.0]
