@@ -129,12 +129,9 @@ class ImageTask:
         batches, per_batch = self.batches, self.spp // self.batches
         pixels = np.arange(height * width)
         rows_all, cols_all = np.divmod(pixels, width)
-        # one rotation per pixel and batch for the pixel integral, from its own probe streams
+        # one phase per pixel and batch for the probes of the pixel integral, from their own streams
         camera_u = np.stack(
             [stream(self.seed, "probes.camera", b).random(pixels.size) for b in range(batches)]
-        )
-        camera = transforms.camera(
-            state, np.tile(rows_all, batches), np.tile(cols_all, batches), camera_u.ravel()
         )
         chunk_pixels = max(1, CHUNK // self.spp)
 
@@ -148,7 +145,10 @@ class ImageTask:
                 ]
             )
             sample_pix = np.tile(np.repeat(pix, per_batch), batches)
-            sample_rot = np.repeat(np.arange(batches) * pixels.size, pix.size * per_batch) + sample_pix
+            # one rotation per pixel and batch for the pixel integral (rows: batch-major)
+            rows, cols = np.tile(rows_all[pix], batches), np.tile(cols_all[pix], batches)
+            camera = transforms.camera(state, rows, cols, camera_u[:, pix].ravel())
+            sample_rot = np.repeat(np.arange(batches * pix.size), per_batch)
             est = pixel_samples(
                 state,
                 transforms,
