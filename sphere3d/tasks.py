@@ -197,20 +197,22 @@ class PointTask:
         transforms = transforms or Identity()
         state = self.scene.state(self.param, theta, self.tracer)
         per_batch = self.n // self.batches
-        means = []
-        for b in range(self.batches):
-            total = 0.0
-            for c, start in enumerate(range(0, per_batch, CHUNK)):  # memory chunks
-                size = min(CHUNK, per_batch - start)
-                x = np.broadcast_to(np.array(self.point), (size, 3)).copy()
-                nrm = np.broadcast_to(np.array(self.normal), (size, 3)).copy()
-                if state.dual:
-                    x, nrm = Dual(x), Dual(nrm)
-                u = stream(self.seed, "samples", b, c).random((size, 5))
-                est = irradiance_samples(
-                    Shading.at(state, x, nrm), u, transforms, stream(self.seed, "kernel", b, c),
-                    stream(self.seed, "probes", b, c),
-                )  # fmt: skip
-                total = total + np.sum(est)
-            means.append(total / per_batch)
+        jobs = [
+            (b, c, start) for b in range(self.batches) for c, start in enumerate(range(0, per_batch, CHUNK))
+        ]
+
+        def job(i: int) -> Any:  # one memory chunk of one batch
+            b, c, start = jobs[i]
+            size = min(CHUNK, per_batch - start)
+            x = np.broadcast_to(np.array(self.point), (size, 3)).copy()
+            nrm = np.broadcast_to(np.array(self.normal), (size, 3)).copy()
+            if state.dual:
+                x, nrm = Dual(x), Dual(nrm)
+            u = stream(self.seed, "samples", b, c).random((size, 5))
+            kernel, probes = stream(self.seed, "kernel", b, c), stream(self.seed, "probes", b, c)
+            return np.sum(irradiance_samples(Shading.at(state, x, nrm), u, transforms, kernel, probes))
+
+        sums = _map(job, range(len(jobs)))
+        means = [sum(s for (b, _, _), s in zip(jobs, sums, strict=True) if b == batch) / per_batch
+                 for batch in range(self.batches)]  # fmt: skip
         return _tally(means, ())
