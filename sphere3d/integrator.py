@@ -3,10 +3,13 @@
 Three nested integrals per pixel (direct illumination only):
 
 1. **Pixel integral** over the film, ``∫ k(s) L(ω(s)) ds``, written over directions
-   ``∫ k(film(ω)) J(ω) L(ω) dω`` (J: film area per solid angle). Samples ω_i come
-   from the filter; a method may rotate them, ω → R·ω_i, and the filter weight
+   ``∫ k(film(ω)) J(ω) L(ω) dω`` (J: film area per solid angle). Film offsets are
+   drawn from :func:`~sphere3d.sampling.sample_filter` and weighted by k / p; a
+   method may rotate their directions, ω → R·ω_i, and the factor
    ``k J (Rω) / detach(k J (Rω))`` (value exactly 1) carries the change of the
-   filter under the rotation (Loubet et al. 2019, Sec. 4.1; DESIGN 2.11).
+   filter under the rotation (Loubet et al. 2019, Sec. 4.1; DESIGN 2.11). Its
+   tangent has zero mean, which :class:`~sphere3d.tasks.ImageTask` uses as a
+   control variate.
 2. **Radiance** along the ray: the sky where it misses; at a hit, front-side emission
    (with the border fade) plus ``ρ/π · E`` for diffuse surfaces.
 3. **Irradiance** ``E = ∫ L_i(ω) cos θ dω`` at the hit point, by multiple importance

@@ -5,7 +5,8 @@
 ``finite_difference``     central difference of renders, common random numbers,
                           option ``h``
 ``reparam``               rotations chosen by probe rays, vMF convolution;
-                          options ``kappa``, ``probes``, ``paired``
+                          options ``kappa``, ``probes``, ``spread``,
+                          ``paired``
 ========================  =====================================================
 
 There is no ``boundary`` method on the sphere: sampling silhouette curves on S²
