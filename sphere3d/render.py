@@ -129,7 +129,7 @@ def irradiance(
     normal: Any,
     param: str | None = None,
     method: str = "naive",
-    n: int = 100_000,
+    n: int = 4096,
     seed: int = 0,
     batches: int | None = None,
     **options: Any,
@@ -145,6 +145,7 @@ def irradiance(
     -------
     Estimate
         Value and derivative with standard errors over ``batches`` batches of ``n / batches``.
+        With ``param=None`` only the value is estimated (derivative 0).
     """
     scene = load_scene(scene)
     param = scene.check_param(param) if param is not None else None
@@ -164,6 +165,6 @@ def irradiance(
         value_stderr=float(_stderr(tally.value)),
         derivative_stderr=float(_stderr(tally.derivative)),
         n=n,
-        method=method,
+        method=method if param is not None else "",
         options=resolved,
     )
