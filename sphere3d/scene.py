@@ -21,16 +21,16 @@ horizontal field of view in radians; ``sky`` the constant environment radiance.
 Parameters bind a scalar θ to one scene quantity, as in flatland: θ is an offset
 applied to the scene as loaded, and gradients are taken at θ = 0:
 
-==================================  ==============================================
-``NAME.translate.x`` / ``.y`` / ``.z``  add θ to the shape's position
-``NAME.rotate.x`` / ``.y`` / ``.z``     add θ radians to that rotation angle (about
-                                        the shape's centre)
-``NAME.scale``                          scale by 1 + θ about the shape's centre
-``NAME.emission``                       add θ to the emitted radiance
-``NAME.albedo``                         add θ to the albedo
+========================================  ==============================================
+``NAME.translate.x`` / ``.y`` / ``.z``    add θ to the shape's position
+``NAME.rotate.x`` / ``.y`` / ``.z``       add θ radians to that rotation angle (about
+                                          the shape's centre)
+``NAME.scale``                            scale by 1 + θ about the shape's centre
+``NAME.emission``                         add θ to the emitted radiance
+``NAME.albedo``                           add θ to the albedo
 ``camera.translate.x`` / ``.y`` / ``.z``  move the camera (position and look-at)
-``sky.emission``                        add θ to the sky radiance
-==================================  ==============================================
+``sky.emission``                          add θ to the sky radiance
+========================================  ==============================================
 
 Bad input raises one :class:`~flatland.core.validate.ValidationError` naming the
 field path and the value, e.g. ``shapes[2].radius: must be > 0, got -1.0``.

@@ -4,17 +4,17 @@ Every shape is a :class:`LocalMesh`: vertices centred on the origin (the point t
 rotation and scale act about), outward (or +z) facing triangles, and per-vertex
 coordinates ``uv`` used by the radiance fade of area emitters (DESIGN 2.8):
 
-============  ======================================  =============================
-type          geometry                                fade coordinate
-============  ======================================  =============================
-rectangle     ``size`` = [sx, sy] in the z = 0 plane,  uv = (2x / sx, 2y / sy)
-              normal +z                               in [-1, 1]²
-disk          ``radius``, ``segments`` fan, normal +z  u = 0 at the centre, 1 on
-                                                      the rim (exact on the polygon)
-box           ``size`` = [sx, sy, sz]                  none
-icosphere     ``radius``, ``subdivisions``             none
-mesh          OBJ / PLY file or inline arrays          none
-============  ======================================  =============================
+============  ========================================  ==================================
+type          geometry                                  fade coordinate
+============  ========================================  ==================================
+rectangle     ``size`` = [sx, sy] in the z = 0 plane,   uv = (2x / sx, 2y / sy)
+              normal +z                                 in [-1, 1]²
+disk          ``radius``, ``segments`` fan, normal +z   u = 0 at the centre, 1 on
+                                                        the rim (exact on the polygon)
+box           ``size`` = [sx, sy, sz]                   none
+icosphere     ``radius``, ``subdivisions``              none
+mesh          OBJ / PLY file or inline arrays           none
+============  ========================================  ==================================
 
 The fade multiplies the radiance by a smoothstep S(t) = t²(3 - 2t) of the distance to
 the border divided by ``fade``, so the emitter's own edge is not a discontinuity of

@@ -45,7 +45,7 @@ WORKERS = min(2, os.cpu_count() or 1)
 
 @dataclass(frozen=True)
 class Tally:
-    """Per-batch means of the value and of its θ-derivative, shape (batches, *output shape)."""
+    """Per-batch means of the value and of its θ-derivative, shape (batches, ``*output_shape``)."""
 
     value: np.ndarray
     derivative: np.ndarray

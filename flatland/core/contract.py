@@ -141,7 +141,7 @@ class MethodTable:
         """The method called ``name``; ValueError naming it if unknown."""
         if not isinstance(name, str) or name not in self._methods:
             raise ValidationError(
-                "method", f"unknown {self.kind} method {name!r}; choose from {', '.join(self.names)}"
+                "method", f"unknown {self.kind} {name!r}; choose from {', '.join(self.names)}"
             )
         return self._methods[name]
 
