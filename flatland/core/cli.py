@@ -308,7 +308,9 @@ def _parser(pkg: Package) -> _Parser:
         "--kappa", type=float, default=None, help="reparam: convolution kernel concentration"
     )
     gradient.add_argument("--probes", type=int, default=None, help="reparam: probe rays")
-    gradient.add_argument("--paired", action="store_true", help="reparam: paired samples (needs --kappa)")
+    gradient.add_argument(
+        "--paired", action="store_true", help="reparam: paired samples sharing one transform (DESIGN 2.9)"
+    )
     gradient.add_argument("--h", type=float, default=None, help="finite_difference: step")
     common(gradient, "samples per pixel (default 64)", 64)
     gradient.set_defaults(func=_gradient)
