@@ -26,7 +26,8 @@ methods live in :data:`GRADIENT_METHODS` (one module each in
 =====================  ====================================================================
 
 Standard errors come from ``batches`` independent batches of ``spp / batches``
-samples per pixel (default: the largest divisor of ``spp`` up to 16).
+samples per pixel (default: the largest divisor of ``spp`` up to 16,
+:func:`flatland.core.image.resolve_batches`).
 """
 
 from __future__ import annotations
@@ -37,31 +38,12 @@ import numpy as np
 
 import flatland.methods  # noqa: F401  (registers the gradient methods)
 from flatland.core.contract import Estimate
-from flatland.core.image import GradientImage, Image
+from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.validate import ValidationError, check_finite, check_int, check_seed
 from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
 from flatland.scene import Scene, load_scene, parse_parameter
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
-
-MAX_DEFAULT_BATCHES = 16
-
-
-def _batches(spp: int, batches: Any) -> int:
-    if batches is None:
-        return max(d for d in range(1, min(spp, MAX_DEFAULT_BATCHES) + 1) if spp % d == 0)
-    b = check_int("batches", batches)
-    if b > spp or spp % b:
-        raise ValidationError("batches", f"must divide spp = {spp} (equal batches), got {batches!r}")
-    return b
-
-
-def _summary(batch_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    b = batch_values.shape[0]
-    mean = batch_values.mean(axis=0)
-    if b < 2:
-        return mean, np.full_like(mean, np.inf)
-    return mean, batch_values.std(axis=0, ddof=1) / np.sqrt(b)
 
 
 def _job(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **target: Any) -> Job:
@@ -69,7 +51,7 @@ def _job(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **target: An
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     p = None if param is None else parse_parameter(scene, param)
-    return Job(scene, p, spp, seed, _batches(spp, batches), **target)
+    return Job(scene, p, spp, seed, resolve_batches(spp, batches), **target)
 
 
 def _gradient(job: Job, method: Any, options: dict[str, Any]) -> tuple[BatchResult, dict[str, Any]]:
@@ -88,10 +70,7 @@ def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int
     """
     job = _job(scene, None, spp, seed, batches)
     result = run(job, job.geometry(0.0), Hooks())
-    value, stderr = _summary(result.value)
-    return Image(
-        value=value, stderr=stderr, spp=job.spp, seed=job.seed, batches=job.batches, scene=job.scene.name
-    )
+    return Image.from_batches(result.value, spp=job.spp, seed=job.seed, scene=job.scene.name)
 
 
 def render_gradient(
@@ -135,18 +114,13 @@ def render_gradient(
         raise ValidationError("param", "is required (a parameter name like 'occluder.translate.x')")
     job = _job(scene, param, spp, seed, batches)
     result, resolved = _gradient(job, method, options)
-    value, value_se = _summary(result.value)
-    deriv, deriv_se = _summary(result.derivative)
-    return GradientImage(
-        value=value,
-        derivative=deriv,
-        value_stderr=value_se,
-        derivative_stderr=deriv_se,
+    return GradientImage.from_batches(
+        result.value,
+        result.derivative,
         param=job.param.name,
         method=method,
         spp=job.spp,
         seed=job.seed,
-        batches=job.batches,
         options=resolved,
         scene=job.scene.name,
     )
@@ -182,16 +156,8 @@ def irradiance(
         result, resolved = run(job, job.geometry(0.0), Hooks()), {}
     else:
         result, resolved = _gradient(job, method, options)
-    value, value_se = _summary(result.value)
-    deriv, deriv_se = _summary(result.derivative)
-    return Estimate(
-        value=float(value[0]),
-        derivative=float(deriv[0]),
-        value_stderr=float(value_se[0]),
-        derivative_stderr=float(deriv_se[0]),
-        n=job.spp,
-        method=method if param is not None else "",
-        options=resolved,
+    return Estimate.from_batches(
+        result.value[:, 0], result.derivative[:, 0], job.spp, method if param is not None else "", resolved
     )
 
 

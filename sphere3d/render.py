@@ -11,23 +11,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from flatland.core.contract import Estimate
-from flatland.core.image import GradientImage, Image
+from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.validate import check_int, check_seed
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.scene import load_scene
-from sphere3d.tasks import ImageTask, PointTask, Tally, resolve_batches
+from sphere3d.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
-
-
-def _stderr(per_batch: np.ndarray) -> np.ndarray:
-    b = per_batch.shape[0]
-    if b < 2:
-        return np.full(per_batch.shape[1:], np.inf)
-    return per_batch.std(axis=0, ddof=1) / np.sqrt(b)
 
 
 def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None) -> Image:
@@ -53,14 +44,7 @@ def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
     tally = ImageTask(scene, None, spp, seed, batches).evaluate(0.0)
-    return Image(
-        value=tally.value.mean(axis=0),
-        stderr=_stderr(tally.value),
-        spp=spp,
-        seed=seed,
-        batches=batches,
-        scene=scene.name,
-    )
+    return Image.from_batches(tally.value, spp=spp, seed=seed, scene=scene.name)
 
 
 def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
@@ -108,16 +92,13 @@ def render_gradient(
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
     tally, resolved = _run(method, ImageTask(scene, param, spp, seed, batches), options)
-    return GradientImage(
-        value=tally.value.mean(axis=0),
-        derivative=tally.derivative.mean(axis=0),
-        value_stderr=_stderr(tally.value),
-        derivative_stderr=_stderr(tally.derivative),
+    return GradientImage.from_batches(
+        tally.value,
+        tally.derivative,
         param=param,
         method=method,
         spp=spp,
         seed=seed,
-        batches=batches,
         options=resolved,
         scene=scene.name,
     )
@@ -159,12 +140,6 @@ def irradiance(
         tally, resolved = task.evaluate(0.0), {}
     else:
         tally, resolved = _run(method, task, options)
-    return Estimate(
-        value=float(tally.value.mean()),
-        derivative=float(tally.derivative.mean()),
-        value_stderr=float(_stderr(tally.value)),
-        derivative_stderr=float(_stderr(tally.derivative)),
-        n=n,
-        method=method if param is not None else "",
-        options=resolved,
+    return Estimate.from_batches(
+        tally.value, tally.derivative, n, method if param is not None else "", resolved
     )

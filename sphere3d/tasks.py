@@ -22,7 +22,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import stream
-from flatland.core.validate import ValidationError, check_finite, check_int
+from flatland.core.validate import ValidationError, check_finite
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
     Identity,
@@ -34,11 +34,10 @@ from sphere3d.integrator import (
 )
 from sphere3d.scene import Scene
 
-__all__ = ["CHUNK", "ImageTask", "PointTask", "Tally", "resolve_batches"]
+__all__ = ["CHUNK", "ImageTask", "PointTask", "Tally"]
 
 CHUNK = 1 << 15
 """Camera samples per memory chunk (a loop over chunks, vectorized inside)."""
-MAX_BATCHES = 16
 WORKERS = min(2, os.cpu_count() or 1)
 """Threads over memory chunks (2: the machines this is written for have two cores)."""
 
@@ -49,16 +48,6 @@ class Tally:
 
     value: np.ndarray
     derivative: np.ndarray
-
-
-def resolve_batches(samples: int, batches: Any, field: str = "spp") -> int:
-    """Number of batches: given (must divide ``samples``), or the largest divisor of it up to 16."""
-    if batches is None:
-        return max(b for b in range(1, min(MAX_BATCHES, samples) + 1) if samples % b == 0)
-    batches = check_int("batches", batches)
-    if samples % batches:
-        raise ValidationError("batches", f"must divide {field}={samples}, got {batches}")
-    return batches
 
 
 def _map(func: Callable[[int], Any], items: range) -> list[Any]:

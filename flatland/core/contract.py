@@ -30,6 +30,9 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
+
+from flatland.core.image import summarize_batches
 from flatland.core.stats import Interval, normal_quantile
 from flatland.core.validate import ValidationError
 
@@ -64,6 +67,19 @@ class Estimate:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+
+    @classmethod
+    def from_batches(
+        cls,
+        values: Any,
+        derivatives: Any,
+        n: int,
+        method: str = "",
+        options: Mapping[str, Any] | None = None,
+    ) -> Estimate:
+        """The estimate from per-batch estimates (1D arrays, one entry per independent batch)."""
+        v, d = summarize_batches(np.ravel(values)), summarize_batches(np.ravel(derivatives))
+        return cls(float(v.mean), float(d.mean), float(v.stderr), float(d.stderr), n, method, options or {})
 
     def interval(self, level: float = 0.99, of: str = "derivative") -> Interval:
         """Normal confidence interval for ``of`` ("value" or "derivative")."""

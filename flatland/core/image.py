@@ -1,7 +1,10 @@
 """Named results of the renderers, shared by flatland (1D film) and sphere3d (2D film).
 
 Pixel arrays have the film's shape: ``(width,)`` in flatland, ``(height, width)``
-in sphere3d. Standard errors come from independent batches of samples per pixel.
+in sphere3d. Standard errors come from independent batches of samples per pixel:
+a renderer estimates every pixel once per batch and :meth:`Image.from_batches` /
+:meth:`GradientImage.from_batches` turn the per-batch arrays into the mean and its
+standard error ``std(ddof=1) / sqrt(batches)``.
 """
 
 from __future__ import annotations
@@ -13,7 +16,52 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["GradientImage", "Image", "relative_error"]
+from flatland.core.validate import ValidationError, check_int
+
+__all__ = [
+    "DEFAULT_MAX_BATCHES",
+    "BatchSummary",
+    "GradientImage",
+    "Image",
+    "relative_error",
+    "resolve_batches",
+    "summarize_batches",
+]
+
+DEFAULT_MAX_BATCHES = 16
+"""Default number of batches: the largest divisor of the sample count up to this."""
+
+
+def resolve_batches(samples: int, batches: Any, field: str = "spp") -> int:
+    """Number of independent batches: ``batches`` if it divides ``samples``, else the default.
+
+    The default is the largest divisor of ``samples`` not above
+    :data:`DEFAULT_MAX_BATCHES`. ``field`` names the sample count in the error.
+    """
+    if batches is None:
+        return max(b for b in range(1, min(samples, DEFAULT_MAX_BATCHES) + 1) if samples % b == 0)
+    b = check_int("batches", batches)
+    if samples % b:
+        raise ValidationError("batches", f"must divide {field}={samples} (equal batches), got {batches!r}")
+    return b
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """Mean over independent batches and its standard error (infinite with one batch)."""
+
+    mean: np.ndarray
+    stderr: np.ndarray
+
+
+def summarize_batches(per_batch: np.ndarray) -> BatchSummary:
+    """Mean and standard error over axis 0 of per-batch estimates."""
+    per_batch = np.asarray(per_batch, dtype=np.float64)
+    b = per_batch.shape[0]
+    mean = per_batch.mean(axis=0)
+    if b < 2:
+        return BatchSummary(mean, np.full_like(mean, np.inf))
+    return BatchSummary(mean, per_batch.std(axis=0, ddof=1) / np.sqrt(b))
 
 
 def relative_error(g: np.ndarray, g_ref: np.ndarray) -> float:
@@ -67,6 +115,12 @@ class Image:
         """Film shape."""
         return self.value.shape
 
+    @classmethod
+    def from_batches(cls, per_batch: np.ndarray, *, spp: int, seed: int, scene: str = "") -> Image:
+        """The image from per-batch pixel estimates of shape ``(batches, *film)``."""
+        summary = summarize_batches(per_batch)
+        return cls(summary.mean, summary.stderr, spp, seed, np.shape(per_batch)[0], scene)
+
 
 @dataclass(frozen=True)
 class GradientImage:
@@ -109,6 +163,35 @@ class GradientImage:
     def shape(self) -> tuple[int, ...]:
         """Film shape."""
         return self.value.shape
+
+    @classmethod
+    def from_batches(
+        cls,
+        values: np.ndarray,
+        derivatives: np.ndarray,
+        *,
+        param: str,
+        method: str,
+        spp: int,
+        seed: int,
+        options: Mapping[str, Any] | None = None,
+        scene: str = "",
+    ) -> GradientImage:
+        """The gradient image from per-batch estimates of shape ``(batches, *film)``."""
+        v, d = summarize_batches(values), summarize_batches(derivatives)
+        return cls(
+            value=v.mean,
+            derivative=d.mean,
+            value_stderr=v.stderr,
+            derivative_stderr=d.stderr,
+            param=param,
+            method=method,
+            spp=spp,
+            seed=seed,
+            batches=np.shape(values)[0],
+            options=options or {},
+            scene=scene,
+        )
 
     def error_vs(self, reference: GradientImage | np.ndarray) -> float:
         """:func:`relative_error` of this derivative against a reference gradient image."""

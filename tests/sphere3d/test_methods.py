@@ -105,7 +105,7 @@ BAD = [
     (dict(method="finite_difference", h=-0.1), "h: must be > 0, got -0.1"),
     (dict(method="naive", kappa=10.0), "kappa: is not an option of method 'naive'"),
     (dict(spp=0), "spp: must be an integer >= 1, got 0"),
-    (dict(spp=10, batches=4), "batches: must divide spp=10, got 4"),
+    (dict(spp=10, batches=4), "batches: must divide spp=10 (equal batches), got 4"),
     (dict(seed=-1), "seed: must be an integer >= 0, got -1"),
     (dict(param="occluder.wobble"), "param: unknown parameter 'occluder.wobble'; choose from"),
 ]

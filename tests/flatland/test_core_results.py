@@ -1,0 +1,52 @@
+"""Named results built from independent batches: means, standard errors, batch counts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flatland.core.contract import Estimate
+from flatland.core.image import GradientImage, Image, relative_error, resolve_batches, summarize_batches
+
+
+def test01_batch_summary_is_mean_and_std_over_sqrt_batches():
+    per_batch = np.array([[1.0, 2.0], [3.0, 2.0], [5.0, 2.0], [7.0, 2.0]])
+    s = summarize_batches(per_batch)
+    np.testing.assert_array_equal(s.mean, [4.0, 2.0])
+    # sample std (ddof=1) of 1, 3, 5, 7 is sqrt(20/3); divided by sqrt(4)
+    np.testing.assert_allclose(s.stderr, [np.sqrt(20.0 / 3.0) / 2.0, 0.0])
+    assert np.all(np.isinf(summarize_batches(per_batch[:1]).stderr))
+
+
+def test02_images_and_estimates_from_batches():
+    rng = np.random.default_rng(0)
+    v, d = rng.normal(size=(8, 3, 5)), rng.normal(size=(8, 3, 5))
+    img = Image.from_batches(v, spp=64, seed=1, scene="s")
+    assert img.shape == (3, 5) and img.batches == 8 and img.spp == 64
+    np.testing.assert_allclose(img.stderr, v.std(axis=0, ddof=1) / np.sqrt(8))
+    g = GradientImage.from_batches(v, d, param="a.scale", method="naive", spp=64, seed=1, options={"h": 1})
+    np.testing.assert_allclose(g.derivative, d.mean(axis=0))
+    assert g.options["h"] == 1 and g.batches == 8
+    with pytest.raises(TypeError):
+        g.options["h"] = 2  # read-only
+    e = Estimate.from_batches(v[:, 0, 0], d[:, 0, 0], n=64, method="naive")
+    assert e.value == pytest.approx(v[:, 0, 0].mean()) and e.n == 64
+
+
+def test03_default_batches_is_the_largest_divisor_up_to_16_and_bad_counts_name_the_field():
+    assert resolve_batches(64, None) == 16
+    assert resolve_batches(12, None) == 12
+    assert resolve_batches(17, None) == 1
+    assert resolve_batches(64, 4) == 4
+    with pytest.raises(ValueError, match=r"^batches: must divide spp=10 \(equal batches\), got 4"):
+        resolve_batches(10, 4)
+    with pytest.raises(ValueError, match="^batches"):
+        resolve_batches(10, 0)
+
+
+def test04_relative_error_metric():
+    ref = np.array([0.0, 2.0, -4.0])
+    assert relative_error(ref, ref) == 0.0
+    assert relative_error(ref + 1.0, ref) == pytest.approx(1.0 / 4.0)
+    with pytest.raises(ValueError, match="all zero"):
+        relative_error(ref, np.zeros(3))
