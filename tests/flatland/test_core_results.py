@@ -40,7 +40,7 @@ def test03_default_batches_is_the_largest_divisor_up_to_16_and_bad_counts_name_t
     assert resolve_batches(64, 4) == 4
     with pytest.raises(ValueError, match=r"^batches: must divide spp=10 \(equal batches\), got 4"):
         resolve_batches(10, 4)
-    with pytest.raises(ValueError, match="^batches"):
+    with pytest.raises(ValueError, match=r"^batches"):
         resolve_batches(10, 0)
 
 
