@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import time
-
-from benchmarks import Row
+from benchmarks import Row, best_seconds
 from flatland import estimate
 
 N = 1_000_000
@@ -18,21 +16,12 @@ CASES = [
 ]
 
 
-def _best_seconds(fn, repeats: int = 3) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def run() -> list[Row]:
     """Samples per second of every method on a line integral and on a circle integral."""
     rows = []
     for integral, theta in (("two_steps", 1.0), ("arc_stretch", 1.0)):
         for method, options in CASES:
-            seconds = _best_seconds(
+            seconds = best_seconds(
                 lambda m=method, o=options, i=integral, t=theta: estimate(i, t, m, n=N, seed=0, **o)
             )
             label = method + "".join(f" {k}={v}" for k, v in options.items())

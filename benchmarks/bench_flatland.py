@@ -6,11 +6,9 @@ in at most 1 s on a 2-core machine, and no method slower than 5× the primal ren
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-from benchmarks import Row
+from benchmarks import Row, best_seconds
 from flatland.geometry import cast, direction
 from flatland.render import render, render_gradient
 from flatland.scene import bind, load_scene
@@ -27,15 +25,6 @@ METHODS = [
 ]
 
 
-def _best_seconds(fn, repeats: int = 3) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def run() -> list[Row]:
     """Rays per second of :func:`flatland.geometry.cast`, and seconds per image per method."""
     rows = []
@@ -45,17 +34,17 @@ def run() -> list[Row]:
     for name in ("shadow", "silhouette", "polygon"):
         geom = bind(load_scene(name))
         prims = geom.n_seg + geom.n_circ
-        seconds = _best_seconds(lambda g=geom: cast(g, origins, dirs))
+        seconds = best_seconds(lambda g=geom: cast(g, origins, dirs))
         rows.append(
             Row("flatland ray caster", f"{name} ({prims} primitives)", RAYS / seconds / 1e6, "M rays/s")
         )
 
     scene = load_scene("shadow").with_camera(pixels=PIXELS)
-    primal = _best_seconds(lambda: render(scene, spp=SPP, seed=0))
+    primal = best_seconds(lambda: render(scene, spp=SPP, seed=0))
     case = f"shadow {PIXELS} px x {SPP} spp"
     rows.append(Row("flatland images", f"{case}: render (primal)", primal, "s", "1.00x primal"))
     for method, options in METHODS:
-        seconds = _best_seconds(
+        seconds = best_seconds(
             lambda m=method, o=options: render_gradient(scene, PARAM, method=m, spp=SPP, seed=0, **o)
         )
         label = method + "".join(f" {k}={v}" for k, v in options.items())

@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import resource
 import sys
-import time
 import tracemalloc
 
 import numpy as np
 
-from benchmarks import Row
+from benchmarks import Row, best_seconds
 from flatland.core.rng import stream
 from sphere3d import load_scene, render, render_gradient
 from sphere3d.vector import normalize
@@ -29,15 +28,6 @@ RAYS = 1 << 20
 TARGET = "target <= 1 s at 64 spp on 2 cores"
 
 
-def _best(fn, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
 def _rays_per_second() -> list[Row]:
     state = load_scene(SCENE).state()
     rng = stream(0, "bench_sphere3d")
@@ -45,8 +35,8 @@ def _rays_per_second() -> list[Row]:
     targets = rng.uniform(-1.0, 1.0, (RAYS, 3)) * [2.0, 2.0, 0.5] + [0.0, 0.0, 0.5]
     dirs = normalize(targets - origins)
     tmax = np.linalg.norm(targets - origins, axis=1)
-    hit = _best(lambda: state.tracer.intersect(origins, dirs), 3)
-    occ = _best(lambda: state.tracer.occluded(origins, dirs, tmax), 3)
+    hit = best_seconds(lambda: state.tracer.intersect(origins, dirs), 3)
+    occ = best_seconds(lambda: state.tracer.occluded(origins, dirs, tmax), 3)
     return [
         Row("sphere3d", "Embree first hits (+ barycentrics)", RAYS / hit / 1e6, "M rays/s", SCENE),
         Row("sphere3d", "Embree occlusion", RAYS / occ / 1e6, "M rays/s", SCENE),
@@ -58,7 +48,7 @@ def _image_seconds() -> list[Row]:
     rows = []
     render_gradient(scene, PARAM, method="reparam", spp=1)  # warm-up: imports, Embree, tables
     for spp in (16, 64, 256):
-        seconds = _best(
+        seconds = best_seconds(
             lambda s=spp: render_gradient(scene, PARAM, method="reparam", spp=s, probes=4),
             1 if spp == 256 else 2,
         )
@@ -71,9 +61,9 @@ def _image_seconds() -> list[Row]:
                 TARGET if spp == 64 else SCENE,
             )
         )
-    seconds = _best(lambda: render_gradient(scene, PARAM, method="naive", spp=64), 2)
+    seconds = best_seconds(lambda: render_gradient(scene, PARAM, method="naive", spp=64), 2)
     rows.append(Row("sphere3d", "naive gradient 64x64, 64 spp", seconds, "s", SCENE))
-    seconds = _best(lambda: render(scene, spp=64), 2)
+    seconds = best_seconds(lambda: render(scene, spp=64), 2)
     rows.append(Row("sphere3d", "render 64x64, 64 spp", seconds, "s", SCENE))
     return rows
 
