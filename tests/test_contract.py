@@ -1,7 +1,9 @@
 """The shared contract, checked identically over every renderer package that is installed.
 
 API names, result types, method and option names, the command-line verbs and the
-one-line error behaviour (DESIGN 5). Scenes are the built-in ``shadow`` on a small film.
+one-line error behaviour (DESIGN 5), in-process and as real commands in a subprocess
+(a missing file, a malformed JSON scene, an unknown parameter, a negative spp).
+Scenes are the built-in ``shadow`` on a small film.
 """
 
 from __future__ import annotations
@@ -9,6 +11,8 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -139,3 +143,52 @@ def test05_same_cli_verbs_and_one_line_errors(package, tmp_path, capsys):
             captured.err,
         )
         assert captured.out == ""
+
+
+@pytest.fixture(scope="module", params=PACKAGES)
+def error_runs(request, tmp_path_factory):
+    """The four bad commands of the CLI issue, as real ``python -m PACKAGE`` processes, started together."""
+    package = request.param
+    folder = tmp_path_factory.mktemp(f"errors_{package}")
+    scene_file = folder / "small_shadow.json"
+    scene_file.write_text(json.dumps(_small_scene(package)[0].to_dict()))
+    broken = folder / "broken.json"
+    broken.write_text('{"name": "broken", "shapes": [}')
+    commands = {
+        "missing file": ["render", folder / "missing.json"],
+        "malformed JSON": ["gradient", broken, "--param", PARAM],
+        "unknown parameter": ["gradient", scene_file, "--param", "occluder.spin"],
+        "negative spp": ["render", scene_file, "--spp", -4],
+    }
+    procs = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", package, *map(str, argv), "--out", str(folder)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name, argv in commands.items()
+    }
+    results = {}
+    for name, proc in procs.items():
+        out, err = proc.communicate(timeout=180)
+        results[name] = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+    return results
+
+
+@pytest.mark.parametrize(
+    ("case", "fragments"),
+    [
+        ("missing file", ["missing.json"]),
+        ("malformed JSON", ["broken.json", "JSON"]),
+        ("unknown parameter", ["param", "occluder.spin"]),
+        ("negative spp", ["spp", "-4"]),
+    ],
+)
+def test06_real_commands_fail_with_one_line_and_status_2(error_runs, case, fragments):
+    result = error_runs[case]
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    assert all(f in lines[0] for f in fragments), (fragments, lines[0])

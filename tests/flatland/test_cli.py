@@ -1,4 +1,6 @@
-"""``python -m flatland``: the real commands in a subprocess (exit codes, files, one-line errors).
+"""``python -m flatland``: the real commands in a subprocess (exit codes, files written).
+
+The one-line errors of the real commands are checked for both packages in tests/test_contract.py.
 
 Extra error cases that need no subprocess run through ``flatland.__main__.main`` in-process.
 """
@@ -25,15 +27,6 @@ def run(*args, cwd=None):
         timeout=120,
         cwd=cwd,
     )
-
-
-def assert_one_line_error(result, *fragments):
-    assert result.returncode == 2, (result.returncode, result.stderr)
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
-    assert "Traceback" not in result.stderr and result.stdout == ""
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
 
 
 @pytest.fixture(scope="module")
@@ -113,50 +106,6 @@ def test05_study_on_a_scene_writes_csv_and_figures(tmp_path, scene_file):
     assert len(list((tmp_path / ".cache" / "reparam-lab").glob("*.npz"))) == 1
 
 
-@pytest.fixture(scope="module")
-def error_runs(tmp_path_factory, scene_file):
-    """The four bad commands, started together (each pays the interpreter start-up once, in parallel)."""
-    folder = tmp_path_factory.mktemp("errors")
-    broken = folder / "broken.json"
-    broken.write_text('{"name": "broken", "shapes": [}')
-    commands = {
-        "missing file": ["render", folder / "missing.json"],
-        "malformed JSON": ["gradient", broken, "--param", "occluder.translate.x"],
-        "unknown parameter": ["gradient", scene_file, "--param", "occluder.spin"],
-        "negative spp": ["render", scene_file, "--spp", -4],
-    }
-    procs = {
-        name: subprocess.Popen(
-            [sys.executable, "-m", "flatland", *map(str, argv)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        for name, argv in commands.items()
-    }
-    results = {}
-    for name, proc in procs.items():
-        out, err = proc.communicate(timeout=120)
-        results[name] = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
-    return results
-
-
-def test06_missing_scene_file(error_runs):
-    assert_one_line_error(error_runs["missing file"], "missing.json")
-
-
-def test07_malformed_json_scene(error_runs):
-    assert_one_line_error(error_runs["malformed JSON"], "broken.json", "JSON")
-
-
-def test08_unknown_parameter(error_runs):
-    assert_one_line_error(error_runs["unknown parameter"], "param", "occluder.spin")
-
-
-def test09_negative_spp(error_runs):
-    assert_one_line_error(error_runs["negative spp"], "spp", "-4")
-
-
 @pytest.mark.parametrize(
     ("argv", "fragments"),
     [
@@ -175,7 +124,7 @@ def test09_negative_spp(error_runs):
         (["study", "no_such_study.json"], ["no_such_study.json"]),
     ],
 )
-def test10_more_bad_arguments_in_process(argv, fragments, capsys, tmp_path):
+def test06_more_bad_arguments_in_process(argv, fragments, capsys, tmp_path):
     assert main([*argv, "--out", str(tmp_path)] if argv[0] != "fly" else argv) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
@@ -184,7 +133,7 @@ def test10_more_bad_arguments_in_process(argv, fragments, capsys, tmp_path):
         assert fragment in lines[0], (fragment, lines[0])
 
 
-def test11_bad_study_configuration_names_the_field(tmp_path, capsys):
+def test07_bad_study_configuration_names_the_field(tmp_path, capsys):
     path = tmp_path / "bad.json"
     path.write_text(
         json.dumps(
@@ -195,7 +144,7 @@ def test11_bad_study_configuration_names_the_field(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: methods[0].kappa: must be > 0")
 
 
-def test12_builtin_study_by_name_with_overrides(tmp_path, capsys):
+def test08_builtin_study_by_name_with_overrides(tmp_path, capsys):
     assert main(["study", "kappa", "--spp", "500", "--seed", "4", "--out", str(tmp_path), "--quiet"]) == 0
     rows = read_csv(tmp_path / "kappa.csv")
     assert len(rows) == 14 and all(r["n"] == 500 and r["seed"] == 4 and r["trials"] == 20 for r in rows)
