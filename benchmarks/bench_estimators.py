@@ -4,16 +4,10 @@ from __future__ import annotations
 
 from benchmarks import Row, best_seconds
 from flatland import estimate
+from flatland.textbook_report import DEFAULT_METHODS
 
 N = 1_000_000
-CASES = [
-    ("naive", {}),
-    ("finite_difference", {}),
-    ("boundary", {}),
-    ("reparam", {}),
-    ("reparam", {"kappa": 100.0}),
-    ("reparam", {"kappa": 100.0, "paired": True}),
-]
+CASES = DEFAULT_METHODS  # the columns of the textbook table printed by `make demo`
 
 
 def run() -> list[Row]:

@@ -28,6 +28,8 @@ from flatland.core.dual import Dual, detach, variable
 from flatland.core.validate import ValidationError, check_choice, check_finite
 from flatland.sampling import (
     TWO_PI,
+    log_pdf_gaussian,
+    log_pdf_von_mises,
     pdf_gaussian,
     pdf_uniform_circle,
     sample_gaussian,
@@ -70,9 +72,8 @@ class Line:
 
     @staticmethod
     def log_kernel(x: Any, center: np.ndarray, kappa: float) -> Any:
-        """log k(x, center) = -κ (x - c)² / 2 + log √(κ / 2π); ``x`` may be a Dual."""
-        d = x - center
-        return -0.5 * kappa * d * d + 0.5 * np.log(kappa / TWO_PI)
+        """log k(x, center), the log density of N(center, 1/κ) at ``x`` (a Dual welcome)."""
+        return log_pdf_gaussian(x, center, 1.0 / np.sqrt(kappa))
 
 
 class Circle:
@@ -92,8 +93,8 @@ class Circle:
 
     @staticmethod
     def log_kernel(x: Any, center: np.ndarray, kappa: float) -> Any:
-        """log k(x, center) = κ (cos(x - c) - 1) - log(2π i0e(κ)); ``x`` may be a Dual."""
-        return kappa * (np.cos(x - center) - 1.0) - np.log(TWO_PI * special.i0e(kappa))
+        """log k(x, center), the log von Mises density at ``x`` (a Dual welcome)."""
+        return log_pdf_von_mises(x, center, kappa)
 
 
 @dataclass(frozen=True)

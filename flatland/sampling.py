@@ -11,12 +11,16 @@ length (they integrate to 1 over any interval of length 2π).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy import special, stats
 
-from flatland.core.validate import check_finite, check_positive
+from flatland.core.validate import ValidationError, check_positive
 
 __all__ = [
+    "log_pdf_gaussian",
+    "log_pdf_von_mises",
     "pdf_circle_direction",
     "pdf_cosine_half_circle",
     "pdf_gaussian",
@@ -64,10 +68,15 @@ def sample_gaussian(u: np.ndarray, mean: float, std: float) -> np.ndarray:
     return mean + std * special.ndtri(np.asarray(u))
 
 
+def log_pdf_gaussian(x: Any, mean: Any, std: float) -> Any:
+    """log of the normal density: ``-(x - mean)² / (2 std²) - log(std √(2π))``; ``x`` may be a Dual."""
+    z = (x - mean) / std
+    return -0.5 * z * z - np.log(std * np.sqrt(TWO_PI))
+
+
 def pdf_gaussian(x: np.ndarray, mean: float, std: float) -> np.ndarray:
     """Normal density ``exp(-(x - mean)² / (2 std²)) / (std √(2π))``."""
-    z = (np.asarray(x, dtype=np.float64) - mean) / std
-    return np.exp(-0.5 * z * z) / (std * np.sqrt(TWO_PI))
+    return np.exp(log_pdf_gaussian(np.asarray(x, dtype=np.float64), mean, std))
 
 
 def sample_tent(u: np.ndarray, center: float, radius: float) -> np.ndarray:
@@ -141,19 +150,19 @@ def pdf_cosine_half_circle(phi: np.ndarray, normal_angle: float | np.ndarray = 0
     return np.where(c > 0.0, 0.5 * c, 0.0)
 
 
-def _von_mises_log_norm(kappa: float) -> float:
-    # log(2π I0(κ)) written with the scaled Bessel function: I0(κ) = i0e(κ) e^κ
-    return float(np.log(TWO_PI * special.i0e(kappa)))
+def log_pdf_von_mises(phi: Any, mu: Any, kappa: float) -> Any:
+    """log of the von Mises density, ``κ (cos(φ - μ) - 1) - log(2π i0e(κ))``; ``phi`` may be a Dual.
+
+    ``I0(κ) = i0e(κ) e^κ`` (the scaled Bessel function), so nothing overflows for κ
+    up to 1e6 and beyond.
+    """
+    kappa = check_positive("kappa", kappa)
+    return kappa * (np.cos(phi - mu) - 1.0) - np.log(TWO_PI * special.i0e(kappa))
 
 
 def pdf_von_mises(phi: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
-    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (DESIGN 2.7).
-
-    Evaluated as ``exp(κ (cos(φ - μ) - 1)) / (2π i0e(κ))`` so nothing overflows
-    for κ up to 1e6 and beyond.
-    """
-    kappa = check_positive("kappa", kappa)
-    return np.exp(kappa * (np.cos(np.asarray(phi) - mu) - 1.0) - _von_mises_log_norm(kappa))
+    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (DESIGN 2.7)."""
+    return np.exp(log_pdf_von_mises(np.asarray(phi, dtype=np.float64), mu, kappa))
 
 
 def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
@@ -166,7 +175,8 @@ def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.
     Returns angles in ``mu + [-π, π]``.
     """
     kappa = check_positive("kappa", kappa)
-    check_finite("mu", float(np.mean(mu)))
+    if not np.all(np.isfinite(mu)):
+        raise ValidationError("mu", f"must be finite, got {mu!r}")
     u = np.asarray(u, dtype=np.float64)
     dist = stats.vonmises(kappa)
     # start from the Gaussian approximation (exact as κ → ∞), clipped into the bracket

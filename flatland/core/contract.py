@@ -34,7 +34,7 @@ import numpy as np
 
 from flatland.core.image import summarize_batches
 from flatland.core.stats import Interval, normal_quantile
-from flatland.core.validate import ValidationError
+from flatland.core.validate import ValidationError, check_choice
 
 __all__ = ["Estimate", "MethodTable", "Option"]
 
@@ -81,23 +81,20 @@ class Estimate:
         v, d = summarize_batches(np.ravel(values)), summarize_batches(np.ravel(derivatives))
         return cls(float(v.mean), float(d.mean), float(v.stderr), float(d.stderr), n, method, options or {})
 
+    def _mean_stderr(self, of: str) -> tuple[float, float]:
+        if check_choice("of", of, ("value", "derivative")) == "value":
+            return self.value, self.value_stderr
+        return self.derivative, self.derivative_stderr
+
     def interval(self, level: float = 0.99, of: str = "derivative") -> Interval:
         """Normal confidence interval for ``of`` ("value" or "derivative")."""
-        mean, se = (
-            (self.derivative, self.derivative_stderr)
-            if of == "derivative"
-            else (self.value, self.value_stderr)
-        )
+        mean, se = self._mean_stderr(of)
         z = normal_quantile(level)
         return Interval(mean - z * se, mean + z * se, level)
 
     def z_score(self, reference: float, of: str = "derivative") -> float:
-        """Distance to ``reference`` in standard errors."""
-        mean, se = (
-            (self.derivative, self.derivative_stderr)
-            if of == "derivative"
-            else (self.value, self.value_stderr)
-        )
+        """Distance to ``reference`` in standard errors of ``of`` ("value" or "derivative")."""
+        mean, se = self._mean_stderr(of)
         if se == 0.0:
             return 0.0 if mean == reference else math.inf
         return (mean - reference) / se

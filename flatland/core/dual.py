@@ -252,7 +252,9 @@ def _vt(x: Any) -> tuple[Any, Any]:
     """(value, tangent) of a Dual or of a constant (tangent 0 as a scalar, broadcasting)."""
     if isinstance(x, Dual):
         return x.value, x.tangent
-    return np.asarray(x, dtype=np.float64) if not isinstance(x, numbers.Number) else float(x), 0.0
+    if isinstance(x, numbers.Number):
+        return float(x), 0.0
+    return np.asarray(x, dtype=np.float64), 0.0
 
 
 def _unary(*ufuncs: np.ufunc):

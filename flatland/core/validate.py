@@ -34,17 +34,13 @@ class ValidationError(ValueError):
         self.field = field
 
 
-def _describe(value: Any) -> str:
-    return repr(value) if not isinstance(value, float) else f"{value!r}"
-
-
 def check_finite(field: str, value: Any) -> float:
     """``value`` as a finite float; raises naming ``field`` otherwise."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValidationError(field, f"must be a real number, got {_describe(value)}")
+        raise ValidationError(field, f"must be a real number, got {value!r}")
     out = float(value)
     if not math.isfinite(out):
-        raise ValidationError(field, f"must be finite, got {_describe(value)}")
+        raise ValidationError(field, f"must be finite, got {value!r}")
     return out
 
 
@@ -53,17 +49,17 @@ def check_positive(field: str, value: Any, *, allow_zero: bool = False) -> float
     out = check_finite(field, value)
     if out < 0 or (out == 0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
-        raise ValidationError(field, f"must be {bound}, got {_describe(value)}")
+        raise ValidationError(field, f"must be {bound}, got {value!r}")
     return out
 
 
 def check_int(field: str, value: Any, *, minimum: int = 1) -> int:
     """``value`` as an int >= ``minimum`` (bools and non-integral floats rejected)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral | np.integer):
-        raise ValidationError(field, f"must be an integer >= {minimum}, got {_describe(value)}")
+        raise ValidationError(field, f"must be an integer >= {minimum}, got {value!r}")
     out = int(value)
     if out < minimum:
-        raise ValidationError(field, f"must be an integer >= {minimum}, got {_describe(value)}")
+        raise ValidationError(field, f"must be an integer >= {minimum}, got {value!r}")
     return out
 
 
@@ -75,7 +71,7 @@ def check_seed(field: str, value: Any) -> int:
 def check_bool(field: str, value: Any) -> bool:
     """``value`` as a bool (only True/False accepted, not truthy values)."""
     if not isinstance(value, bool | np.bool_):
-        raise ValidationError(field, f"must be True or False, got {_describe(value)}")
+        raise ValidationError(field, f"must be True or False, got {value!r}")
     return bool(value)
 
 
@@ -83,5 +79,5 @@ def check_choice(field: str, value: Any, choices: Iterable[str]) -> str:
     """``value`` if it is one of ``choices``."""
     choices = tuple(choices)
     if not isinstance(value, str) or value not in choices:
-        raise ValidationError(field, f"must be one of {', '.join(choices)}; got {_describe(value)}")
+        raise ValidationError(field, f"must be one of {', '.join(choices)}; got {value!r}")
     return value

@@ -42,7 +42,7 @@ def to_estimate(
     ``extra_derivative`` is a deterministic term added to the derivative (the exact
     discontinuity term of the boundary estimator); it adds no variance.
     """
-    values = summarize(np.broadcast_to(detach(per_sample), np.shape(detach(per_sample))))
+    values = summarize(detach(per_sample))
     derivs = summarize(tangent(per_sample))
     return Estimate(
         value=float(values.mean),

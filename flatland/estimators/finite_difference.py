@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 from flatland.core.contract import Estimate, Option
-from flatland.core.dual import detach
-from flatland.core.stats import summarize
+from flatland.core.dual import Dual, detach
 from flatland.core.validate import check_positive
-from flatland.estimators._common import METHODS, primary_samples
+from flatland.estimators._common import METHODS, primary_samples, to_estimate
 from flatland.integrals import Integrand
 
 
@@ -27,15 +26,6 @@ def finite_difference(integrand: Integrand, theta: float, n: int, seed: int, h: 
     s = primary_samples(integrand, n, seed)
     f_plus = detach(integrand.f(s.x, theta + h)) / s.pdf
     f_minus = detach(integrand.f(s.x, theta - h)) / s.pdf
-    values = summarize(detach(integrand.f(s.x, theta)) / s.pdf)
-    # per-sample central difference: common random numbers cancel everything that did not move
-    derivs = summarize((f_plus - f_minus) / (2.0 * h))
-    return Estimate(
-        value=float(values.mean),
-        derivative=float(derivs.mean),
-        value_stderr=float(values.stderr),
-        derivative_stderr=float(derivs.stderr),
-        n=n,
-        method="finite_difference",
-        options={"h": h},
-    )
+    # per-sample central difference as the tangent: common random numbers cancel everything that did not move
+    per_sample = Dual(detach(integrand.f(s.x, theta)) / s.pdf, (f_plus - f_minus) / (2.0 * h))
+    return to_estimate(per_sample, n, "finite_difference", {"h": h})

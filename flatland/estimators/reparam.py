@@ -47,13 +47,9 @@ def _kernel_weight(domain: Any, y: Dual, center: np.ndarray, kappa: float) -> Du
     return np.exp(log_k - detach(log_k))
 
 
-def _check_kappa(name: str, value: Any) -> float:
-    return check_positive(name, value)
-
-
 @METHODS.register(
     "reparam",
-    Option("kappa", None, _check_kappa),
+    Option("kappa", None, check_positive),
     Option("paired", False, check_bool),
 )
 def reparam(

@@ -50,3 +50,13 @@ def test04_relative_error_metric():
     assert relative_error(ref + 1.0, ref) == pytest.approx(1.0 / 4.0)
     with pytest.raises(ValueError, match="all zero"):
         relative_error(ref, np.zeros(3))
+
+
+def test05_estimate_interval_and_z_score_pick_value_or_derivative():
+    e = Estimate(value=1.0, derivative=-2.0, value_stderr=0.5, derivative_stderr=0.25, n=10)
+    assert e.z_score(2.0, of="value") == pytest.approx(-2.0)
+    assert e.z_score(-1.0) == pytest.approx(-4.0)
+    iv = e.interval(0.95)
+    assert iv.contains(-2.0) and iv.high - iv.low == pytest.approx(2 * 1.959964 * 0.25, rel=1e-6)
+    with pytest.raises(ValueError, match=r"^of"):
+        e.interval(of="valu")

@@ -105,3 +105,18 @@ def test06_bad_parameters_name_the_field():
         s.sample_von_mises(np.array([0.5]), 0.0, 0.0)
     with pytest.raises(ValueError, match="std"):
         s.sample_gaussian(np.array([0.5]), 0.0, -1.0)
+
+
+def test07_log_densities_accept_duals_and_match_the_densities():
+    """The kernels' log densities (used with reparameterized Dual samples) are the samplers' pdfs."""
+    from flatland.core.dual import Dual
+
+    x = np.linspace(-2.0, 2.0, 9)
+    lg = s.log_pdf_gaussian(Dual(x, np.ones_like(x)), 0.3, 0.7)
+    np.testing.assert_allclose(np.exp(lg.value), s.pdf_gaussian(x, 0.3, 0.7), rtol=1e-14)
+    np.testing.assert_allclose(lg.tangent, -(x - 0.3) / 0.49, rtol=1e-14)  # d/dx log N = -(x - m)/σ²
+    lv = s.log_pdf_von_mises(Dual(x, np.ones_like(x)), 0.3, 50.0)
+    np.testing.assert_allclose(np.exp(lv.value), s.pdf_von_mises(x, 0.3, 50.0), rtol=1e-14)
+    np.testing.assert_allclose(lv.tangent, -50.0 * np.sin(x - 0.3), rtol=1e-13)
+    with pytest.raises(ValueError, match=r"^mu"):
+        s.sample_von_mises(np.array([0.5]), np.nan, 1.0)
