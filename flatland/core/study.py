@@ -86,6 +86,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from flatland.core.image import relative_error
 from flatland.core.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
 from flatland.core.table import format_table
 from flatland.core.validate import ValidationError, check_int
@@ -360,14 +361,12 @@ class CellResult:
 
 
 def _relative_error(run: _Run, reference: Reference) -> float:
-    if reference.image is not None:
-        scale = float(np.max(np.abs(reference.image)))
-        if scale == 0.0:
-            return math.nan
-        return float(np.mean(np.abs(np.asarray(run.derivative_image) - reference.image)) / scale)
-    if reference.derivative == 0.0:
+    """:func:`~flatland.core.image.relative_error` of the run's derivative image (a scalar for an
+    integral: then |d - d_ref| / |d_ref|); NaN against an all-zero reference."""
+    target = reference.derivative if reference.image is None else reference.image
+    if not np.any(target):
         return math.nan
-    return abs(run.derivative - reference.derivative) / abs(reference.derivative)
+    return relative_error(run.derivative_image, target)
 
 
 def _summarize(

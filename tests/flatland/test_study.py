@@ -100,6 +100,8 @@ def test04_cell_statistics_follow_their_definitions():
         assert row.mean_derivative == pytest.approx(d.mean(), rel=1e-14)
         assert row.variance_per_sample == pytest.approx(d.var(ddof=1) * 4000, rel=1e-12, abs=1e-300)
         assert row.rmse == pytest.approx(np.sqrt(np.mean((d - reference) ** 2)), rel=1e-12)
+        assert row.bias == pytest.approx(d.mean() - reference, rel=1e-14, abs=1e-16)
+        assert row.relative_error == pytest.approx(np.mean(np.abs(d - reference)) / abs(reference), rel=1e-12)
         half = stats.t.ppf(0.975, 11) * d.std(ddof=1) / np.sqrt(12)
         assert row.bias_high - row.bias_low == pytest.approx(2 * half, rel=1e-9, abs=1e-14)
         assert row.seconds_per_sample > 0.0
@@ -187,3 +189,61 @@ def test09_load_config_reads_json_and_applies_overrides(tmp_path):
     bad.write_text('{"problem": {"integral": "arc"},}')
     with pytest.raises(ValidationError, match=r"bad\.json: invalid JSON: .*line 1"):
         load_config(bad)
+
+
+def test10_trial_k_of_cell_c_is_the_estimate_with_trial_seed_of_seed_c_k():
+    """Each trial recomputed through flatland.estimate with its documented seed: the same numbers."""
+    from flatland import estimate
+
+    config = _config(trials=3)
+    result = run_study(config, progress=False)
+    for c, row in enumerate(result.rows):
+        trials = [
+            estimate("step", 0.5, row.cell.method, n=4000, seed=trial_seed(7, c, k), **row.cell.options_dict)
+            for k in range(3)
+        ]
+        assert row.derivatives == tuple(e.derivative for e in trials)
+        assert row.mean_value == pytest.approx(np.mean([e.value for e in trials]), rel=1e-14)
+
+
+@pytest.mark.parametrize("pixel", [None, 5], ids=["film_sum", "one_pixel"])
+def test11_scene_cells_study_the_film_sum_or_one_pixel_of_the_gradient_image(tmp_path, pixel):
+    """Scene problems recomputed through render_gradient: the functional of each trial's gradient
+    image, the reference's standard error from independent pixels, and the per-pixel error metric
+    relative_error = mean|g - g_ref| / max|g_ref| averaged over the trials."""
+    from flatland.core.image import relative_error
+    from flatland.render import render_gradient
+    from flatland.scene import load_scene
+
+    scene = load_scene("shadow").with_camera(pixels=16)
+    path = tmp_path / "small.json"
+    path.write_text(json.dumps(scene.to_dict()))
+    problem = {"scene": str(path), "param": "occluder.translate.x"}
+    if pixel is not None:
+        problem["pixel"] = pixel
+    config = StudyConfig.from_dict(
+        {"problem": problem, "methods": [{"method": "reparam", "kappa": 1000}], "spp": 4, "trials": 3,
+         "seed": 5, "reference": {"spp": 32, "seed": 9}}
+    )  # fmt: skip
+    result = run_study(config, progress=False)
+    row = result.rows[0]
+    ref = render_gradient(scene, "occluder.translate.x", "boundary", spp=32, seed=9)
+    trials = [
+        render_gradient(scene, "occluder.translate.x", "reparam", spp=4, seed=trial_seed(5, 0, k), kappa=1000)
+        for k in range(3)
+    ]
+
+    def functional(image):
+        return float(np.sum(image)) if pixel is None else float(image[pixel])
+
+    assert np.array_equal(result.reference.image, ref.derivative)
+    assert result.reference.derivative == functional(ref.derivative)
+    expected_stderr = (
+        np.sqrt(np.sum(ref.derivative_stderr**2)) if pixel is None else ref.derivative_stderr[pixel]
+    )
+    assert result.reference.stderr == pytest.approx(expected_stderr, rel=1e-14)
+    assert row.derivatives == tuple(functional(g.derivative) for g in trials)
+    assert row.samples == 4 * 16
+    assert row.mean_value == pytest.approx(np.mean([functional(g.value) for g in trials]), rel=1e-14)
+    errors = [relative_error(g.derivative, ref.derivative) for g in trials]
+    assert row.relative_error == pytest.approx(np.mean(errors), rel=1e-14)
