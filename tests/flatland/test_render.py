@@ -33,7 +33,6 @@ from scipy import special
 
 from flatland.core.stats import normal_quantile, sidak
 from flatland.core.validate import ValidationError
-from flatland.integrator import filter_value
 from flatland.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from flatland.scene import load_scene
 
@@ -70,12 +69,23 @@ def _cdf(filt: str, t: float, c: np.ndarray, w: float) -> np.ndarray:
     return special.ndtr(x / (0.5 * w))
 
 
+def _pdf(filt: str, t: float, c: np.ndarray, w: float) -> np.ndarray:
+    """The filter k_j(t): the derivative of :func:`_cdf`, written out (not the renderer's)."""
+    x = t - c
+    if filt == "box":
+        return np.where(np.abs(x) <= 0.5 * w, 1.0 / w, 0.0)
+    if filt == "tent":
+        return np.maximum(w - np.abs(x), 0.0) / (w * w)
+    sigma = 0.5 * w
+    return np.exp(-0.5 * (x / sigma) ** 2) / (sigma * np.sqrt(2.0 * np.pi))
+
+
 def _closed_form_a(filt: str) -> tuple[np.ndarray, np.ndarray]:
     cam = load_scene(_segment_scene(filt)).camera
     c, w = cam.pixel_centers(), cam.pixel_width
     t_lo, t_hi = X_LO / H, X_HI / H
     value = 1.0 - (_cdf(filt, t_hi, c, w) - _cdf(filt, t_lo, c, w))
-    deriv = (filter_value(filt, t_lo, c, w) - filter_value(filt, t_hi, c, w)) / H
+    deriv = (_pdf(filt, t_lo, c, w) - _pdf(filt, t_hi, c, w)) / H
     return value, deriv
 
 
