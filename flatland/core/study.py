@@ -257,13 +257,6 @@ class _Run:
     stderr_image: np.ndarray | float
 
 
-@dataclass(frozen=True)
-class _Outcome:
-    cell: int
-    trial: int
-    run: _Run
-
-
 @lru_cache(maxsize=4)
 def _load_scene(package: str, source: str) -> Any:
     return importlib.import_module(f"{package}.scene").load_scene(source)
@@ -291,42 +284,42 @@ def _run_one(problem: Problem, cell: Cell, seed: int) -> _Run:
     )
 
 
-def _run_task(task: _Task) -> _Outcome:
+def _run_task(task: _Task) -> _Run:
     """Worker entry point (module level, so processes and Dask can import it)."""
     try:
-        return _Outcome(task.cell.index, task.trial, _run_one(task.problem, task.cell, task.seed))
+        return _run_one(task.problem, task.cell, task.seed)
     except ValidationError as e:  # its two-argument constructor does not survive pickling
         raise ValueError(f"methods cell {task.cell.index} ({task.cell.label}): {e}") from None
 
 
-def _execute(tasks: Sequence[_Task], workers: int, scheduler: str | None, progress: Any) -> list[_Outcome]:
-    """Run the tasks serially, in a process pool or on a Dask cluster; outcomes in task order."""
-    outcomes: list[_Outcome] = []
+def _execute(tasks: Sequence[_Task], workers: int, scheduler: str | None, progress: Any) -> list[_Run]:
+    """Run the tasks serially, in a process pool or on a Dask cluster; runs in task order."""
     if scheduler is not None:
         from dask.distributed import Client
 
         with Client(scheduler, set_as_default=False) as client:
             futures = client.map(_run_task, tasks, pure=False)
-            for future in futures:  # collected in submission order; they run in any order
-                outcomes.append(future.result())
+            for future in futures:  # waited for in submission order; they run in any order
+                future.result()
                 progress.update(1)
-    elif workers == 1:
+            return [future.result() for future in futures]
+    if workers == 1:
+        runs = []
         for task in tasks:
-            outcomes.append(_run_task(task))
+            runs.append(_run_task(task))
             progress.update(1)
-    else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        return runs
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        # spawn: forking a process that may run threads (Dask, BLAS) is unsafe
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = [pool.submit(_run_task, task) for task in tasks]
-            for future in as_completed(futures):
-                outcomes.append(future.result())
-                progress.update(1)
-    outcomes.sort(key=lambda o: (o.cell, o.trial))
-    return outcomes
+    # spawn: forking a process that may run threads (Dask, BLAS) is unsafe
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = [pool.submit(_run_task, task) for task in tasks]
+        for future in as_completed(futures):
+            future.result()  # the first failure stops the study
+            progress.update(1)
+        return [future.result() for future in futures]
 
 
 # ---------------------------------------------------------------------------------------------- results
@@ -440,7 +433,7 @@ class StudyResult:
             writer = csv.writer(f)
             writer.writerow(CSV_COLUMNS)
             for r in self.rows:
-                writer.writerow([_csv_value(r, c, self.config) for c in CSV_COLUMNS])
+                writer.writerow(_csv_row(r, self.config))
         return path
 
     def table(self) -> str:
@@ -465,25 +458,22 @@ class StudyResult:
         return format_table(head, rows, title)
 
 
-def _csv_value(row: CellResult, column: str, config: StudyConfig) -> Any:
+def _csv_row(row: CellResult, config: StudyConfig) -> list[Any]:
+    """One CSV line: the cell's description, then the statistics (floats as repr: full precision)."""
     cell = row.cell
     options = cell.options_dict
-    if column in OPTION_COLUMNS:
-        v = options.get(column)
-        return "" if v is None else v
-    special_cases = {
+    described = {
         "cell": cell.index,
         "problem": config.problem.label,
         "method": cell.method,
         "label": cell.label,
+        **{k: "" if options.get(k) is None else options[k] for k in OPTION_COLUMNS},
         "options": json.dumps({k: v for k, v in options.items() if k not in OPTION_COLUMNS}, sort_keys=True),
         "n": cell.n,
         "seed": config.seed,
     }
-    if column in special_cases:
-        return special_cases[column]
-    v = getattr(row, column)
-    return repr(float(v)) if isinstance(v, float) else v
+    values = [described[c] if c in described else getattr(row, c) for c in CSV_COLUMNS]
+    return [repr(float(v)) if isinstance(v, float) else v for v in values]
 
 
 def read_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
@@ -571,13 +561,14 @@ def run_study(
     ]
     bar = _progress(len(tasks), config.name, progress)
     try:
-        outcomes = _execute(tasks, workers, scheduler, bar)
+        runs = _execute(tasks, workers, scheduler, bar)
     finally:
         bar.close()
-    rows = []
-    for cell in config.cells:
-        runs = [o.run for o in outcomes if o.cell == cell.index]
-        rows.append(_summarize(cell, runs, reference, config.level, config.time_budget))
+    t = config.trials  # tasks are ordered cell by cell, trial by trial
+    rows = [
+        _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget)
+        for c, cell in enumerate(config.cells)
+    ]
     return StudyResult(config, reference, tuple(rows), time.perf_counter() - start)
 
 
