@@ -37,6 +37,7 @@ __all__ = [
     "film_coordinate",
     "film_direction",
     "silhouette_angles",
+    "zeros",
 ]
 
 MAX_PAIRS = 1 << 15
@@ -44,6 +45,11 @@ MAX_PAIRS = 1 << 15
 
 EPS_DIST = 1e-9
 """Hits closer than this to the ray origin are ignored (besides the ``ignore`` primitive)."""
+
+
+def zeros(shape: tuple[int, ...], dual: bool) -> Any:
+    """Zeros to fill by index: a Dual when what goes in may carry a tangent, else a plain array."""
+    return Dual(np.zeros(shape)) if dual else np.zeros(shape)
 
 
 def cross2(a: Any, b: Any) -> Any:
@@ -197,10 +203,6 @@ class Attached:
     u: Any
 
 
-def _gather(x: Any, idx: np.ndarray) -> Any:
-    return x[idx]
-
-
 def _segment_normal(e: Any) -> Any:
     length = np.sqrt(e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1])
     return np.stack([e[..., 1] / length, -e[..., 0] / length], axis=-1)
@@ -216,14 +218,13 @@ def attach(geom: Geometry, hits: Hits, rows: np.ndarray, origins: Any, dirs: Any
     prim = hits.prim[rows]
     m = prim.size
     n_seg = geom.n_seg
-    is_dual = geom.differentiable or isinstance(origins, Dual) or isinstance(dirs, Dual)
-    make = (lambda shape: Dual(np.zeros(shape))) if is_dual else (lambda shape: np.zeros(shape))
-    point, normal, u_out = make((m, 2)), make((m, 2)), make((m,))
-    origins_b = origins if np.ndim(detach(origins)) == 2 else origins[None, :] + make((m, 2))
+    dual = geom.differentiable or isinstance(origins, Dual) or isinstance(dirs, Dual)
+    point, normal, u_out = zeros((m, 2), dual), zeros((m, 2), dual), zeros((m,), dual)
+    origins_b = origins if np.ndim(detach(origins)) == 2 else origins[None, :] + zeros((m, 2), dual)
     seg = np.flatnonzero(prim < n_seg)
     if seg.size:
         k = prim[seg]
-        a, b = _gather(geom.seg_a, k), _gather(geom.seg_b, k)
+        a, b = geom.seg_a[k], geom.seg_b[k]
         e = b - a
         w = a - origins_b[seg]
         d = dirs[seg]
@@ -235,7 +236,7 @@ def attach(geom: Geometry, hits: Hits, rows: np.ndarray, origins: Any, dirs: Any
     circ = np.flatnonzero(prim >= n_seg)
     if circ.size:
         k = prim[circ] - n_seg
-        c, r = _gather(geom.circ_c, k), _gather(geom.circ_r, k)
+        c, r = geom.circ_c[k], geom.circ_r[k]
         o, d = origins_b[circ], dirs[circ]
         p = o - c
         q = d[:, 0] * p[:, 0] + d[:, 1] * p[:, 1]
@@ -260,13 +261,11 @@ def attached_points(geom: Geometry, prim: np.ndarray, coord: np.ndarray) -> tupl
     """
     m = prim.size
     n_seg = geom.n_seg
-    is_dual = geom.differentiable
-    make = (lambda shape: Dual(np.zeros(shape))) if is_dual else (lambda shape: np.zeros(shape))
-    point, normal = make((m, 2)), make((m, 2))
+    point, normal = zeros((m, 2), geom.differentiable), zeros((m, 2), geom.differentiable)
     seg = np.flatnonzero(prim < n_seg)
     if seg.size:
         k = prim[seg]
-        a, b = _gather(geom.seg_a, k), _gather(geom.seg_b, k)
+        a, b = geom.seg_a[k], geom.seg_b[k]
         e = b - a
         point[seg] = a + coord[seg, None] * e
         normal[seg] = _segment_normal(e)
@@ -274,8 +273,8 @@ def attached_points(geom: Geometry, prim: np.ndarray, coord: np.ndarray) -> tupl
     if circ.size:
         k = prim[circ] - n_seg
         unit = np.stack([np.cos(coord[circ]), np.sin(coord[circ])], axis=1)
-        point[circ] = _gather(geom.circ_c, k) + _gather(geom.circ_r, k)[:, None] * unit
-        normal[circ] = unit + make((circ.size, 2))
+        point[circ] = geom.circ_c[k] + geom.circ_r[k][:, None] * unit
+        normal[circ] = unit
     return point, normal
 
 

@@ -32,9 +32,9 @@ import numpy as np
 from scipy import special
 
 from flatland.core.contract import MethodTable
-from flatland.core.dual import Dual, detach, tangent
+from flatland.core.dual import Dual, detach, is_dual, tangent
 from flatland.core.rng import stream
-from flatland.geometry import Attached, Hits, attach, cast, direction, film_direction
+from flatland.geometry import Attached, Hits, attach, cast, direction, film_direction, zeros
 from flatland.lights import Lights
 from flatland.sampling import sample_gaussian, sample_tent, sample_uniform
 from flatland.scene import Geometry, Scene, bind
@@ -221,14 +221,6 @@ def filter_sample(kind: str, u: np.ndarray, center: np.ndarray, width: float) ->
 
 
 # ------------------------------------------------------------------ radiance
-def _zeros(like_dual: bool, shape: tuple[int, ...]) -> Any:
-    return Dual(np.zeros(shape)) if like_dual else np.zeros(shape)
-
-
-def _any_dual(*xs: Any) -> bool:
-    return any(isinstance(x, Dual) for x in xs)
-
-
 def emitted(geom: Geometry, prim: np.ndarray, u: Any, normal0: np.ndarray, dirs0: np.ndarray) -> Any:
     """Radiance L_e leaving primitives ``prim`` at coordinate ``u`` toward the ray origins.
 
@@ -249,7 +241,7 @@ def incident(geom: Geometry, origins: Any, dirs: Any, hits: Hits) -> tuple[Any, 
     """Incident radiance along rays (sky on a miss) and the hits re-attached to ``geom``."""
     rows = np.flatnonzero(hits.hit)
     n = hits.prim.size
-    out = _zeros(geom.differentiable or _any_dual(origins, dirs), (n,)) + geom.sky * (~hits.hit)
+    out = zeros((n,), geom.differentiable or is_dual(origins) or is_dual(dirs)) + geom.sky * (~hits.hit)
     if not rows.size:
         return out, None
     o = origins[rows] if np.ndim(detach(origins)) == 2 else origins
@@ -401,7 +393,7 @@ def run(job: Job, geom: Geometry, hooks: Hooks) -> BatchResult:
         key = batch * job.pixels + pixel
         size = job.batches * job.pixels
         sums_v += np.bincount(key, weights=detach(est), minlength=size)
-        sums_t += np.bincount(key, weights=tangent(est) * np.ones(key.size), minlength=size)
+        sums_t += np.bincount(key, weights=tangent(est), minlength=size)
     value = (sums_v / job.per_batch).reshape(job.batches, job.pixels)
     deriv = (sums_t / job.per_batch).reshape(job.batches, job.pixels)
     extra = hooks.pixel_extra(job, geom)

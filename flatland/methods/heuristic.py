@@ -50,8 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual
-from flatland.geometry import attached_points
+from flatland.geometry import attached_points, zeros
 from flatland.scene import Geometry
 
 __all__ = ["PARALLEL", "Choice", "choose_points"]
@@ -137,8 +136,9 @@ def choose_points(
     code[~hit0 & hit1] = 1
     both = np.flatnonzero(hit0 & hit1)
     if both.size:
-        p0, n0 = attached_points(geom.detached(), prim0[both], coord0[both])
-        p1, n1 = attached_points(geom.detached(), prim1[both], coord1[both])
+        geom0 = geom.detached()  # the choice is made on values only
+        p0, n0 = attached_points(geom0, prim0[both], coord0[both])
+        p1, n1 = attached_points(geom0, prim1[both], coord1[both])
         o = origins[both]
         occludes01 = _dot(n0, p1 - p0) * _dot(n0, o - p0) < 0.0  # line 0 separates p1 from o
         occludes10 = _dot(n1, p0 - p1) * _dot(n1, o - p1) < 0.0
@@ -179,7 +179,7 @@ def choose_points(
             coord_f[live] = np.where(on, c_mid, coord_f[live])
             lo, hi = np.where(on, mid, lo), np.where(on, hi, mid)
 
-    point = Dual(np.zeros((n, 2))) if geom.differentiable else np.zeros((n, 2))
+    point = zeros((n, 2), geom.differentiable)
     if single.size:
         point[single] = attached_points(geom, prim_f, coord_f)[0]
     corner = np.flatnonzero(code == 2)
