@@ -19,7 +19,7 @@ from types import MappingProxyType
 from typing import Any
 
 from flatland.core.stats import normal_quantile
-from flatland.core.table import format_table
+from flatland.core.table import format_table, method_label
 from flatland.core.validate import check_int, check_seed
 from flatland.estimators import estimate
 from flatland.integrals import INTEGRALS
@@ -60,9 +60,7 @@ class TextbookRow:
     @property
     def label(self) -> str:
         """``reparam kappa=100 paired`` style name."""
-        parts = [self.method]
-        parts += [k if v is True else f"{k}={v:g}" for k, v in self.options.items() if v is not False]
-        return " ".join(parts)
+        return method_label(self.method, self.options.items())
 
     @property
     def z(self) -> float:

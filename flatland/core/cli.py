@@ -36,7 +36,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from flatland.core.table import format_table
+from flatland.core.table import format_table, method_label
 from flatland.core.validate import ValidationError, check_int, check_positive, check_seed
 
 __all__ = ["EXIT_USAGE", "Package", "main"]
@@ -188,7 +188,7 @@ def _demo(pkg: Package, args: argparse.Namespace) -> int:
     reference = render.render_gradient(
         scene, pkg.demo_param, method=reference_method, spp=ref_spp, seed=seed + 1, **ref_options
     )
-    ref_label = " ".join([reference_method, *(f"{k}={v}" for k, v in ref_options.items())])
+    ref_label = method_label(reference_method, ref_options.items())
     columns = {PANEL_TITLES.get(m, m): g for m, g in gradients.items()}
     title = f"{pkg.demo_scene}: d/d {pkg.demo_param}, {spp} spp"
     panel = pkg.module("plot").plot_panel(primal, columns, out / "demo_panel.png", title=title)

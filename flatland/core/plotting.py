@@ -24,6 +24,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import Normalize
 
+from flatland.core.table import method_label
+
 __all__ = [
     "DIVERGING",
     "PRIMAL",
@@ -201,12 +203,8 @@ def _series(rows: Sequence[Any]) -> dict[str, list[Any]]:
         if options.get("kappa") is None:
             continue
         key = (cell.method, tuple((k, repr(v)) for k, v in cell.options if k != "kappa"), cell.n)
-        shown = [
-            k if v is True else f"{k}={v}"
-            for k, v in cell.options
-            if k != "kappa" and k in cell.given and v is not None and v is not False
-        ]
-        labels[key] = " ".join([cell.method, *shown, f"n={cell.n}"])
+        shown = [(k, v) for k, v in cell.options if k != "kappa" and k in cell.given]
+        labels[key] = f"{method_label(cell.method, shown)} n={cell.n}"
         groups.setdefault(key, []).append(r)
     return {
         labels[k]: sorted(v, key=lambda r: r.cell.options_dict["kappa"])

@@ -88,7 +88,7 @@ from scipy import stats
 
 from flatland.core.image import relative_error
 from flatland.core.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
-from flatland.core.table import format_table
+from flatland.core.table import format_table, method_label
 from flatland.core.validate import ValidationError, check_int
 
 __all__ = [
@@ -216,8 +216,7 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
         from flatland.integrals import get_integral
 
         return Reference(float(get_integral(problem.integral).derivative(problem.theta)), 0.0, "closed form")
-    options = "".join(f" {k}={v}" for k, v in spec.options if v is not None)
-    label = f"{spec.method}{options} {problem.count_name}={spec.n} seed={spec.seed}"
+    label = f"{method_label(spec.method, spec.options)} {problem.count_name}={spec.n} seed={spec.seed}"
     path = Path(cache_dir) / f"{_cache_key(problem, spec)}.npz" if cache_dir is not None else None
     if path is not None and path.is_file():
         with np.load(path) as data:

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core.table import method_label
 from flatland.core.validate import (
     ValidationError,
     check_choice,
@@ -107,12 +108,7 @@ class Cell:
     @property
     def label(self) -> str:
         """``method`` plus the options the configuration set, e.g. ``reparam kappa=100 paired``."""
-        parts = [self.method]
-        for k, v in self.options:
-            if k not in self.given or v is None or v is False:
-                continue
-            parts.append(k if v is True else f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}")
-        return " ".join(parts)
+        return method_label(self.method, [(k, v) for k, v in self.options if k in self.given])
 
 
 @dataclass(frozen=True)

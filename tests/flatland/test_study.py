@@ -247,3 +247,17 @@ def test11_scene_cells_study_the_film_sum_or_one_pixel_of_the_gradient_image(tmp
     assert row.mean_value == pytest.approx(np.mean([functional(g.value) for g in trials]), rel=1e-14)
     errors = [relative_error(g.derivative, ref.derivative) for g in trials]
     assert row.relative_error == pytest.approx(np.mean(errors), rel=1e-14)
+
+
+def test12_labels_show_the_options_set_true_ones_by_name_floats_by_g():
+    from flatland.core.table import method_label
+
+    options = [("kappa", 100.0), ("probes", 4), ("paired", True), ("h", None), ("antithetic", False)]
+    assert method_label("reparam", options) == "reparam kappa=100 probes=4 paired"
+    config = StudyConfig.from_dict(
+        {"problem": {"integral": "two_steps"}, "methods": [{"method": "reparam", "kappa": 0.5}], "n": 10,
+         "reference": {"method": "reparam", "kappa": 2000, "paired": True, "n": 20}}
+    )  # fmt: skip
+    assert config.cells[0].label == "reparam kappa=0.5"  # the defaults filled in are not shown
+    source = study.resolve_reference(config).source
+    assert source.startswith("reparam kappa=2000 ") and source.endswith(" paired n=20 seed=2147483647")
