@@ -35,7 +35,7 @@ from matplotlib.figure import Figure
 
 from flatland.core.stats import normal_quantile
 from flatland.core.validate import ValidationError
-from flatland.plot_textbook import FIGSIZE, REFERENCE_STYLE
+from flatland.plot_textbook import FIGSIZE, REFERENCE_STYLE, _axes
 
 __all__ = ["plot_descent", "plot_film", "plot_gradient_panel", "plot_grid"]
 
@@ -76,14 +76,6 @@ def _limit(arrays: Sequence[np.ndarray]) -> float:
     finite = [np.abs(a[np.isfinite(a)]) for a in arrays]
     top = max((float(a.max()) for a in finite if a.size), default=0.0)
     return top if top > 0.0 and math.isfinite(top) else 1.0
-
-
-def _axes(ax: Axes | None, title: str | None, figsize: tuple[float, float] = FIGSIZE) -> Axes:
-    if ax is None:
-        ax = Figure(figsize=figsize, layout="constrained").add_subplot()
-    if title:
-        ax.set_title(title)
-    return ax
 
 
 def plot_grid(
