@@ -52,18 +52,17 @@ def importable(name: str) -> bool:
     return getattr(module, "__file__", None) is not None  # an empty folder is a namespace package
 
 
-def resolve(dotted: str) -> Any:
-    """The object behind a fully qualified name: the longest importable module prefix, then attributes."""
-    parts = dotted.split(".")
-    for cut in range(len(parts), 0, -1):
-        try:
-            obj = importlib.import_module(".".join(parts[:cut]))
-        except ImportError:
-            continue
-        for attr in parts[cut:]:
-            obj = getattr(obj, attr)
-        return obj
-    raise ImportError(dotted)
+def load_extension() -> Any:
+    """The site's Sphinx extension, docs/_ext/project_docs.py: the tests use its own name resolution and
+    docstring passes, so they check what the build does."""
+    spec = importlib.util.spec_from_file_location("project_docs", DOCS / "_ext" / "project_docs.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+project_docs = load_extension()
+resolve = project_docs.resolve_name
 
 
 def public_modules(package: str) -> list[str]:
@@ -403,15 +402,8 @@ def _register_sphinx_markup() -> None:
 
 def _as_the_site_reads_it(doc: str, what: str, name: str, obj: Any) -> str:
     """The docstring after the site's pipe escaping, napoleon and plain-type passes (docs/_ext)."""
-    import sys
-
     from sphinx.ext.napoleon import Config, NumpyDocstring
 
-    sys.path.insert(0, str(DOCS / "_ext"))
-    try:
-        import project_docs
-    finally:
-        sys.path.remove(str(DOCS / "_ext"))
     lines = [project_docs._escape_pipes(line) for line in doc.splitlines()]
     config = Config(napoleon_google_docstring=False, napoleon_use_ivar=False, napoleon_use_param=False,
                     napoleon_use_rtype=False)  # fmt: skip
