@@ -53,7 +53,7 @@ import json
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -441,7 +441,6 @@ class Geometry:
     cam_r: Any  # (2,)
     sky: float
     camera: Camera
-    shape_names: tuple[str, ...] = field(default=())
 
     @property
     def n_seg(self) -> int:
@@ -465,6 +464,11 @@ class Geometry:
         return np.flatnonzero(detach(self.emission) > 0.0)
 
 
+def _unit(axis: int) -> np.ndarray:
+    """The unit vector along x (0) or y (1)."""
+    return np.eye(2)[axis]
+
+
 def _rotation(points: Any, centre: np.ndarray, angle: Any) -> Any:
     c, s = np.cos(angle), np.sin(angle)
     dx, dy = points[:, 0] - centre[0], points[:, 1] - centre[1]
@@ -472,16 +476,15 @@ def _rotation(points: Any, centre: np.ndarray, angle: Any) -> Any:
 
 
 def _moved_points(shape: Shape, p: Parameter | None, theta: Any) -> Any:
-    pts = np.array(shape.points, dtype=np.float64)
+    """The shape's points (a circle's centre, as one point) with parameter ``p`` at offset ``theta``."""
+    pts = np.array([shape.center] if shape.type == "circle" else shape.points, dtype=np.float64)
     if p is None or p.target != shape.name:
         return pts
-    unit = np.zeros(2)
     if p.kind == "translate":
-        unit[p.axis] = 1.0
-        return pts + theta * unit
+        return pts + theta * _unit(p.axis)
     if p.kind == "rotate":
         return _rotation(pts, shape.centre(), theta)
-    if p.kind == "scale":
+    if p.kind == "scale":  # about the centre: a circle's centre stays put
         ctr = shape.centre()
         return ctr + (1.0 + theta) * (pts - ctr)
     if p.kind == "vertex":
@@ -502,21 +505,14 @@ def bind(scene: Scene, param: str | Parameter | None = None, theta: Any = 0.0) -
     circ_c, circ_r, circ_shape, circ_one = [], [], [], []
     vertices = []
     for k, s in enumerate(scene.shapes):
+        pts = _moved_points(s, p, theta)
         if s.type == "circle":
-            c = np.array(s.center, dtype=np.float64)
-            r: Any = s.radius
-            if p is not None and p.target == s.name and p.kind == "translate":
-                unit = np.zeros(2)
-                unit[p.axis] = 1.0
-                c = c + theta * unit
-            if p is not None and p.target == s.name and p.kind == "scale":
-                r = s.radius * (1.0 + theta)
-            circ_c.append(np.stack([c[0], c[1]]))
-            circ_r.append(np.stack([r]))
+            scaled = p is not None and p.target == s.name and p.kind == "scale"
+            circ_c.append(pts[0])
+            circ_r.append(np.stack([s.radius * (1.0 + theta) if scaled else s.radius]))
             circ_shape.append(k)
             circ_one.append(s.one_sided)
             continue
-        pts = _moved_points(s, p, theta)
         pairs = np.array(s.segments())
         seg_a.append(pts[pairs[:, 0]])
         seg_b.append(pts[pairs[:, 1]])
@@ -540,18 +536,12 @@ def bind(scene: Scene, param: str | Parameter | None = None, theta: Any = 0.0) -
             albedo = albedo + theta * mask
     cam = scene.camera
     o: Any = np.array(cam.position, dtype=np.float64)
-    angle: Any = math.atan2(cam.direction[1], cam.direction[0])
-    if p is not None and p.target == "camera":
-        if p.kind == "translate":
-            unit = np.zeros(2)
-            unit[p.axis] = 1.0
-            o = o + theta * unit
-        else:
-            angle = angle + theta
+    f: Any = np.array(cam.direction, dtype=np.float64)
+    if p is not None and p.target == "camera" and p.kind == "translate":
+        o = o + theta * _unit(p.axis)
     if p is not None and p.target == "camera" and p.kind == "rotate":
+        angle = math.atan2(cam.direction[1], cam.direction[0]) + theta
         f = np.stack([np.cos(angle), np.sin(angle)])
-    else:
-        f = np.array(cam.direction, dtype=np.float64)
     r_vec = np.stack([f[1], -f[0]])  # right = forward turned clockwise
     return Geometry(
         seg_a=seg_a_all,
@@ -569,5 +559,4 @@ def bind(scene: Scene, param: str | Parameter | None = None, theta: Any = 0.0) -
         cam_r=r_vec,
         sky=float(scene.sky),
         camera=cam,
-        shape_names=tuple(s.name for s in scene.shapes),
     )
