@@ -22,7 +22,6 @@ import pytest
 import sphere3d as s3
 from flatland.core.dual import detach, tangent, variable
 from flatland.core.stats import normal_quantile
-from sphere3d.vector import cross, dot, norm, normalize
 
 Z = normal_quantile(0.9999)
 SKY = 1.5
@@ -32,13 +31,18 @@ CAMERA = {"position": [0, -3, 1], "look_at": [0, 0, 0], "fov": 0.8, "width": 8, 
 
 
 def lambert(vertices, normal=(0.0, 0.0, 1.0)):
-    """Projected solid angle of a polygon seen from the origin: ½ |Σ γ_i n·u_i| (Dual-aware)."""
-    a = normalize(vertices)
+    """Projected solid angle of a polygon seen from the origin: ½ |Σ γ_i n·u_i| (Dual-aware).
+
+    Written with numpy's own cross product and norm, not the renderer's vector helpers,
+    so the closed form shares no code with what it checks.
+    """
+    a = vertices / np.linalg.norm(vertices, axis=-1)[:, None]
     normal = np.asarray(normal)
     total = 0.0
-    for i in range(len(vertices)):
-        c = cross(a[i], a[(i + 1) % len(vertices)])
-        total = total + np.arccos(dot(a[i], a[(i + 1) % len(vertices)])) * dot(c, normal) / norm(c)
+    for i in range(len(vertices)):  # edges of the polygon
+        c = np.cross(a[i], a[(i + 1) % len(vertices)])
+        gamma = np.arccos(np.sum(a[i] * a[(i + 1) % len(vertices)]))  # the edge's angle γ_i
+        total = total + gamma * np.sum(c * normal) / np.linalg.norm(c)
     return np.abs(0.5 * total)
 
 
