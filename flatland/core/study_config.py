@@ -157,10 +157,7 @@ class StudyConfig:
             raise ValidationError("name", f"must be a non-empty file-name-safe string, got {name!r}")
         problem = _parse_problem(data.get("problem"), package, base_dir)
         count = problem.count_name
-        other = "n" if count == "spp" else "spp"
-        if other in data:
-            kind = "scene" if problem.is_scene else "integral"
-            raise ValidationError(other, f"{kind} problems take {count!r} (samples per trial), not {other!r}")
+        _reject_other_count("", data, problem)
         default_n = check_int(count, data[count]) if count in data else None
         cells = _expand_cells(data.get("methods"), problem, default_n)
         trials = check_int("trials", data.get("trials", 10), minimum=2)
@@ -223,6 +220,16 @@ def _reject_unknown(prefix: str, data: Mapping[str, Any], known: Iterable[str]) 
         if key not in known:
             where = f"{prefix}.{key}" if prefix else str(key)
             raise ValidationError(where, f"unknown key; expected one of {', '.join(known)}")
+
+
+def _reject_other_count(prefix: str, data: Mapping[str, Any], problem: Problem) -> None:
+    """Integral problems count samples per trial in ``n``, scenes in ``spp``: the other key is an error."""
+    count = problem.count_name
+    other = "n" if count == "spp" else "spp"
+    if other in data:
+        kind = "scene" if problem.is_scene else "integral"
+        where = f"{prefix}.{other}" if prefix else other
+        raise ValidationError(where, f"{kind} problems take {count!r} (samples per trial), not {other!r}")
 
 
 def _parse_problem(data: Any, package: str, base_dir: Any) -> Problem:
@@ -292,9 +299,7 @@ def _expand_cells(data: Any, problem: Problem, default_n: int | None) -> tuple[C
         where = f"methods[{i}]"
         if not isinstance(entry, Mapping) or "method" not in entry:
             raise ValidationError(where, f"must be an object with a 'method' key, got {entry!r}")
-        other = "n" if count == "spp" else "spp"
-        if other in entry:
-            raise ValidationError(f"{where}.{other}", f"this problem takes {count!r}, not {other!r}")
+        _reject_other_count(where, entry, problem)
         sweeps = {k: v for k, v in entry.items() if k != "method"}
         if count not in sweeps:
             if default_n is None:
@@ -330,9 +335,7 @@ def _parse_reference(data: Any, problem: Problem, cells: Sequence[Cell]) -> Refe
     options = {k: v for k, v in data.items() if k not in _REFERENCE_KEYS}
     default_method = "boundary" if "boundary" in table.names else "finite_difference"
     method, options = _resolve(table, "reference", data.get("method", default_method), options)
-    other = "n" if count == "spp" else "spp"
-    if other in data:
-        raise ValidationError(f"reference.{other}", f"this problem takes {count!r}, not {other!r}")
+    _reject_other_count("reference", data, problem)
     n = check_int(f"reference.{count}", data.get(count, 16 * max(c.n for c in cells)))
     seed = check_seed("reference.seed", data.get("seed", 2**31 - 1))
     return ReferenceSpec(method, tuple(options.items()), n, seed)
