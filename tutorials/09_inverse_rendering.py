@@ -182,17 +182,23 @@ def descend(pkg, scene, target, method, eta0, steps, spp):
     return np.array(thetas), np.array(losses), theta
 
 
-curvature = 2.0 * np.sum(
-    fl.render_gradient(flat, PARAM, method="reparam", spp=256, seed=SEED).derivative ** 2
-)
-flat_runs = {}
-for method in ("naive", "reparam"):
-    start = time.perf_counter()
-    flat_runs[method] = descend(fl, flat, flat_target, method, 1.0 / curvature, steps=30, spp=32)
-    thetas, losses, final = flat_runs[method]
-    print(f"{method:>8}: final θ = {final:+.4f}, loss {losses[0]:.3f} → {losses[-1]:.3f}", end=", ")
-    print(f"{time.perf_counter() - start:.1f} s")
-print(f"H = {curvature:.1f}, η0 = {1 / curvature:.4f}")
+def compare_descents(pkg, scene, target, curvature_spp, steps, spp):
+    """Naive and reparameterized descents with η0 = 1/H, H = 2 Σ_j (dI_j/dθ)² at θ = 0; printed, by method."""
+    curvature = 2.0 * np.sum(
+        pkg.render_gradient(scene, PARAM, method="reparam", spp=curvature_spp, seed=SEED).derivative ** 2
+    )
+    runs = {}
+    for method in ("naive", "reparam"):
+        start = time.perf_counter()
+        runs[method] = descend(pkg, scene, target, method, 1.0 / curvature, steps, spp)
+        _, losses, final = runs[method]
+        print(f"{method:>8}: final θ = {final:+.4f}, loss {losses[0]:.3f} → {losses[-1]:.3f}", end=", ")
+        print(f"{time.perf_counter() - start:.1f} s")
+    print(f"H = {curvature:.1f}, η0 = {1 / curvature:.4f}")
+    return runs
+
+
+flat_runs = compare_descents(fl, flat, flat_target, curvature_spp=256, steps=30, spp=32)
 
 # %%
 # check: the reparameterized descent recovers θ* to within 0.02 (measured with six values of SEED: errors
@@ -226,16 +232,7 @@ ptu.plot_descent(
 sphere = s3.load_scene("shadow").to_dict()
 sphere["camera"].update(width=24, height=24)
 sphere_target = s3.render(moved(sphere, TARGET_THETA), spp=256, seed=SEED + 10_000).value
-curvature = 2.0 * np.sum(
-    s3.render_gradient(sphere, PARAM, method="reparam", spp=64, seed=SEED).derivative ** 2
-)
-sphere_runs = {}
-for method in ("naive", "reparam"):
-    start = time.perf_counter()
-    sphere_runs[method] = descend(s3, sphere, sphere_target, method, 1.0 / curvature, steps=20, spp=16)
-    thetas, losses, final = sphere_runs[method]
-    print(f"{method:>8}: final θ = {final:+.4f}, loss {losses[0]:.3f} → {losses[-1]:.3f}", end=", ")
-    print(f"{time.perf_counter() - start:.1f} s")
+sphere_runs = compare_descents(s3, sphere, sphere_target, curvature_spp=64, steps=20, spp=16)
 
 # %%
 # check: the reparameterized descent recovers θ* to within 0.02 (measured with six values of SEED: errors
