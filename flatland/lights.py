@@ -18,6 +18,7 @@ fixed, θ-free density, which is what the gradient methods require (DESIGN 2.5).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,14 +39,10 @@ __all__ = ["Lights"]
 class Lights:
     """The emitters of a geometry (at θ0) and their selection probabilities."""
 
+    geom: Geometry  # detached
     prims: np.ndarray  # emitter primitive indices
     probs: np.ndarray  # P(e)
     cdf: np.ndarray  # cumulative P(e), last entry 1
-    seg_a: np.ndarray
-    seg_b: np.ndarray
-    circ_c: np.ndarray
-    circ_r: np.ndarray
-    n_seg: int
 
     @classmethod
     def of(cls, geom: Geometry) -> Lights:
@@ -60,12 +57,20 @@ class Lights:
             else:
                 power[i] = g.emission[k] * 2.0 * g.circ_r[k - g.n_seg]
         probs = power / power.sum() if prims.size else power
-        return cls(prims, probs, np.cumsum(probs), g.seg_a, g.seg_b, g.circ_c, g.circ_r, g.n_seg)
+        return cls(g, prims, probs, np.cumsum(probs))
 
     @property
     def empty(self) -> bool:
         """True when the scene has no emitter to sample (the sky is reached by cosine sampling)."""
         return self.prims.size == 0
+
+    def _technique(self, k: int) -> tuple[Callable[..., np.ndarray], Callable[..., np.ndarray], tuple]:
+        """Sampler, density and shape arguments (after ``u``/``phi`` and ``x``) for emitter primitive k."""
+        g = self.geom
+        if k < g.n_seg:
+            return sample_segment_direction, pdf_segment_direction, (g.seg_a[k], g.seg_b[k])
+        j = k - g.n_seg
+        return sample_circle_direction, pdf_circle_direction, (g.circ_c[j], g.circ_r[j])
 
     def sample(
         self, u_choice: np.ndarray, u_point: np.ndarray, x: np.ndarray
@@ -81,13 +86,9 @@ class Lights:
         phi = np.zeros(np.shape(u_choice))
         for i, k in enumerate(self.prims):  # a handful of emitters, each vectorized over its samples
             rows = np.flatnonzero(choice == i)
-            if not rows.size:
-                continue
-            if k < self.n_seg:
-                phi[rows] = sample_segment_direction(u_point[rows], x[rows], self.seg_a[k], self.seg_b[k])
-            else:
-                j = k - self.n_seg
-                phi[rows] = sample_circle_direction(u_point[rows], x[rows], self.circ_c[j], self.circ_r[j])
+            if rows.size:
+                sample, _, shape = self._technique(k)
+                phi[rows] = sample(u_point[rows], x[rows], *shape)
         return phi, self.prims[choice]
 
     def pdf(self, phi: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -95,10 +96,6 @@ class Lights:
         x = np.asarray(detach(x))
         out = np.zeros(np.shape(phi))
         for i, k in enumerate(self.prims):
-            if k < self.n_seg:
-                p = pdf_segment_direction(phi, x, self.seg_a[k], self.seg_b[k])
-            else:
-                j = k - self.n_seg
-                p = pdf_circle_direction(phi, x, self.circ_c[j], self.circ_r[j])
-            out += self.probs[i] * p
+            _, pdf, shape = self._technique(k)
+            out += self.probs[i] * pdf(phi, x, *shape)
         return out
