@@ -114,8 +114,9 @@ class BoundaryHooks(Hooks):
         m, n_s = t0.size, job.per_batch
         eps = EPS_FILM * (1.0 + np.abs(t0))
         t_eval = np.concatenate([np.repeat(t0 - eps, n_s), np.repeat(t0 + eps, n_s)])
+        lights = Lights.of(geom0)
         for b in range(job.batches):
-            ctx = Context(geom0, geom0, Lights.of(geom0), Hooks(), job.seed, b)
+            ctx = Context(geom0, geom0, lights, Hooks(), job.seed, b)
             u = stream(job.seed, "boundary", b).random((m * n_s, 3))
             radiance = radiance_along_film(ctx, t_eval, np.concatenate([u, u]))  # the same samples both sides
             jump = (radiance[: m * n_s] - radiance[m * n_s :]).reshape(m, n_s).mean(axis=1)
