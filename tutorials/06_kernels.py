@@ -94,18 +94,18 @@ pt.plot_curves(
 # %%
 no_kernel = {name: estimate(name, theta, "reparam", n=N, seed=SEED) for name in ("two_steps", "arc_stretch")}
 predicted_b0 = {"two_steps": -K(1.5 * theta), "arc_stretch": -g(1.5 * theta)}
+bias_b0 = {name: est.derivative - get_integral(name).derivative(theta) for name, est in no_kernel.items()}
 for name, est in no_kernel.items():
-    bias = est.derivative - get_integral(name).derivative(theta)
-    print(f"{name:>12}: bias {bias:+.4f} ± {est.derivative_stderr:.4f}   predicted {predicted_b0[name]:+.4f}")
+    print(f"{name:>12}: bias {bias_b0[name]:+.4f} ± {est.derivative_stderr:.4f}", end="   ")
+    print(f"predicted {predicted_b0[name]:+.4f}")
 
 # %%
 # check: the measured bias matches the prediction within z standard errors (two-sided, family-wise
 # level 1e-3 over the two integrals), and it is far from zero (more than 20 standard errors)
 z2 = normal_quantile(1 - sidak(1e-3, 2))
 for name, est in no_kernel.items():
-    bias = est.derivative - get_integral(name).derivative(theta)
-    assert abs(bias - predicted_b0[name]) <= z2 * est.derivative_stderr, name
-    assert abs(bias) > 20 * est.derivative_stderr, name
+    assert abs(bias_b0[name] - predicted_b0[name]) <= z2 * est.derivative_stderr, name
+    assert abs(bias_b0[name]) > 20 * est.derivative_stderr, name
 
 # %% [markdown]
 # ## The kernel estimator
