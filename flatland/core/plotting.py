@@ -308,11 +308,11 @@ def efficiency_figure(rows: Sequence[Any], path: str | os.PathLike, title: str =
 def study_figures(result: Any, out_dir: str | os.PathLike) -> list[Path]:
     """The figures of a study: ``<name>_kappa.png`` (if κ is swept) and ``<name>_efficiency.png``."""
     out_dir = Path(out_dir)
-    name, label = result.config.name, result.config.problem.label
+    name = result.config.name
     paths = []
     if has_kappa_series(result.rows):
-        paths.append(kappa_figure(result.rows, out_dir / f"{name}_kappa.png", f"{name}: {label}"))
-    paths.append(efficiency_figure(result.rows, out_dir / f"{name}_efficiency.png", f"{name}: {label}"))
+        paths.append(plot_kappa(result, out_dir / f"{name}_kappa.png"))
+    paths.append(plot_efficiency(result, out_dir / f"{name}_efficiency.png"))
     return paths
 
 
