@@ -34,14 +34,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 import flatland.methods  # noqa: F401  (registers the gradient methods)
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
-from flatland.core.validate import ValidationError, check_finite, check_int, check_seed
+from flatland.core.validate import ValidationError, check_int, check_seed
 from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
-from flatland.scene import Scene, load_scene, parse_parameter
+from flatland.scene import Scene, check_direction, check_point, load_scene, parse_parameter
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
@@ -145,13 +143,8 @@ def irradiance(
     the unoccluded sky of radiance 1 gives 2. With ``param=None`` only the value is
     estimated (derivative 0).
     """
-    pt = tuple(check_finite(f"point[{i}]", v) for i, v in enumerate(_pair("point", point)))
-    nv = tuple(check_finite(f"normal[{i}]", v) for i, v in enumerate(_pair("normal", normal)))
-    length = float(np.hypot(*nv))
-    if not length > 0.0:
-        raise ValidationError("normal", f"must be a non-zero vector, got {normal!r}")
-    nv = (nv[0] / length, nv[1] / length)
-    job = _job(scene, param, n, seed, batches, point=pt, normal=nv)
+    point, normal = check_point("point", point), check_direction("normal", normal)
+    job = _job(scene, param, n, seed, batches, point=point, normal=normal)
     if param is None:
         result, resolved = run(job, job.geometry(0.0), Hooks()), {}
     else:
@@ -159,9 +152,3 @@ def irradiance(
     return Estimate.from_batches(
         result.value[:, 0], result.derivative[:, 0], job.spp, method if param is not None else "", resolved
     )
-
-
-def _pair(field: str, value: Any) -> tuple[Any, Any]:
-    if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != 2:
-        raise ValidationError(field, f"must be a pair [x, y], got {value!r}")
-    return value[0], value[1]

@@ -72,6 +72,8 @@ __all__ = [
     "Scene",
     "Shape",
     "bind",
+    "check_direction",
+    "check_point",
     "list_scenes",
     "load_scene",
     "parse_parameter",
@@ -213,10 +215,20 @@ def _check_keys(path: str, d: Any, allowed: tuple[str, ...], required: tuple[str
             raise ValidationError(f"{path}.{key}" if path else key, "is required")
 
 
-def _check_point(path: str, value: Any) -> tuple[float, float]:
+def check_point(path: str, value: Any) -> tuple[float, float]:
+    """``value`` as a pair of finite floats (a point or a vector); one error naming ``path`` otherwise."""
     if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != 2:
-        raise ValidationError(path, f"must be a point [x, y], got {value!r}")
+        raise ValidationError(path, f"must be a pair [x, y], got {value!r}")
     return (check_finite(f"{path}[0]", value[0]), check_finite(f"{path}[1]", value[1]))
+
+
+def check_direction(path: str, value: Any) -> tuple[float, float]:
+    """``value`` as a unit vector: a non-zero pair of finite floats, normalized."""
+    x, y = check_point(path, value)
+    length = math.hypot(x, y)
+    if not length > 1e-12:
+        raise ValidationError(path, f"must be a non-zero vector, got {value!r}")
+    return (x / length, y / length)
 
 
 def _check_name(path: str, value: Any) -> str:
@@ -236,17 +248,14 @@ def _check_range(path: str, value: Any, lo: float, hi: float) -> float:
 
 def _check_camera(d: Any) -> Camera:
     _check_keys("camera", d, _CAMERA_KEYS, ("position", "direction", "fov", "pixels"))
-    position = _check_point("camera.position", d["position"])
-    direction = _check_point("camera.direction", d["direction"])
-    length = math.hypot(*direction)
-    if not length > 1e-12:
-        raise ValidationError("camera.direction", f"must be a non-zero vector, got {d['direction']!r}")
+    position = check_point("camera.position", d["position"])
+    direction = check_direction("camera.direction", d["direction"])
     fov = check_finite("camera.fov", d["fov"])
     if not 0.0 < fov < math.pi:
         raise ValidationError("camera.fov", f"must lie in (0, π) radians, got {d['fov']!r}")
     pixels = check_int("camera.pixels", d["pixels"])
     filt = check_choice("camera.filter", d.get("filter", "tent"), FILTERS)
-    return Camera(position, (direction[0] / length, direction[1] / length), fov, pixels, filt)
+    return Camera(position, direction, fov, pixels, filt)
 
 
 def _check_shape(i: int, d: Any) -> Shape:
@@ -269,7 +278,7 @@ def _check_shape(i: int, d: Any) -> Shape:
         raise ValidationError(f"{path}.emission", f"must be >= 0, got {d['emission']!r}")
     one_sided = check_bool(f"{path}.one_sided", d.get("one_sided", False))
     if kind == "circle":
-        center = _check_point(f"{path}.center", d["center"])
+        center = check_point(f"{path}.center", d["center"])
         radius = check_finite(f"{path}.radius", d["radius"])
         if radius <= 0.0:
             raise ValidationError(f"{path}.radius", f"must be > 0, got {d['radius']!r}")
@@ -283,7 +292,7 @@ def _check_shape(i: int, d: Any) -> Shape:
         raise ValidationError(
             f"{path}.points", f"a {kind} needs >= {_MIN_POINTS[kind]} points, got {len(raw)}"
         )
-    points = tuple(_check_point(f"{path}.points[{k}]", p) for k, p in enumerate(raw))
+    points = tuple(check_point(f"{path}.points[{k}]", p) for k, p in enumerate(raw))
     fade = _check_range(f"{path}.fade", d.get("fade", 0.0), 0.0, 0.5)
     shape = Shape(name, kind, points, None, None, albedo, emission, one_sided, fade)
     scale = max(1.0, float(np.max(np.abs(np.array(points)))))

@@ -299,3 +299,5 @@ def test12_reparam_refuses_a_box_filter_and_points_to_the_tent():
     assert set(GRADIENT_METHODS.names) == {"naive", "finite_difference", "boundary", "reparam"}
     with pytest.raises(ValidationError, match="normal"):
         irradiance(SKY, (0.0, 0.0), (0.0, 0.0))
+    with pytest.raises(ValidationError, match=r"^point\[1\]: must be finite"):
+        irradiance(SKY, (0.0, float("nan")), (0.0, 1.0))
