@@ -9,13 +9,14 @@ gradient methods are in :data:`GRADIENT_METHODS` (``naive``, ``finite_difference
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
-from flatland.core.validate import check_int, check_seed
+from flatland.core.validate import ValidationError, check_int, check_seed
 from sphere3d.methods import GRADIENT_METHODS
-from sphere3d.scene import load_scene
+from sphere3d.scene import check_vector, load_scene
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
@@ -130,8 +131,12 @@ def irradiance(
     """
     scene = load_scene(scene)
     param = scene.check_param(param) if param is not None else None
-    point = PointTask.check_vector("point", point)
-    normal = PointTask.check_vector("normal", normal, unit=True)
+    point = check_vector("point", point)
+    normal = check_vector("normal", normal)
+    length = math.hypot(*normal)
+    if length == 0.0:
+        raise ValidationError("normal", f"must not be zero, got {list(normal)}")
+    normal = tuple(x / length for x in normal)
     n = check_int("n", n)
     seed = check_seed("seed", seed)
     batches = resolve_batches(n, batches, "n")

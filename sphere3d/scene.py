@@ -59,7 +59,16 @@ from flatland.core.validate import (
 from sphere3d import shapes as shp
 from sphere3d.sampling import FILTERS
 
-__all__ = ["SHAPE_KEYS", "SHAPE_TYPES", "Camera", "Scene", "Shape", "list_scenes", "load_scene"]
+__all__ = [
+    "SHAPE_KEYS",
+    "SHAPE_TYPES",
+    "Camera",
+    "Scene",
+    "Shape",
+    "check_vector",
+    "list_scenes",
+    "load_scene",
+]
 
 SHAPE_TYPES = ("rectangle", "box", "icosphere", "disk", "mesh")
 COMMON_KEYS = ("name", "type", "translate", "rotate", "scale", "albedo", "emission", "fade")
@@ -101,8 +110,13 @@ def _check_keys(field: str, d: Any, allowed: tuple[str, ...], required: tuple[st
             raise ValidationError(f"{field}.{key}" if field else key, "is required")
 
 
-def _vec(field: str, value: Any, n: int = 3, positive: bool = False) -> tuple[float, ...]:
-    if not isinstance(value, list | tuple) or len(value) != n:
+def check_vector(field: str, value: Any, n: int = 3, positive: bool = False) -> tuple[float, ...]:
+    """``value`` (a list, tuple or 1D array) as ``n`` finite floats, > 0 with ``positive``."""
+    if (
+        not isinstance(value, list | tuple | np.ndarray)
+        or (isinstance(value, np.ndarray) and value.ndim != 1)
+        or len(value) != n
+    ):
         raise ValidationError(field, f"must be a list of {n} numbers, got {value!r}")
     check = check_positive if positive else check_finite
     return tuple(check(f"{field}[{i}]", x) for i, x in enumerate(value))
@@ -131,9 +145,9 @@ class Camera:
     def from_dict(d: Any) -> Camera:
         _check_keys("camera", d, CAMERA_KEYS, ("position", "look_at", "fov", "width", "height"))
         d = {**CAMERA_DEFAULTS, **d}
-        position = _vec("camera.position", d["position"])
-        look_at = _vec("camera.look_at", d["look_at"])
-        up = _vec("camera.up", d["up"])
+        position = check_vector("camera.position", d["position"])
+        look_at = check_vector("camera.look_at", d["look_at"])
+        up = check_vector("camera.up", d["up"])
         fov = check_positive("camera.fov", d["fov"])
         if fov >= math.pi:
             raise ValidationError("camera.fov", f"must be < π (radians), got {d['fov']!r}")
@@ -209,8 +223,8 @@ class Shape:
         return Shape(
             name=name,
             type=kind,
-            translate=_vec(f"{field}.translate", d["translate"]),
-            rotate=_vec(f"{field}.rotate", d["rotate"]),
+            translate=check_vector(f"{field}.translate", d["translate"]),
+            rotate=check_vector(f"{field}.rotate", d["rotate"]),
             scale=check_positive(f"{field}.scale", d["scale"]),
             albedo=_unit_interval(f"{field}.albedo", d["albedo"]),
             emission=check_positive(f"{field}.emission", d["emission"], allow_zero=True),
@@ -238,10 +252,10 @@ def _geometry(
 ) -> tuple[tuple, shp.LocalMesh]:
     """The type-specific keys (validated) and the local mesh they describe."""
     if kind == "rectangle":
-        size = _vec(f"{field}.size", d.get("size", [1.0, 1.0]), 2, positive=True)
+        size = check_vector(f"{field}.size", d.get("size", [1.0, 1.0]), 2, positive=True)
         return (("size", size),), shp.rectangle(*size)
     if kind == "box":
-        size = _vec(f"{field}.size", d.get("size", [1.0, 1.0, 1.0]), 3, positive=True)
+        size = check_vector(f"{field}.size", d.get("size", [1.0, 1.0, 1.0]), 3, positive=True)
         return (("size", size),), shp.box(*size)
     if kind == "icosphere":
         radius = check_positive(f"{field}.radius", d.get("radius", 1.0))

@@ -22,7 +22,6 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import stream
-from flatland.core.validate import ValidationError, check_finite
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
     Identity,
@@ -166,16 +165,6 @@ class PointTask:
     seed: int
     batches: int
     tracer: str = "embree"
-
-    @staticmethod
-    def check_vector(field: str, value: Any, unit: bool = False) -> tuple[float, float, float]:
-        if not isinstance(value, list | tuple | np.ndarray) or len(value) != 3:
-            raise ValidationError(field, f"must be 3 numbers, got {value!r}")
-        out = tuple(check_finite(f"{field}[{i}]", float(x)) for i, x in enumerate(value))
-        length = float(np.linalg.norm(out))
-        if unit and length == 0.0:
-            raise ValidationError(field, f"must not be zero, got {list(out)}")
-        return tuple(x / length for x in out) if unit else out
 
     @property
     def shape(self) -> tuple[()]:

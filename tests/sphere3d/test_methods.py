@@ -131,6 +131,13 @@ def test08_reparam_refuses_the_box_filter_and_fd_a_too_large_scale_step():
         s3.irradiance("shadow", [0, 0, 0], [0, 0, 0])
     with pytest.raises(ValidationError, match=r"point\[1\]: must be finite"):
         s3.irradiance("shadow", [0, float("inf"), 0], [0, 0, 1])
+    # each coordinate is checked as given, not after float() (which turned True into 1.0 and
+    # raised a bare "could not convert string to float" for a string)
+    for bad in ("a", True):
+        with pytest.raises(ValidationError, match=r"point\[0\]: must be a real number"):
+            s3.irradiance("shadow", [bad, 0, 0], [0, 0, 1])
+    with pytest.raises(ValidationError, match=r"normal: must be a list of 3 numbers"):
+        s3.irradiance("shadow", [0, 0, 0], np.eye(3))
 
 
 def test09_paired_and_kernel_free_variants_run_on_images():
