@@ -124,24 +124,21 @@ def _bisect(
     trace_origin: np.ndarray,
     inside: np.ndarray,
     outside: np.ndarray,
-    shape: np.ndarray,
     hits: Hits,
     normal: np.ndarray | None,
 ) -> Hits:
-    """Move a hit on ``shape`` towards its silhouette: :data:`REFINE` bisections between a direction
+    """Move ``hits`` towards their shape's silhouette: :data:`REFINE` bisections between a direction
     that hits the shape (``inside``, with ``hits``) and one that does not (``outside``)."""
     for _ in range(REFINE):
         mid = inside + outside
         mid = mid / norm(mid)[:, None]
         h = state.tracer.intersect(trace_origin, mid)
-        on = h.shape == shape
+        on = h.shape == hits.shape  # the shape never changes: hits are only replaced where it matches
         if normal is not None:
             on = on & (dot(mid, normal) > 0.0)
         inside = np.where(on[:, None], mid, inside)
         outside = np.where(on[:, None], outside, mid)
-        hits = Hits(
-            *(np.where(on, getattr(h, f), getattr(hits, f)) for f in ("shape", "triangle", "t", "u", "v"))
-        )
+        hits = h.where(on, hits)
     return hits
 
 
@@ -233,11 +230,10 @@ def select_points(
         first = use_p0[refine]
         inside = np.where(first[:, None], d0[refine], d1[refine])
         outside = np.where(first[:, None], d1[refine], d0[refine])
-        start = Hits(*(np.where(first, getattr(h0, f)[refine], getattr(h1, f)[refine])
-                       for f in ("shape", "triangle", "t", "u", "v")))  # fmt: skip
+        start = h0.take(refine).where(first, h1.take(refine))
         tro = np.broadcast_to(trace_origin, (m, 3))[refine]
         nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[refine]
-        edge = _bisect(state, tro, inside, outside, start.shape, start, nrm)
+        edge = _bisect(state, tro, inside, outside, start, nrm)
         moved = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
         p0[refine] = np.where(first[:, None], moved, p0[refine])
         p1[refine] = np.where(first[:, None], p1[refine], moved)

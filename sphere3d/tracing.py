@@ -21,7 +21,7 @@ every triangle); the tests use it to check the Embree path on small meshes.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -73,24 +73,24 @@ class Hits:
         """True where the ray hit something."""
         return self.shape >= 0
 
+    def where(self, mask: np.ndarray, other: Hits) -> Hits:
+        """These hits where ``mask`` is True, ``other``'s elsewhere (ray by ray)."""
+        return Hits(*(np.where(mask, getattr(self, f), getattr(other, f)) for f in FIELDS))
+
     def without(self, mask: np.ndarray) -> Hits:
         """The same hits with the rays where ``mask`` is True turned into misses."""
-        mask = np.asarray(mask, dtype=bool)
-        return Hits(
-            np.where(mask, MISS, self.shape),
-            np.where(mask, MISS, self.triangle),
-            np.where(mask, FAR, self.t),
-            np.where(mask, 0.0, self.u),
-            np.where(mask, 0.0, self.v),
-        )
+        return Hits(MISS, MISS, FAR, 0.0, 0.0).where(np.asarray(mask, dtype=bool), self)
 
     def take(self, index: np.ndarray) -> Hits:
         """The hits of the rays at ``index``."""
-        return Hits(self.shape[index], self.triangle[index], self.t[index], self.u[index], self.v[index])
+        return Hits(*(getattr(self, f)[index] for f in FIELDS))
 
     def reshape(self, *shape: int) -> Hits:
         """The same hits with the ray axis reshaped (e.g. to (samples, probes))."""
-        return Hits(*(getattr(self, f).reshape(*shape) for f in ("shape", "triangle", "t", "u", "v")))
+        return Hits(*(getattr(self, f).reshape(*shape) for f in FIELDS))
+
+
+FIELDS = tuple(f.name for f in fields(Hits))
 
 
 def _rays(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
