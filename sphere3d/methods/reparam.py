@@ -9,6 +9,7 @@ implementation (DESIGN 2.6–2.9).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -196,19 +197,11 @@ def _check_kappa(name: str, value: Any) -> float | None:
     return None if value is None else check_positive(name, value)
 
 
-def _check_probes(name: str, value: Any) -> int:
-    return check_int(name, value, minimum=1)
-
-
-def _check_spread(name: str, value: Any) -> float:
-    return check_positive(name, value, allow_zero=True)
-
-
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, _check_kappa),
-    Option("probes", 4, _check_probes),
-    Option("spread", 3.0, _check_spread),
+    Option("probes", 4, check_int),  # an integer >= 1
+    Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("paired", False, check_bool),
 )
 def reparam(
