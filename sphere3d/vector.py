@@ -14,7 +14,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach
 
-__all__ = ["cross", "dot", "frame", "is_dual_any", "norm", "normalize", "scatter", "zeros"]
+__all__ = ["cross", "dot", "frame", "norm", "normalize", "scatter", "zeros"]
 
 
 def dot(a: Any, b: Any) -> Any:
@@ -52,11 +52,6 @@ def frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t = np.stack([1.0 + sign * n[..., 0] ** 2 * a, sign * b, -sign * n[..., 0]], axis=-1)
     s = np.stack([b, sign + n[..., 1] ** 2 * a, -n[..., 1]], axis=-1)
     return t, s
-
-
-def is_dual_any(*xs: Any) -> bool:
-    """True if any argument carries a tangent."""
-    return any(isinstance(x, Dual) for x in xs)
 
 
 def zeros(shape: tuple[int, ...], dual: bool) -> Any:
