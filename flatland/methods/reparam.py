@@ -10,6 +10,7 @@ implementation (DESIGN 2.9).
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -135,25 +136,13 @@ class ReparamHooks(Hooks):
         return Members(points, np.exp(kappa * (c - detach(c))), self.paired)
 
 
-def _check_int0(name: str, value: Any) -> int:
-    return check_int(name, value, minimum=0)
-
-
-def _check_int1(name: str, value: Any) -> int:
-    return check_int(name, value, minimum=1)
-
-
-def _check_spread(name: str, value: Any) -> float:
-    return check_positive(name, value, allow_zero=True)
-
-
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, check_positive),
     Option("kappa_film", None, check_positive),
-    Option("probes", 4, _check_int1),
-    Option("spread", 3.0, _check_spread),
-    Option("refine", 2, _check_int0),
+    Option("probes", 4, check_int),
+    Option("spread", 3.0, partial(check_positive, allow_zero=True)),
+    Option("refine", 2, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
 )
 def reparam(
