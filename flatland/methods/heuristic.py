@@ -61,11 +61,15 @@ PARALLEL = 0.99
 
 @dataclass(frozen=True)
 class Choice:
-    """Per sample: whether a point was chosen (``ok``) and the attached point (Dual, (n, 2))."""
+    """Per sample: which rule chose the point (``code``) and the attached point (Dual, (n, 2))."""
 
-    ok: np.ndarray
     point: Any
     code: np.ndarray  # -1 none, 0 probe 0's point, 1 the partner's point, 2 tangent-line intersection
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Whether a point was chosen (else the transform is the identity)."""
+        return self.code >= 0
 
 
 def _dot(a: Any, b: Any) -> Any:
@@ -189,4 +193,4 @@ def choose_points(
         e0 = np.stack([-n0[:, 1], n0[:, 0]], axis=1)
         # attached corner: its derivative follows both moving tangent lines
         point[corner] = p0 + (_dot(p1 - p0, n1) / _dot(e0, n1))[:, None] * e0
-    return Choice(code >= 0, point, code)
+    return Choice(point, code)
