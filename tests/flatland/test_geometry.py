@@ -50,11 +50,15 @@ def _brute_force(geom, o, d):
     return prim, best
 
 
+def _random_rays(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` rays with origins uniform in [-3, 3]² (around the scene) and uniform directions."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-3, 3, (n, 2)), direction(rng.uniform(-np.pi, np.pi, n))
+
+
 def test01_cast_matches_a_brute_force_reference():
     geom = bind(load_scene(SCENE))
-    rng = np.random.default_rng(1)
-    origins = rng.uniform(-3, 3, (300, 2))
-    dirs = direction(rng.uniform(-np.pi, np.pi, 300))
+    origins, dirs = _random_rays(1, 300)
     hits = cast(geom, origins, dirs)
     for i in range(300):
         prim, dist = _brute_force(geom, origins[i], dirs[i])
@@ -66,9 +70,7 @@ def test01_cast_matches_a_brute_force_reference():
 
 def test02_hit_coordinates_locate_the_hit_point():
     geom = bind(load_scene(SCENE))
-    rng = np.random.default_rng(2)
-    origins = rng.uniform(-3, 3, (500, 2))
-    dirs = direction(rng.uniform(-np.pi, np.pi, 500))
+    origins, dirs = _random_rays(2, 500)
     hits = cast(geom, origins, dirs)
     rows = np.flatnonzero(hits.hit)
     point = origins[rows] + hits.dist[rows, None] * dirs[rows]
@@ -78,18 +80,12 @@ def test02_hit_coordinates_locate_the_hit_point():
     assert np.all((hits.coord[rows][seg] >= 0) & (hits.coord[rows][seg] <= 1))
 
 
-def test03_chunking_and_ignore():
+def test03_chunking_and_ignore(monkeypatch):
     geom = bind(load_scene(SCENE))
-    rng = np.random.default_rng(3)
-    origins = rng.uniform(-3, 3, (400, 2))
-    dirs = direction(rng.uniform(-np.pi, np.pi, 400))
+    origins, dirs = _random_rays(3, 400)
     whole = cast(geom, origins, dirs)
-    saved = geometry.MAX_PAIRS
-    try:
-        geometry.MAX_PAIRS = 13  # two rays per chunk
-        chunked = cast(geom, origins, dirs)
-    finally:
-        geometry.MAX_PAIRS = saved
+    monkeypatch.setattr(geometry, "MAX_PAIRS", 13)  # two rays per chunk
+    chunked = cast(geom, origins, dirs)
     assert np.array_equal(whole.prim, chunked.prim) and np.array_equal(whole.dist, chunked.dist)
     ignored = cast(geom, origins, dirs, ignore=whole.prim)
     assert not np.any((ignored.prim == whole.prim) & whole.hit)
