@@ -176,12 +176,12 @@ class Transforms(Protocol):
         shading: Shading,
         mu: np.ndarray,
         pdf: np.ndarray,
-        hits: Hits,
         kernel: np.random.Generator,
         probes: np.random.Generator,
     ) -> Any:
-        """The per-sample estimate of the cosine-sampled integral (samples μ ~ cos, density ``pdf``,
-        first hits ``hits``), using :meth:`Shading.evaluate_bsdf` for the integrand."""
+        """The per-sample estimate of the cosine-sampled integral (samples μ ~ cos, density ``pdf``),
+        using :meth:`Shading.trace` and :meth:`Shading.evaluate_bsdf` for the integrand (a method
+        that evaluates it elsewhere than along μ need not trace μ)."""
         ...
 
 
@@ -194,9 +194,9 @@ class Identity:
     def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
         return Rotation.identity((len(shading),))
 
-    def bsdf(self, shading, mu, pdf, hits, kernel, probes):
+    def bsdf(self, shading, mu, pdf, kernel, probes):
         rotated = mu if not shading.state.dual else Dual(mu)
-        return shading.evaluate_bsdf(mu, rotated, hits) / pdf
+        return shading.evaluate_bsdf(mu, rotated, shading.trace(mu)) / pdf
 
 
 def _emitter_term(
@@ -250,7 +250,7 @@ def irradiance_samples(
     n0 = detach(shading.n)
     mu = sample_cosine_hemisphere(u[:, 3:5], n0)
     pdf = pdf_cosine_hemisphere(mu, n0)
-    return total + transforms.bsdf(shading, mu, pdf, shading.trace(mu), kernel, probes)
+    return total + transforms.bsdf(shading, mu, pdf, kernel, probes)
 
 
 def pixel_samples(

@@ -38,7 +38,7 @@ from sphere3d.sampling import (
 )
 from sphere3d.state import SceneState
 from sphere3d.tasks import ImageTask, PointTask, Tally
-from sphere3d.tracing import Hits, attached_points
+from sphere3d.tracing import attached_points
 from sphere3d.vector import dot, norm, scatter, zeros
 
 __all__ = ["ReparamTransforms", "reparam"]
@@ -147,12 +147,11 @@ class ReparamTransforms:
         log_k = self.kappa * dot(rotated, centre)  # the vMF normalization cancels in the ratio
         return np.exp(log_k - detach(log_k))
 
-    def bsdf(
-        self, shading: Shading, mu: np.ndarray, pdf: np.ndarray, hits: Hits, kernel: Any, probes: Any
-    ) -> Any:
+    def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray, kernel: Any, probes: Any) -> Any:
         """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
-        if self.paired:
+        if self.paired:  # evaluated at the two members only: μ itself is not traced
             return self._paired(shading, mu, pdf, kernel, probes)
+        hits = shading.trace(mu)
         # samples whose integrand is 0 with zero derivative need no rotation (and no probes)
         live = np.flatnonzero(shading.contributes(mu, hits))
         sub, mu_l, hits_l = shading.take(live), mu[live], hits.take(live)
