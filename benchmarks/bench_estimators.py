@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from benchmarks import Row, best_seconds
 from flatland import estimate
+from flatland.core.table import method_label
 from flatland.textbook_report import DEFAULT_METHODS
 
 N = 1_000_000
@@ -18,6 +19,6 @@ def run() -> list[Row]:
             seconds = best_seconds(
                 lambda m=method, o=options, i=integral, t=theta: estimate(i, t, m, n=N, seed=0, **o)
             )
-            label = method + "".join(f" {k}={v}" for k, v in options.items())
+            label = method_label(method, options.items())
             rows.append(Row("textbook estimators", f"{integral}: {label}", N / seconds / 1e6, "M samples/s"))
     return rows
