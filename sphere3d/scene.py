@@ -41,7 +41,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from dataclasses import field as dataclass_field
 from importlib import resources
 from pathlib import Path
@@ -122,6 +122,11 @@ def check_vector(field: str, value: Any, n: int = 3, positive: bool = False) -> 
     return tuple(check(f"{field}[{i}]", x) for i, x in enumerate(value))
 
 
+def _json_value(value: Any) -> Any:
+    """A validated field as JSON writes it: tuples as lists."""
+    return list(value) if isinstance(value, tuple) else value
+
+
 def _unit_interval(field: str, value: Any) -> float:
     out = check_finite(field, value)
     if not 0.0 <= out <= 1.0:
@@ -166,15 +171,7 @@ class Camera:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "position": list(self.position),
-            "look_at": list(self.look_at),
-            "up": list(self.up),
-            "fov": self.fov,
-            "width": self.width,
-            "height": self.height,
-            "filter": self.filter,
-        }
+        return {f.name: _json_value(getattr(self, f.name)) for f in fields(self)}
 
     def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Unit (forward, right, up) vectors of the camera."""
@@ -234,15 +231,13 @@ class Shape:
         )
 
     def to_dict(self) -> dict[str, Any]:
+        # name and type, the type-specific keys, then the common ones in field order
         out: dict[str, Any] = {"name": self.name, "type": self.type}
-        out.update({k: (list(v) if isinstance(v, tuple) else v) for k, v in self.geometry})
+        out.update((k, _json_value(v)) for k, v in self.geometry)
         out.update(
-            translate=list(self.translate),
-            rotate=list(self.rotate),
-            scale=self.scale,
-            albedo=self.albedo,
-            emission=self.emission,
-            fade=self.fade,
+            (f.name, _json_value(getattr(self, f.name)))
+            for f in fields(self)
+            if f.name not in ("name", "type", "geometry", "mesh")
         )
         return out
 
