@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import special
+from scipy import special, stats
 
 from flatland.core.stats import normal_quantile, sidak
 from flatland.core.validate import ValidationError
@@ -250,6 +250,14 @@ def test09_reparam_primal_is_bit_identical_to_naive(name):
 
 
 def test10_seeds_batches_and_standard_errors():
+    """Same seed, same image; batch standard errors match the spread of independent renders.
+
+    With Gaussian batch means, (std over R = 30 renders / stderr from B = 8 batches)² is
+    F(R - 1, B - 1) per pixel, independently across pixels; the median ratio over the
+    live pixels must lie in the central 1 - ALPHA interval of that null, drawn with a
+    fixed seed. Measured median (reference seeds 100..103): 1.03, 0.89, 0.95, 0.90
+    (the interval is [0.73, 1.56] for the 10 live pixels).
+    """
     scene = load_scene("shadow").with_camera(pixels=12)
     a, b = render(scene, spp=32, seed=12), render(scene, spp=32, seed=12)
     assert np.array_equal(a.value, b.value) and a.batches == 16
@@ -257,11 +265,14 @@ def test10_seeds_batches_and_standard_errors():
     assert render(scene, spp=12).batches == 12 and render(scene, spp=17).batches == 1
     assert np.all(np.isinf(render(scene, spp=17).stderr))
     # batch standard errors describe the spread between independent renders
-    runs = np.array([render(scene, spp=64, seed=s, batches=8).value for s in range(30)])
-    se = render(scene, spp=64, seed=100, batches=8).stderr
+    r, b = 30, 8
+    runs = np.array([render(scene, spp=64, seed=s, batches=b).value for s in range(r)])
+    se = render(scene, spp=64, seed=100, batches=b).stderr
     live = se > 0
-    ratio = runs.std(axis=0, ddof=1)[live] / se[live]
-    assert 0.6 < np.median(ratio) < 1.5
+    median = np.median(runs.std(axis=0, ddof=1)[live] / se[live])
+    null = stats.f.rvs(r - 1, b - 1, size=(100_000, np.count_nonzero(live)), random_state=0)
+    lo, hi = np.quantile(np.median(np.sqrt(null), axis=1), [0.5 * ALPHA, 1.0 - 0.5 * ALPHA])
+    assert lo <= median <= hi, (lo, median, hi)
 
 
 @pytest.mark.parametrize(
