@@ -131,7 +131,10 @@ def test08_probe_patterns_and_mean_points():
     kappa, spread = 1e4, 3.0
     angle = vmf_spread_angle(kappa, spread)
     assert angle == pytest.approx(spread / math.sqrt(kappa), rel=1e-3)
-    assert vmf_spread_angle(1.0, 3.0) <= math.pi
+    # the ring holds the Rayleigh probability of ``spread`` σ under the vMF's own angle CDF,
+    # P(angle <= r) = (1 - e^{-κ(1 - cos r)}) / (1 - e^{-2κ}), also where the vMF is far from Gaussian
+    r = vmf_spread_angle(1.0, spread)
+    assert math.expm1(-(1.0 - math.cos(r))) / math.expm1(-2.0) == pytest.approx(-math.expm1(-4.5), rel=1e-12)
     centre = normalize(np.array([[0.2, -0.3, 0.9], [0.0, 0.0, -1.0]]))
     d = ring_directions(centre, angle, 4, np.array([0.1, 0.7]))
     np.testing.assert_allclose(d[:, 0], centre)
