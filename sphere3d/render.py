@@ -33,7 +33,7 @@ def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None)
         Same seed, same image; the primary samples are those of every gradient method.
     batches : int, optional
         Independent batches behind the standard errors (must divide ``spp``);
-        default: the largest divisor of ``spp`` up to 8.
+        default: the largest divisor of ``spp`` up to 16 (:func:`~flatland.core.image.resolve_batches`).
 
     Returns
     -------
