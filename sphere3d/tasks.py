@@ -175,13 +175,12 @@ class PointTask:
         transforms = transforms or Identity()
         state = self.scene.state(self.param, theta, self.tracer)
         per_batch = self.n // self.batches
-        jobs = [
-            (b, c, start) for b in range(self.batches) for c, start in enumerate(range(0, per_batch, CHUNK))
-        ]
+        starts = range(0, per_batch, CHUNK)  # memory chunks of one batch
+        k = len(starts)
 
-        def job(i: int) -> Any:  # one memory chunk of one batch
-            b, c, start = jobs[i]
-            size = min(CHUNK, per_batch - start)
+        def job(i: int) -> Any:  # chunk c of batch b
+            b, c = divmod(i, k)
+            size = min(CHUNK, per_batch - starts[c])
             x = np.broadcast_to(np.array(self.point), (size, 3)).copy()
             nrm = np.broadcast_to(np.array(self.normal), (size, 3)).copy()
             if state.dual:
@@ -190,7 +189,6 @@ class PointTask:
             kernel, probes = stream(self.seed, "kernel", b, c), stream(self.seed, "probes", b, c)
             return np.sum(irradiance_samples(Shading.at(state, x, nrm), u, transforms, kernel, probes))
 
-        sums = _map(job, range(len(jobs)))
-        means = [sum(s for (b, _, _), s in zip(jobs, sums, strict=True) if b == batch) / per_batch
-                 for batch in range(self.batches)]  # fmt: skip
+        sums = _map(job, range(self.batches * k))  # batch-major
+        means = [sum(sums[b * k : (b + 1) * k]) / per_batch for b in range(self.batches)]
         return _tally(means, ())
