@@ -122,6 +122,18 @@ class Members:
     paired: bool = False
     density: np.ndarray | None = None
 
+    def flat(self) -> tuple[Any, np.ndarray]:
+        """All evaluation points as one flat array, and the index of each one's sample."""
+        n, m = np.shape(detach(self.points))
+        return self.points.reshape(-1), np.repeat(np.arange(n), m)
+
+    def reduce(self, e_flat: Any) -> Any:
+        """Per-sample estimates from the members' estimates ``e_flat`` (in :meth:`flat` order)."""
+        e = e_flat.reshape(np.shape(detach(self.points)))
+        if self.weights is not None:
+            e = e * self.weights
+        return combine(e, self.weights, self.paired)
+
 
 def combine(e: Any, w: Any, paired: bool) -> Any:
     """Per-sample estimate from member estimates ``e`` (n, m) carrying weights ``w`` (value 1).
@@ -279,20 +291,14 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray) 
 
     xr = x[idx]
     members = ctx.hooks.directions(ctx, xr, ign, phi)
-    m = np.shape(detach(members.points))[1]
-    flat = members.points.reshape(-1)
-    rep = np.repeat(np.arange(phi.size), m)
+    flat, rep = members.flat()
     d = direction(flat)
     hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
     li, _ = incident(ctx.geom, xr[rep], d, hits)
     nr = normal[idx][rep]
     cos = d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1]
     f = li * np.where(detach(cos) > 0.0, cos, 0.0)
-    e = (f * inv[rep]).reshape(phi.size, m)
-    if members.weights is not None:
-        e = e * members.weights
-    per_sample = combine(e, members.weights, members.paired)
-    total = per_sample.reshape(techniques, n).sum(axis=0)
+    total = members.reduce(f * inv[rep]).reshape(techniques, n).sum(axis=0)
     extra = ctx.hooks.shading_extra(ctx, x, normal, ignore)
     if extra is not None:
         total = total + Dual(np.zeros(n), extra)
@@ -331,9 +337,8 @@ def _film_pass(ctx: Context, job: Job, pixel: np.ndarray, u: np.ndarray) -> Any:
     width = cam.pixel_width
     t = filter_sample(cam.filter, u[:, 0], centers, width)
     members = ctx.hooks.film(ctx, t, pixel)
+    flat, rep = members.flat()
     m = np.shape(detach(members.points))[1]
-    flat = members.points.reshape(-1)
-    rep = np.repeat(np.arange(t.size), m)
     u_shade = u[rep, 1:]
     if m > 1:  # the other members of a pair get their own shading samples
         extra = ctx.rng("paired").random((t.size, m - 1, 3))
@@ -343,10 +348,7 @@ def _film_pass(ctx: Context, job: Job, pixel: np.ndarray, u: np.ndarray) -> Any:
     k_sample = filter_value(cam.filter, t, centers, width) if members.density is None else members.density
     k_sample = k_sample[rep]
     ratio = k_eval / np.where(k_sample > 0.0, k_sample, 1.0)
-    e = (ratio * radiance).reshape(t.size, m)
-    if members.weights is not None:
-        e = e * members.weights
-    return combine(e, members.weights, members.paired)
+    return members.reduce(ratio * radiance)
 
 
 # ------------------------------------------------------------------ work plan and driver
