@@ -49,6 +49,7 @@ from sphere3d.sampling import (
     sample_cosine_hemisphere,
     sample_filter,
     sample_mesh,
+    solid_angle_pdf,
 )
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits, face_normals, intersect_triangles
@@ -136,7 +137,7 @@ class Shading:
             front = detach(cos_y) > 0.0
             e, cos_y, tri = e[front], cos_y[front], tri[front]
             it_t, b1, b2 = it.t[front], it.b1[front], it.b2[front]
-            p_light = it_t * it_t / (state.emitter_area * cos_y)
+            p_light = solid_angle_pdf(1.0 / state.emitter_area, it_t, cos_y)
             p_cos = cos_x[e] * INV_PI
             # balance heuristic at the rotated direction, θ-dependent on both sides   (MIS, see module doc)
             out[e] = state.emitted(tri, b1, b2) * (p_cos / (p_cos + p_light))
@@ -222,14 +223,14 @@ def _emitter_term(
     if vis.size == 0:
         return scatter(m, vis, 0.0, state.dual)
     # θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
-    pdf = dist[vis] ** 2 / (float(detach(state.emitter_area)) * cos_y[vis])
+    pdf = solid_angle_pdf(1.0 / float(detach(state.emitter_area)), dist[vis], cos_y[vis])
     sub = shading.take(vis)
     rotated = transforms.emitter(sub, probes).apply(w[vis])
     # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
     it = intersect_triangles(sub.x, rotated, state.triangles[tri[vis]])
     cos_x_d = np.maximum(dot(sub.n, rotated), 0.0)
     cos_y_d = -dot(it.normal, rotated)
-    p_light = it.t * it.t / (state.emitter_area * cos_y_d)
+    p_light = solid_angle_pdf(1.0 / state.emitter_area, it.t, cos_y_d)
     p_cos = cos_x_d * INV_PI
     f = state.emitted(tri[vis], it.b1, it.b2) * cos_x_d
     return scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
