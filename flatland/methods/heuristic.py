@@ -152,9 +152,9 @@ def choose_points(
         # the corner: p0 + s e0 on line 0 with (p0 + s e0 - p1)·n1 = 0, e0 = n0 turned by 90 degrees
         e0 = np.stack([-n0[:, 1], n0[:, 0]], axis=1)
         den = _dot(e0, n1)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):  # parallel lines: q not finite, rejected below
             q = p0 + (_dot(p1 - p0, n1) / den)[:, None] * e0
-        ahead = _dot(q - o, dirs0[both]) > 0.0
+            ahead = _dot(q - o, dirs0[both]) > 0.0
         sub = np.where((sub == 2) & ~(np.isfinite(q).all(axis=1) & ahead), 0, sub)
         code[both] = sub
 

@@ -34,9 +34,11 @@ import pytest
 
 import flatland.integrator as integrator
 import flatland.methods.boundary as boundary
+from flatland.core.dual import detach, tangent, variable
 from flatland.core.stats import normal_quantile, sidak
+from flatland.methods.heuristic import choose_points
 from flatland.render import render_gradient
-from flatland.scene import list_scenes, load_scene
+from flatland.scene import bind, list_scenes, load_scene
 
 ALPHA = 1e-3
 RES = 0.01
@@ -161,3 +163,52 @@ def test03_results_do_not_depend_on_memory_chunks(monkeypatch):
     pieces = render_gradient(scene, "ball.translate.y", method="boundary", spp=64, seed=9)
     assert np.allclose(whole.value, pieces.value, rtol=1e-12, atol=1e-15)
     assert np.allclose(whole.derivative, pieces.derivative, rtol=1e-9, atol=1e-12)
+
+
+def _segment(name: str, a: list[float], b: list[float]) -> dict:
+    return {"name": name, "type": "segment", "points": [a, b]}
+
+
+HEURISTIC_SCENE = {
+    "name": "probes",
+    "camera": {"position": [0.0, 0.0], "direction": [0.0, 1.0], "fov": 1.0, "pixels": 4},
+    "shapes": [
+        _segment("near", [-1.0, 1.0], [1.0, 1.0]),  # primitive 0, in front of 1
+        _segment("far", [-1.0, 2.0], [1.0, 2.0]),  # primitive 1
+        _segment("left", [-1.0, 1.0], [0.0, 2.0]),  # 2 and 3: a roof seen from below, corner (0, 2)
+        _segment("right", [0.0, 2.0], [1.0, 1.0]),
+        # 4 and 5: |n0·n1| = 1 / sqrt(1 + 0.05²) = 0.9988 > PARALLEL, though their lines meet at (0, 3)
+        _segment("west", [-1.0, 3.0], [0.0, 3.0]),
+        _segment("east", [0.0, 3.0], [1.0, 2.95]),
+    ],
+}
+
+
+def test04_probe_heuristic_one_configuration_per_rule():
+    """Hand-made probe hits from o = (0, 0) looking along +y, four probes in order (DESIGN 2.8).
+
+    Expected points by hand: a segment's hit at barycentric u is a + u (b - a); the roof's
+    corner under ``right.translate.x`` = θ is where y = x + 2 meets y = 2 - (x - θ), i.e.
+    (θ/2, 2 + θ/2), moving with tangent (1/2, 1/2).
+    """
+    miss = -1
+    cases = [  # (probe primitives, probe coordinates, rule code, chosen point)
+        ([0, 0, 0, 0], [0.2, 0.4, 0.6, 0.8], -1, None),  # one primitive in sight: the identity
+        ([0, miss, miss, miss], [0.5, 0, 0, 0], 0, [0.0, 1.0]),  # only probe 0 hits
+        ([miss, miss, miss, 0], [0, 0, 0, 0.5], 1, [0.0, 1.0]),  # only the partner hits
+        ([0, 0, 1, 1], [0.4, 0.5, 0.5, 0.6], 0, [0.0, 1.0]),  # probe 0's line occludes: its hit by the switch
+        ([1, 1, 0, 0], [0.4, 0.5, 0.5, 0.6], 1, [0.0, 1.0]),  # the partner's line occludes
+        ([4, 4, 5, 5], [0.5, 0.9, 0.1, 0.5], 0, [-0.1, 3.0]),  # nearly parallel lines: probe 0's shape
+        ([2, 2, 3, 3], [0.5, 0.8, 0.2, 0.5], 2, [0.0, 2.0]),  # neither occludes: the lines' corner
+    ]
+    prim = np.array([c[0] for c in cases])
+    coord = np.array([c[1] for c in cases], dtype=np.float64)
+    n = prim.shape[0]
+    geom = bind(load_scene(HEURISTIC_SCENE), "right.translate.x", variable(0.0))
+    choice = choose_points(geom, np.zeros((n, 2)), prim, coord, np.tile([0.0, 1.0], (n, 1)))
+    assert choice.code.tolist() == [c[2] for c in cases]
+    assert choice.ok.tolist() == [c[3] is not None for c in cases]
+    for i, (_, _, _, point) in enumerate(cases):
+        if point is not None:
+            assert np.allclose(detach(choice.point)[i], point), i
+    assert np.allclose(tangent(choice.point)[-1], [0.5, 0.5])
