@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core.stats import spread
 from flatland.core.validate import ValidationError, check_int
 
 __all__ = [
@@ -61,7 +62,8 @@ def summarize_batches(per_batch: np.ndarray) -> BatchSummary:
     mean = per_batch.mean(axis=0)
     if b < 2:
         return BatchSummary(mean, np.full_like(mean, np.inf))
-    return BatchSummary(mean, per_batch.std(axis=0, ddof=1) / np.sqrt(b))
+    # rounding-level spread between batches is no variance (one policy: flatland.core.stats.spread)
+    return BatchSummary(mean, spread(per_batch.std(axis=0, ddof=1), mean) / np.sqrt(b))
 
 
 def relative_error(g: np.ndarray, g_ref: np.ndarray) -> float:

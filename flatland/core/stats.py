@@ -16,6 +16,7 @@ import numpy as np
 from scipy import special, stats
 
 __all__ = [
+    "ROUNDING",
     "Chi2Result",
     "Interval",
     "SampleSummary",
@@ -23,9 +24,24 @@ __all__ = [
     "chi2_gof",
     "chi2_gof_counts",
     "normal_quantile",
+    "rounding_floor",
     "sidak",
+    "spread",
     "summarize",
 ]
+
+ROUNDING = 64 * np.finfo(np.float64).eps
+"""Relative size of floating-point noise in a mean or standard deviation of many terms.
+
+The one policy for "zero spread": a standard deviation at or below
+``ROUNDING * scale`` (:func:`rounding_floor`) is rounding, not variance. The mean of
+N identical floats is not always bit-equal to that float (pairwise summation and
+the SIMD width differ between CPUs), so the sample standard deviation of a
+constant is a few ulps, not 0.0, on some machines. :func:`spread` maps such values
+to exactly 0.0, so a zero-variance estimator reports a zero standard error on every
+CPU; :func:`summarize`, :func:`flatland.core.image.summarize_batches` and the study
+runner all go through it.
+"""
 
 
 @dataclass(frozen=True)
@@ -64,13 +80,40 @@ class Chi2Result:
         return self.p_value >= alpha
 
 
+def rounding_floor(scale: np.ndarray | float) -> np.ndarray | float:
+    """The largest spread that counts as rounding for values of size ``scale``: ``ROUNDING * |scale|``."""
+    return ROUNDING * np.abs(scale)
+
+
+def spread(std: np.ndarray | float, scale: np.ndarray | float) -> np.ndarray | float:
+    """``std`` with rounding-level spread (``std <= rounding_floor(scale)``) set to exactly 0.0.
+
+    Parameters
+    ----------
+    std : float or ndarray
+        Sample standard deviations (or standard errors: the rule is scale-free).
+    scale : float or ndarray
+        The size of the values whose spread ``std`` measures (their mean, or the
+        largest of mean and reference), broadcast against ``std``.
+    """
+    std = np.asarray(std, dtype=np.float64)
+    out = np.where(std <= rounding_floor(np.asarray(scale, dtype=np.float64)), 0.0, std)
+    return float(out) if out.ndim == 0 else out
+
+
 def summarize(samples: np.ndarray, axis: int = 0) -> SampleSummary:
-    """Mean and standard error ``std(ddof=1) / sqrt(n)`` of i.i.d. samples along ``axis``."""
+    """Mean and standard error ``std(ddof=1) / sqrt(n)`` of i.i.d. samples along ``axis``.
+
+    Rounding-level spread counts as none (:data:`ROUNDING`): the standard error of
+    identical samples is exactly 0.0 on every CPU.
+    """
     samples = np.asarray(samples, dtype=np.float64)
     n = samples.shape[axis]
     mean = samples.mean(axis=axis)
-    stderr = samples.std(axis=axis, ddof=1) / np.sqrt(n) if n > 1 else np.full_like(mean, np.inf)
-    return SampleSummary(mean=mean, stderr=stderr, n=n)
+    if n < 2:
+        return SampleSummary(mean=mean, stderr=np.full_like(mean, np.inf), n=n)
+    std = spread(samples.std(axis=axis, ddof=1), mean)
+    return SampleSummary(mean=mean, stderr=std / np.sqrt(n), n=n)
 
 
 def normal_quantile(level: float) -> float:

@@ -39,7 +39,9 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
 ``bias``
     mean - reference, with a Student-t interval (T - 1 degrees of freedom) of
     half-width t · sqrt(s²/T + s_ref²) (plus a floating-point allowance of
-    64 ε abs(reference); a spread of the trials below that counts as zero variance)
+    :func:`~flatland.core.stats.rounding_floor` (64 ε) of the larger of mean and
+    reference; a spread of the trials below that counts as zero variance, the
+    policy of :data:`flatland.core.stats.ROUNDING`)
 ``variance_per_sample``
     s² · samples (s² the variance of the trial estimates), the variance a
     single-sample estimate would have
@@ -87,6 +89,7 @@ import numpy as np
 from scipy import stats
 
 from flatland.core.image import relative_error
+from flatland.core.stats import rounding_floor, spread
 from flatland.core.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
 from flatland.core.table import format_table, method_label
 from flatland.core.validate import ValidationError, check_int
@@ -119,7 +122,6 @@ CSV_COLUMNS = (
 """Columns of the study CSV, in order."""
 
 CACHE_VERSION = 1
-_ROUNDING = 64 * np.finfo(np.float64).eps  # relative size of floating-point noise in a mean of many terms
 
 
 # ------------------------------------------------------------------------------------------- reference
@@ -370,9 +372,9 @@ def _summarize(
     mean = float(d.mean())
     var = float(d.var(ddof=1))
     # differences at the level of floating-point rounding are not variance or bias
-    resolution = _ROUNDING * max(abs(mean), abs(reference.derivative))
-    if math.sqrt(var) <= resolution:
-        var = 0.0
+    scale = max(abs(mean), abs(reference.derivative))
+    resolution = float(rounding_floor(scale))
+    var = float(spread(math.sqrt(var), scale)) ** 2  # one rounding policy (flatland.core.stats.ROUNDING)
     stderr = math.sqrt(var / t)
     half = (
         float(stats.t.ppf(0.5 + 0.5 * level, t - 1)) * math.sqrt(var / t + reference.stderr**2) + resolution

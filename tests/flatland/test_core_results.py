@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, relative_error, resolve_batches, summarize_batches
+from flatland.core.stats import ROUNDING, rounding_floor, spread, summarize
 
 
 def test01_batch_summary_is_mean_and_std_over_sqrt_batches():
@@ -60,3 +63,26 @@ def test05_estimate_interval_and_z_score_pick_value_or_derivative():
     assert iv.contains(-2.0) and iv.high - iv.low == pytest.approx(2 * 1.959964 * 0.25, rel=1e-6)
     with pytest.raises(ValueError, match=r"^of"):
         e.interval(of="valu")
+
+
+@given(
+    value=st.floats(min_value=-1e12, max_value=1e12, allow_nan=False, allow_subnormal=False),
+    n=st.integers(min_value=2, max_value=50_000),
+)
+def test05_identical_samples_have_exactly_zero_stderr_on_every_cpu(value, n):
+    # the mean of n copies of a float need not be bit-equal to it (summation order and SIMD
+    # width differ between CPUs): rounding-level spread goes through one policy, stats.spread
+    samples = np.full(n, value)
+    assert summarize(samples).stderr == 0.0
+    assert np.all(summarize_batches(np.full((n % 17 + 2, 3), value)).stderr == 0.0)
+
+
+def test06_spread_above_the_rounding_floor_is_kept():
+    # the floor is ROUNDING * |scale|: a relative spread 10x above it is variance, one 10x below is not
+    base = np.full(1000, 3.0)
+    jitter = np.tile([-1.0, 1.0], 500)
+    above = summarize(base + 10 * ROUNDING * 3.0 * jitter).stderr
+    below = summarize(base + 0.1 * ROUNDING * 3.0 * jitter).stderr
+    assert above > 0.0 and below == 0.0
+    assert spread(np.array([1e-20, 1.0]), np.array([1.0, 1.0])).tolist() == [0.0, 1.0]
+    assert rounding_floor(-2.0) == 2.0 * ROUNDING
