@@ -18,14 +18,21 @@ samples: :class:`Hooks` maps each film sample t to evaluation points ``T(t)`` an
 each direction sample φ to ``T(φ)`` (with a weight of value 1 that carries kernel
 derivatives), may replace one sample by a pair (DESIGN 2.9), and may add a
 derivative-only term per shading point or per pixel (the boundary method). The
-default hooks are the identity: the naive estimator. The primary samples come from
-the ``"samples"`` stream per batch, so every method sees the same ones for a seed.
+default hooks are the identity: the naive estimator.
+
+Random numbers. Sample j of pixel p has the global index ``p * spp + j`` (batch
+``j // (spp / batches)``), and every number drawn for it, its primary uniforms
+(stream ``"samples"``) as much as a method's kernel or probe draws, is keyed on that
+index (:class:`flatland.core.rng.Draws`). Every method therefore sees the same
+primary samples for a seed, and an image does not depend on :data:`CHUNK` (how
+samples are grouped for vectorization, which bounds memory) nor, sample for
+sample, on the number of batches.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,7 +40,7 @@ from scipy import special
 
 from flatland.core.contract import MethodTable
 from flatland.core.dual import Dual, detach, is_dual, tangent
-from flatland.core.rng import stream
+from flatland.core.rng import Draws
 from flatland.geometry import Attached, Hits, attach, cast, direction, film_direction, zeros
 from flatland.lights import Lights
 from flatland.sampling import sample_gaussian, sample_tent, sample_uniform
@@ -59,7 +66,8 @@ __all__ = [
 ]
 
 CHUNK = 1 << 15
-"""Primary samples processed together (bounds memory; results do not depend on it)."""
+"""Primary samples processed together (bounds memory; results do not depend on it, up to the
+rounding of the per-pixel sums, which add the same numbers in another grouping)."""
 
 N_UNIFORMS = 4  # per primary sample: film, cosine direction, emitter choice, point on emitter
 
@@ -155,11 +163,11 @@ def combine(e: Any, w: Any, paired: bool) -> Any:
 class Hooks:
     """Identity hooks: evaluate every integrand where it was sampled (the naive estimator)."""
 
-    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray) -> Members:
-        """Film evaluation points for film samples ``t`` of pixels ``pixel``."""
+    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
+        """Film evaluation points for film samples ``t`` of pixels ``pixel`` (``draws``: one row each)."""
         return Members(t[:, None])
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray) -> Members:
+    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         """Direction evaluation points for direction samples ``phi`` from shading points ``x``."""
         return Members(phi[:, None])
 
@@ -172,23 +180,18 @@ class Hooks:
         return None
 
 
-@dataclass
+@dataclass(frozen=True)
 class Context:
-    """What a work item's hooks may use: the geometry, emitters, and named random streams."""
+    """What the hooks may use: the geometry (θ-dependent and detached) and the emitters.
+
+    Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
+    argument), keyed on the primary samples, never from a per-chunk stream.
+    """
 
     geom: Geometry
     geom0: Geometry
     lights: Lights
     hooks: Hooks
-    seed: int
-    work: int
-    _count: dict[str, int] = field(default_factory=dict)
-
-    def rng(self, name: str) -> np.random.Generator:
-        """A fresh generator for stream ``name`` of this work item (each call a new sub-stream)."""
-        k = self._count.get(name, 0)
-        self._count[name] = k + 1
-        return stream(self.seed, name, self.work, k)
 
 
 # ------------------------------------------------------------------ pixel filters
@@ -262,11 +265,12 @@ def incident(geom: Geometry, origins: Any, dirs: Any, hits: Hits) -> tuple[Any, 
     return out, att
 
 
-def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray) -> Any:
+def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, draws: Draws) -> Any:
     """MIS estimate of E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ at shading points ``x`` (n, 2).
 
     ``normal`` (n, 2) is the unit normal on the side being shaded, ``ignore`` the
-    primitive each point lies on (-1 for none), ``u`` (n, 3) the primary uniforms.
+    primitive each point lies on (-1 for none), ``u`` (n, 3) the primary uniforms,
+    ``draws`` the keys of the n rows for anything the hooks draw.
     """
     n = ignore.size
     x0, n0 = detach(x), detach(normal)
@@ -290,7 +294,7 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray) 
     inv = np.where(keep_all, 1.0 / np.where(keep_all, denom, 1.0), 0.0)
 
     xr = x[idx]
-    members = ctx.hooks.directions(ctx, xr, ign, phi)
+    members = ctx.hooks.directions(ctx, xr, ign, phi, draws.tile(techniques))
     flat, rep = members.flat()
     d = direction(flat)
     hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
@@ -306,7 +310,7 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray) 
 
 
 # ------------------------------------------------------------------ the pixel integral
-def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray) -> Any:
+def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) -> Any:
     """L(t) for film evaluation points ``t_eval`` (n,): emission at the hit + (ρ/2) E there."""
     geom = ctx.geom
     d = film_direction(geom, t_eval)
@@ -325,25 +329,25 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray) -> Any:
     # shade the side facing the camera: flip the geometric normal where the ray meets its back
     facing = np.sum(detach(n_geo) * detach(d)[rows[sub]], axis=1) < 0.0
     n_shade = n_geo * np.where(facing, 1.0, -1.0)[:, None]
-    e = shade(ctx, att.point[sub], n_shade, prim[sub], u[rows[sub]])
+    e = shade(ctx, att.point[sub], n_shade, prim[sub], u[rows[sub]], draws.take(rows[sub]))
     radiance[rows[sub]] = radiance[rows[sub]] + 0.5 * rho[sub] * e
     return radiance
 
 
-def _film_pass(ctx: Context, job: Job, pixel: np.ndarray, u: np.ndarray) -> Any:
+def _film_pass(ctx: Context, job: Job, pixel: np.ndarray, u: np.ndarray, draws: Draws) -> Any:
     """Per-sample pixel estimates k_j(T t) / k_j(t) · L(T t) · w (combined over members)."""
     cam = job.scene.camera
     centers = cam.pixel_centers()[pixel]
     width = cam.pixel_width
     t = filter_sample(cam.filter, u[:, 0], centers, width)
-    members = ctx.hooks.film(ctx, t, pixel)
+    members = ctx.hooks.film(ctx, t, pixel, draws)
     flat, rep = members.flat()
     m = np.shape(detach(members.points))[1]
     u_shade = u[rep, 1:]
     if m > 1:  # the other members of a pair get their own shading samples
-        extra = ctx.rng("paired").random((t.size, m - 1, 3))
+        extra = draws.uniforms("paired", m - 1, 3)
         u_shade = np.concatenate([u[:, None, 1:], extra], axis=1).reshape(-1, 3)
-    radiance = radiance_along_film(ctx, flat, u_shade)
+    radiance = radiance_along_film(ctx, flat, u_shade, draws.repeat(m))
     k_eval = filter_value(cam.filter, flat, centers[rep], width)
     k_sample = filter_value(cam.filter, t, centers, width) if members.density is None else members.density
     k_sample = k_sample[rep]
@@ -352,48 +356,33 @@ def _film_pass(ctx: Context, job: Job, pixel: np.ndarray, u: np.ndarray) -> Any:
 
 
 # ------------------------------------------------------------------ work plan and driver
-def _work_items(job: Job) -> Iterator[list[tuple[int, np.ndarray, np.ndarray]]]:
-    """Groups of (batch, pixel index, uniforms) slices of at most ~CHUNK samples each."""
-    group: list[tuple[int, np.ndarray, np.ndarray]] = []
-    size = 0
-    for b in range(job.batches):
-        u = (
-            stream(job.seed, "samples", b)
-            .random((job.pixels, job.per_batch, N_UNIFORMS))
-            .reshape(-1, N_UNIFORMS)
-        )
-        pixel = np.repeat(np.arange(job.pixels), job.per_batch)
-        for lo in range(0, u.shape[0], CHUNK):
-            piece = (b, pixel[lo : lo + CHUNK], u[lo : lo + CHUNK])
-            if size and size + piece[1].size > CHUNK:
-                yield group
-                group, size = [], 0
-            group.append(piece)
-            size += piece[1].size
-    if group:
-        yield group
+def _chunks(job: Job) -> Iterator[np.ndarray]:
+    """Global sample indices ``pixel * spp + j`` in consecutive ranges of at most :data:`CHUNK`."""
+    total = job.pixels * job.spp
+    for lo in range(0, total, CHUNK):
+        yield np.arange(lo, min(lo + CHUNK, total), dtype=np.int64)
 
 
 def run(job: Job, geom: Geometry, hooks: Hooks) -> BatchResult:
     """Estimate every pixel (or the point) in every batch with ``hooks``; values and derivatives."""
     geom0 = geom.detached()
-    lights = Lights.of(geom0)
-    sums_v = np.zeros(job.batches * job.pixels)
-    sums_t = np.zeros(job.batches * job.pixels)
-    for work, group in enumerate(_work_items(job)):
-        ctx = Context(geom, geom0, lights, hooks, job.seed, work)
-        batch = np.concatenate([np.full(p.size, b) for b, p, _ in group])
-        pixel = np.concatenate([p for _, p, _ in group])
-        u = np.concatenate([uu for _, _, uu in group])
+    ctx = Context(geom, geom0, Lights.of(geom0), hooks)
+    size = job.batches * job.pixels
+    sums_v = np.zeros(size)
+    sums_t = np.zeros(size)
+    for index in _chunks(job):
+        pixel, j = np.divmod(index, job.spp)
+        batch = j // job.per_batch
+        draws = Draws.of(job.seed, index)
+        u = draws.uniforms("samples", N_UNIFORMS)  # the primary sample, the same for every method
         if job.point is None:
-            est = _film_pass(ctx, job, pixel, u)
+            est = _film_pass(ctx, job, pixel, u, draws)
         else:
             n = pixel.size
             x = np.tile(np.array(job.point, dtype=np.float64), (n, 1))
             normal = np.tile(np.array(job.normal, dtype=np.float64), (n, 1))
-            est = shade(ctx, x, normal, np.full(n, -1), u[:, 1:])
+            est = shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws)
         key = batch * job.pixels + pixel
-        size = job.batches * job.pixels
         sums_v += np.bincount(key, weights=detach(est), minlength=size)
         sums_t += np.bincount(key, weights=tangent(est), minlength=size)
     value = (sums_v / job.per_batch).reshape(job.batches, job.pixels)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach, tangent, variable
-from flatland.core.rng import stream
+from flatland.core.rng import Draws, stream
 from flatland.geometry import cast, direction, film_coordinate, silhouette_angles
 from flatland.integrator import (
     GRADIENT_METHODS,
@@ -115,10 +115,14 @@ class BoundaryHooks(Hooks):
         eps = EPS_FILM * (1.0 + np.abs(t0))
         t_eval = np.concatenate([np.repeat(t0 - eps, n_s), np.repeat(t0 + eps, n_s)])
         lights = Lights.of(geom0)
+        ctx = Context(geom0, geom0, lights, Hooks())
         for b in range(job.batches):
-            ctx = Context(geom0, geom0, lights, Hooks(), job.seed, b)
             u = stream(job.seed, "boundary", b).random((m * n_s, 3))
-            radiance = radiance_along_film(ctx, t_eval, np.concatenate([u, u]))  # the same samples both sides
+            # identity hooks draw nothing; the rows are keyed on the edge sample, the same on both sides
+            draws = Draws.of(job.seed, np.arange(m * n_s)).tile(2)
+            radiance = radiance_along_film(
+                ctx, t_eval, np.concatenate([u, u]), draws
+            )  # same samples both sides
             jump = (radiance[: m * n_s] - radiance[m * n_s :]).reshape(m, n_s).mean(axis=1)
             # discontinuity term: k_j(t_c) (L(t_c-) - L(t_c+)) * dt_c/dtheta   (Leibniz, DESIGN 2.1)
             out[b] = (weights * (jump * speed)[:, None]).sum(axis=0)

@@ -17,6 +17,7 @@ import numpy as np
 
 from flatland.core.contract import Option
 from flatland.core.dual import detach, variable
+from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from flatland.geometry import angle_of, cast, direction, film_coordinate, film_direction
 from flatland.integrator import (
@@ -81,14 +82,14 @@ class ReparamHooks(Hooks):
             self.refine,
         )
 
-    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray) -> Members:
+    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
         n, sigma, geom = t.size, 1.0 / np.sqrt(self.kappa_film), ctx.geom
-        center = t + sigma * ctx.rng("kernel").standard_normal(n)
+        center = t + sigma * draws.normals("kernel.film")
         density = None
         if self.paired:
             # ω = t + σz has density q = k_j ⊛ N(0, σ²) (closed form); unlike k_j itself it covers the
             # kernel-blurred integrand beyond the filter's support. Members μ_j ~ k(·, ω).
-            mu = center[:, None] + sigma * ctx.rng("kernel").standard_normal((n, 2))
+            mu = center[:, None] + sigma * draws.normals("kernel.film.pair", 2)
             cam = geom.camera
             density = filter_blurred(cam.filter, center - cam.pixel_centers()[pixel], cam.pixel_width, sigma)
         else:
@@ -112,14 +113,14 @@ class ReparamHooks(Hooks):
         # w = k(T y, ω) / detach(k(T y, ω)) = exp(-κ/2 (x² - detach(x²))) for the Gaussian   (DESIGN 2.7)
         return Members(points, np.exp(-0.5 * self.kappa_film * (sq - detach(sq))), self.paired, density)
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray) -> Members:
+    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         n, kappa = phi.size, self.kappa
         x0 = detach(x)
         if self.paired:  # ω = φ (the primary sample), members μ_j ~ vM(ω, κ)
             center = phi
-            mu = sample_von_mises(ctx.rng("kernel").random((n, 2)), phi[:, None], kappa)
+            mu = sample_von_mises(draws.uniforms("kernel.directions.pair", 2), phi[:, None], kappa)
         else:  # reverse order: ω ~ vM(φ, κ), the member is φ itself
-            center = sample_von_mises(ctx.rng("kernel").random(n), phi, kappa)
+            center = sample_von_mises(draws.uniforms("kernel.directions"), phi, kappa)
             mu = phi[:, None]
 
         def trace(rows: np.ndarray, phi_probe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

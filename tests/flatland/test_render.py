@@ -148,13 +148,20 @@ def test04_reparam_probe_spread_bias_is_the_predicted_fraction():
     A lone translating edge then contributes the fraction P(|Z| < s) = 2Φ(s) - 1 of its
     term (Z the kernel centre's offset from the edge in kernel deviations): 0.683 at
     s = 1, 0.997 at the default s = 3. Measured on closed form (a), Gaussian filter.
+
+    Checked on the pixels whose edge term is at least 1 % of the largest: further
+    out, the edge lies in the filter's far tail, a sample lands within the probes'
+    span of it only rarely (at seed 4 none of pixel 7's 8192 samples did, where the
+    predicted term is 0.4 % of the largest), the batch means are not normal and a
+    normal-quantile tolerance does not apply.
     """
     _, deriv = _closed_form_a("gaussian")
     g = render_gradient(
         _segment_scene("gaussian"), "occ.translate.x", method="reparam", spp=8192, seed=4, spread=1.0
     )
     fraction = 2.0 * special.ndtr(1.0) - 1.0
-    assert _within(g.derivative, g.derivative_stderr, fraction * deriv)
+    live = np.abs(deriv) >= 0.01 * np.abs(deriv).max()
+    assert _within(g.derivative[live], g.derivative_stderr[live], fraction * deriv[live])
     edge = np.argmax(np.abs(deriv))
     assert abs(g.derivative[edge] - deriv[edge]) > 5 * g.derivative_stderr[edge]  # the bias is visible
 
