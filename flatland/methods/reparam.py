@@ -114,7 +114,7 @@ class ReparamHooks(Hooks):
         return Members(points, np.exp(-0.5 * self.kappa_film * (sq - detach(sq))), self.paired, density)
 
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
-        n, kappa = phi.size, self.kappa
+        kappa = self.kappa
         x0 = detach(x)
         if self.paired:  # ω = φ (the primary sample), members μ_j ~ vM(ω, κ)
             center = phi
