@@ -40,6 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from flatland.core.dual import Dual, detach
+from flatland.core.rng import Draws
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -82,16 +83,18 @@ class Shading:
     x: Any
     n: Any
     origin: np.ndarray
+    draws: Draws
 
     @staticmethod
-    def at(state: SceneState, x: Any, n: Any) -> Shading:
-        return Shading(state, x, n, detach(x) + state.epsilon * detach(n))
+    def at(state: SceneState, x: Any, n: Any, draws: Draws) -> Shading:
+        """Shading points ``x``, normals ``n``; ``draws`` keys their random numbers on their samples."""
+        return Shading(state, x, n, detach(x) + state.epsilon * detach(n), draws)
 
     def __len__(self) -> int:
         return len(self.origin)
 
     def take(self, index: np.ndarray) -> Shading:
-        return Shading(self.state, self.x[index], self.n[index], self.origin[index])
+        return Shading(self.state, self.x[index], self.n[index], self.origin[index], self.draws.take(index))
 
     def trace(self, mu: np.ndarray) -> Hits:
         """First hits along directions ``mu`` from the shading points (detached)."""
@@ -168,21 +171,15 @@ class Transforms(Protocol):
         """One rotation per (batch, pixel) of the pixel integral, given one uniform ``u`` each."""
         ...
 
-    def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
-        """One rotation per shading point for the emitter-sampling strategy."""
+    def emitter(self, shading: Shading) -> Rotation:
+        """One rotation per shading point for the emitter-sampling strategy (draws: ``shading.draws``)."""
         ...
 
-    def bsdf(
-        self,
-        shading: Shading,
-        mu: np.ndarray,
-        pdf: np.ndarray,
-        kernel: np.random.Generator,
-        probes: np.random.Generator,
-    ) -> Any:
+    def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
         """The per-sample estimate of the cosine-sampled integral (samples μ ~ cos, density ``pdf``),
         using :meth:`Shading.trace` and :meth:`Shading.evaluate_bsdf` for the integrand (a method
-        that evaluates it elsewhere than along μ need not trace μ)."""
+        that evaluates it elsewhere than along μ need not trace μ). Random numbers come from
+        ``shading.draws``, keyed on each point's camera sample."""
         ...
 
 
@@ -192,17 +189,15 @@ class Identity:
     def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
         return Rotation.identity(rows.shape)
 
-    def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
+    def emitter(self, shading: Shading) -> Rotation:
         return Rotation.identity((len(shading),))
 
-    def bsdf(self, shading, mu, pdf, kernel, probes):
+    def bsdf(self, shading, mu, pdf):
         rotated = mu if not shading.state.dual else Dual(mu)
         return shading.evaluate_bsdf(mu, rotated, shading.trace(mu)) / pdf
 
 
-def _emitter_term(
-    shading: Shading, u: np.ndarray, transforms: Transforms, probes: np.random.Generator
-) -> Any:
+def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
     """Emitter-sampling estimate of E, MIS-weighted, per shading point."""
     state = shading.state
     m = len(shading)
@@ -225,7 +220,7 @@ def _emitter_term(
     # θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
     pdf = solid_angle_pdf(1.0 / float(detach(state.emitter_area)), dist[vis], cos_y[vis])
     sub = shading.take(vis)
-    rotated = transforms.emitter(sub, probes).apply(w[vis])
+    rotated = transforms.emitter(sub).apply(w[vis])
     # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
     it = intersect_triangles(sub.x, rotated, state.triangles[tri[vis]])
     cos_x_d = np.maximum(dot(sub.n, rotated), 0.0)
@@ -236,22 +231,16 @@ def _emitter_term(
     return scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
 
 
-def irradiance_samples(
-    shading: Shading,
-    u: np.ndarray,
-    transforms: Transforms,
-    kernel: np.random.Generator,
-    probes: np.random.Generator,
-) -> Any:
+def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
     """One MIS estimate of ``E = ∫ L_i cos θ dω`` per shading point (uniforms ``u``: 3 emitter + 2 cosine)."""
     state = shading.state
     total = 0.0
     if len(state.emitters):
-        total = total + _emitter_term(shading, u[:, 0:3], transforms, probes)
+        total = total + _emitter_term(shading, u[:, 0:3], transforms)
     n0 = detach(shading.n)
     mu = sample_cosine_hemisphere(u[:, 3:5], n0)
     pdf = pdf_cosine_hemisphere(mu, n0)
-    return total + transforms.bsdf(shading, mu, pdf, kernel, probes)
+    return total + transforms.bsdf(shading, mu, pdf)
 
 
 def pixel_samples(
@@ -261,14 +250,13 @@ def pixel_samples(
     cols: np.ndarray,
     u: np.ndarray,
     camera_rotation: Rotation,
-    kernel: np.random.Generator,
-    probes: np.random.Generator,
+    draws: Draws,
 ) -> Any:
     """One estimate of the pixel integral per sample (pixel ``rows``, ``cols``; uniforms ``u``).
 
     ``camera_rotation`` holds one rotation per sample (its pixel's). The estimate is
     ``radiance * weight`` (:class:`PixelSamples`); both are Duals when the state
-    carries tangents.
+    carries tangents. ``draws`` keys the samples' further random numbers on their indices.
     """
     cam = state.camera
     n = len(rows)
@@ -302,8 +290,8 @@ def pixel_samples(
         diffuse = (detach(albedo) > 0.0) | (state.param is not None and state.param.endswith(".albedo"))
         s = np.flatnonzero(diffuse)
         if s.size:
-            shading = Shading.at(state, it.point[s], shade_n[s])
-            e = irradiance_samples(shading, u[hit[s], 2:7], transforms, kernel, probes)
+            shading = Shading.at(state, it.point[s], shade_n[s], draws.take(hit[s]))
+            e = irradiance_samples(shading, u[hit[s], 2:7], transforms)
             value = value + scatter(hit.size, s, albedo[s] * INV_PI * e, state.dual)
         radiance[hit] = value
     return PixelSamples(radiance, weight)

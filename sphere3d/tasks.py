@@ -5,9 +5,13 @@ A task fixes the scene, the parameter, the sample count, the seed and the batche
 float (plain) or as a Dual, and returns a :class:`Tally` of per-batch means. Methods
 (:mod:`sphere3d.methods`) differ only in the ``theta`` and the
 :class:`~sphere3d.integrator.Transforms` they pass, so they share every primary
-sample: the uniforms come from ``stream(seed, "samples", batch, chunk)`` whatever
-the method, and anything a method draws in addition comes from other streams
-(``"kernel"``, ``"probes"``, ``"probes.camera"``).
+sample: sample j of pixel p has the global index ``p * spp + j`` (batch
+``j // (spp / batches)``), its uniforms are ``Draws.of(seed, index).uniforms("samples", ...)``
+whatever the method, and anything a method draws in addition is keyed on the same
+index under other stream names (``"kernel.bsdf"``, ``"probes.emitter"``, ...; see
+:class:`flatland.core.rng.Draws`). The camera's per-(pixel, batch) probe phases come
+from the sequential stream ``"probes.camera"``. Results therefore do not depend on
+:data:`CHUNK` or on the number of threads.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from flatland.core.rng import stream
+from flatland.core.rng import Draws, stream
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
     Identity,
@@ -36,7 +40,8 @@ from sphere3d.scene import Scene
 __all__ = ["CHUNK", "ImageTask", "PointTask", "Tally"]
 
 CHUNK = 1 << 15
-"""Camera samples per memory chunk (a loop over chunks, vectorized inside)."""
+"""Camera samples per memory chunk (a loop over chunks, vectorized inside); results do not
+depend on it (every draw is keyed on the sample's index)."""
 WORKERS = min(2, os.cpu_count() or 1)
 """Threads over memory chunks (2: the machines this is written for have two cores)."""
 
@@ -107,9 +112,10 @@ class ImageTask:
         """Render every pixel with the parameter offset by ``theta`` (float or Dual) under ``transforms``.
 
         All batches of a range of pixels are processed together (one vectorized call
-        per memory chunk); batch b's primary uniforms come from
-        ``stream(seed, "samples", b, chunk)`` and its camera rotations from
-        ``stream(seed, "probes.camera", b)``, so every batch is independent.
+        per memory chunk); every sample's numbers are keyed on its index
+        ``pixel * spp + j`` and batch b's camera rotations come from
+        ``stream(seed, "probes.camera", b)``, so every batch is independent and the
+        image does not depend on how pixels are grouped into chunks.
         """
         transforms = transforms or Identity()
         state = self.scene.state(self.param, theta, self.tracer)
@@ -125,14 +131,11 @@ class ImageTask:
 
         def chunk(c: int) -> np.ndarray:
             pix = pixels[c * chunk_pixels : (c + 1) * chunk_pixels]
-            # sample order: batch, pixel, sample
-            u = np.concatenate(
-                [
-                    stream(self.seed, "samples", b, c).random((pix.size * per_batch, PRIMARY_UNIFORMS))
-                    for b in range(batches)
-                ]
-            )
-            sample_pix = np.tile(np.repeat(pix, per_batch), batches)
+            # sample order: batch, pixel, sample; sample s of batch b is its pixel's j = b * per_batch + s
+            b_idx, p_idx, s_idx = np.meshgrid(np.arange(batches), pix, np.arange(per_batch), indexing="ij")
+            draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
+            u = draws.uniforms("samples", PRIMARY_UNIFORMS)
+            sample_pix = p_idx.ravel()
             # one rotation per pixel and batch for the pixel integral (rows: batch-major)
             rows, cols = np.tile(rows_all[pix], batches), np.tile(cols_all[pix], batches)
             camera = transforms.camera(state, rows, cols, camera_u[:, pix].ravel())
@@ -144,8 +147,7 @@ class ImageTask:
                 cols_all[sample_pix],
                 u,
                 camera.take(sample_rot),
-                stream(self.seed, "kernel", c),
-                stream(self.seed, "probes", c),
+                draws,
             )
             return np.mean(self._control_variate(est, per_batch), axis=1).reshape(batches, pix.size)
 
@@ -185,9 +187,10 @@ class PointTask:
             nrm = np.broadcast_to(np.array(self.normal), (size, 3)).copy()
             if state.dual:
                 x, nrm = Dual(x), Dual(nrm)
-            u = stream(self.seed, "samples", b, c).random((size, 5))
-            kernel, probes = stream(self.seed, "kernel", b, c), stream(self.seed, "probes", b, c)
-            return np.sum(irradiance_samples(Shading.at(state, x, nrm), u, transforms, kernel, probes))
+            # sample j = b * per_batch + starts[c] + s of the point: its numbers are keyed on j
+            draws = Draws.of(self.seed, b * per_batch + starts[c] + np.arange(size))
+            u = draws.uniforms("samples", 5)
+            return np.sum(irradiance_samples(Shading.at(state, x, nrm, draws), u, transforms))
 
         sums = _map(job, range(self.batches * k))  # batch-major
         means = [sum(sums[b * k : (b + 1) * k]) / per_batch for b in range(self.batches)]

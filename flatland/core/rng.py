@@ -27,7 +27,7 @@ from scipy import special
 
 from flatland.core.validate import check_seed
 
-__all__ = ["Draws", "keyed_bits", "keyed_normals", "keyed_uniforms", "philox4x64", "stream"]
+__all__ = ["Draws", "keyed_bits", "keyed_normals", "keyed_uniforms", "mix64", "stream"]
 
 
 def stream(seed: int, name: str, *extra: int) -> np.random.Generator:
@@ -53,55 +53,45 @@ def stream(seed: int, name: str, *extra: int) -> np.random.Generator:
 
 
 # ------------------------------------------------------------------ counter-based draws keyed on samples
-_M0, _M1 = np.uint64(0xD2E7470EE14C6C93), np.uint64(0xCA5A826395121157)  # Philox4x64 multipliers
-_W0, _W1 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBB67AE8584CAA73B)  # Weyl key increments
-_LOW = np.uint64(0xFFFFFFFF)
-_32 = np.uint64(32)
-ROUNDS = 10
+_GAMMA = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's Weyl increment, 2^64 / golden ratio
+_S30, _S27, _S31 = np.uint64(30), np.uint64(27), np.uint64(31)
+_C1, _C2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
 
 
-def _mulhilo(a: np.uint64, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """High and low 64-bit words of the 128-bit products ``a * b`` (schoolbook on 32-bit halves)."""
-    a0, a1 = a & _LOW, a >> _32
-    b0, b1 = b & _LOW, b >> _32
-    p00, p01, p10, p11 = a0 * b0, a0 * b1, a1 * b0, a1 * b1  # each exact: < 2^64
-    mid = (p00 >> _32) + (p01 & _LOW) + (p10 & _LOW)  # < 3 * 2^32: no overflow
-    hi = p11 + (p01 >> _32) + (p10 >> _32) + (mid >> _32)
-    return hi, a * b  # the low word wraps modulo 2^64, as it should
+def mix64(z: np.ndarray) -> np.ndarray:
+    """SplitMix64's output function (Steele, Lea, Flood 2014; Vigna's constants), elementwise on uint64.
 
-
-def philox4x64(counter: np.ndarray, key: tuple[int, int]) -> np.ndarray:
-    """The Philox4x64-10 block function (Salmon et al. 2011) on counters of shape (n, 4): (n, 4) uint64.
-
-    The same function numpy's :class:`numpy.random.Philox` applies to its counter
-    (a test checks the two agree bit for bit); here it runs on many counters at
-    once, which is what makes draws keyed on sample indices cheap.
+    A bijection of 64-bit words with full avalanche. ``mix64(k * GAMMA)`` for
+    k = 1, 2, ... is the SplitMix64 sequence of seed 0 (a test checks its first words).
     """
-    x = [np.array(counter[:, i], dtype=np.uint64) for i in range(4)]
-    k0, k1 = np.uint64(key[0]), np.uint64(key[1])
     with np.errstate(over="ignore"):
-        for r in range(ROUNDS):
-            if r:
-                k0, k1 = k0 + _W0, k1 + _W1  # key schedule: Weyl sequence
-            hi0, lo0 = _mulhilo(_M0, x[0])
-            hi1, lo1 = _mulhilo(_M1, x[2])
-            x = [hi1 ^ x[1] ^ k0, lo1, hi0 ^ x[3] ^ k1, lo0]
-    return np.stack(x, axis=1)
+        z = (z ^ (z >> _S30)) * _C1
+        z = (z ^ (z >> _S27)) * _C2
+        return z ^ (z >> _S31)
 
 
-def _key(seed: int, name: str) -> tuple[int, int]:
-    return check_seed("seed", seed), zlib.crc32(name.encode("utf-8"))
+def _key(seed: int, name: str) -> np.uint64:
+    """One 64-bit key for the stream ``name`` of ``seed``."""
+    seed = check_seed("seed", seed)
+    words = np.array([seed & 0xFFFFFFFFFFFFFFFF, zlib.crc32(name.encode("utf-8"))], dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        return mix64(mix64(words[0] + _GAMMA) ^ (words[1] * _GAMMA))
 
 
 def keyed_bits(seed: int, name: str, keys: np.ndarray, count: int) -> np.ndarray:
     """``count`` random 64-bit words per row of ``keys``: a pure function of (seed, name, key, column).
+
+    Row i's words are the SplitMix64 sequence seeded with a hash of ``(seed, name,
+    keys[i])``: ``h = mix64(mix64(key(seed, name) + sample) + (path + 1) * GAMMA)``, then
+    word j is ``mix64(h + (j + 1) * GAMMA)``. About a dozen integer operations per word,
+    vectorized over all rows.
 
     Parameters
     ----------
     seed : int
         The user's seed.
     name : str
-        Stream name (one per call site: ``"kernel.center"``, ``"probes.film"``, ...).
+        Stream name (one per call site: ``"kernel.film"``, ``"probes.emitter"``, ...).
     keys : ndarray of int, shape (n,) or (n, 2)
         One key per row: the global index of the primary sample the row belongs to,
         and optionally a second word telling apart rows of the same sample (a pair
@@ -117,16 +107,14 @@ def keyed_bits(seed: int, name: str, keys: np.ndarray, count: int) -> np.ndarray
     """
     keys = np.asarray(keys)
     keys = keys.reshape(-1, 1) if keys.ndim == 1 else keys
-    n, width = keys.shape
-    if width > 2:
-        raise ValueError(f"keys: at most 2 words per row, got {width}")
-    blocks = -(-count // 4)
-    counter = np.zeros((n, blocks, 4), dtype=np.uint64)
-    counter[:, :, 0] = keys[:, :1].astype(np.uint64)
-    if width == 2:
-        counter[:, :, 1] = keys[:, 1:].astype(np.uint64)
-    counter[:, :, 2] = np.arange(blocks, dtype=np.uint64)
-    return philox4x64(counter.reshape(-1, 4), _key(seed, name)).reshape(n, 4 * blocks)[:, :count]
+    if keys.shape[1] > 2:
+        raise ValueError(f"keys: at most 2 words per row, got {keys.shape[1]}")
+    sample = keys[:, 0].astype(np.uint64)
+    path = keys[:, 1].astype(np.uint64) if keys.shape[1] == 2 else np.zeros_like(sample)
+    j = np.arange(1, count + 1, dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        h = mix64(mix64(_key(seed, name) + sample) + (path + np.uint64(1)) * _GAMMA)
+        return mix64(h[:, None] + j[None, :] * _GAMMA)
 
 
 def keyed_uniforms(seed: int, name: str, keys: np.ndarray, count: int) -> np.ndarray:

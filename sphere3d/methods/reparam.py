@@ -84,7 +84,7 @@ class ReparamTransforms:
         hits = state.tracer.intersect(detach(cam.origin), d)
         return follow_probes(state, cam.origin, detach(cam.origin), d, hits)
 
-    def emitter(self, shading: Shading, rng: np.random.Generator) -> Rotation:
+    def emitter(self, shading: Shading) -> Rotation:
         """Emitter sampling: one rotation per shading point from ``probes`` shadow rays (Sec. 4.3).
 
         The authors' rule: follow the mean attached hit of the occluded probes. When
@@ -97,7 +97,7 @@ class ReparamTransforms:
         """
         state = shading.state
         m = len(shading)
-        u = rng.random((m, self.probes, 3))
+        u = shading.draws.uniforms("probes.emitter", self.probes, 3)
         emitters = np.asarray(detach(state.triangles))[state.emitters]
         y, k = sample_mesh(u, emitters)
         to = y - detach(shading.x)[:, None]
@@ -125,16 +125,18 @@ class ReparamTransforms:
             target[f], found[f] = mean_point_direction(shading.x[f], points, usable[f])
         return Rotation.following(target, found)
 
-    def _probe_rotation(self, shading: Shading, centre: np.ndarray, rng: np.random.Generator) -> Rotation:
+    def _probe_rotation(self, shading: Shading, centre: np.ndarray) -> Rotation:
         """One rotation per shading point from a ring of probes around the kernel ``centre``.
 
         Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
-        m = len(shading)
         if self.kappa is None:
-            d = sample_cosine_hemisphere(rng.random((m, self.probes, 2)), detach(shading.n)[:, None])
+            d = sample_cosine_hemisphere(
+                shading.draws.uniforms("probes.bsdf", self.probes, 2), detach(shading.n)[:, None]
+            )
         else:
-            d = ring_directions(centre, vmf_spread_angle(self.kappa, self.spread), self.probes, rng.random(m))
+            phase = shading.draws.uniforms("probes.bsdf.ring")
+            d = ring_directions(centre, vmf_spread_angle(self.kappa, self.spread), self.probes, phase)
         hits = shading.state.tracer.intersect(shading.origin[:, None], d)
         # a probe below the horizon sees only the surface it leaves, where the integrand is 0
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
@@ -147,34 +149,34 @@ class ReparamTransforms:
         log_k = self.kappa * dot(rotated, centre)  # the vMF normalization cancels in the ratio
         return np.exp(log_k - detach(log_k))
 
-    def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray, kernel: Any, probes: Any) -> Any:
+    def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
         """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
         if self.paired:  # evaluated at the two members only: μ itself is not traced
-            return self._paired(shading, mu, pdf, kernel, probes)
+            return self._paired(shading, mu, pdf)
         hits = shading.trace(mu)
         # samples whose integrand is 0 with zero derivative need no rotation (and no probes)
         live = np.flatnonzero(shading.contributes(mu, hits))
         sub, mu_l, hits_l = shading.take(live), mu[live], hits.take(live)
         if self.kappa is None:
-            rotated = self._probe_rotation(sub, mu_l, probes).apply(mu_l)
+            rotated = self._probe_rotation(sub, mu_l).apply(mu_l)
             est = sub.evaluate_bsdf(mu_l, rotated, hits_l) / pdf[live]
         else:
             # kernel centre ω ~ k(·, μ) around the primary sample μ: the joint density of (μ, ω) is
             # the paper's "ω ~ p, μ ~ k(·, ω)" read the other way (k symmetric), and μ stays the
             # naive sample, so the primal is bit-identical to the naive one
-            centre = sample_vmf(kernel.random((live.size, 2)), mu_l, self.kappa)
-            rotated = self._probe_rotation(sub, centre, probes).apply(mu_l)
+            centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, self.kappa)
+            rotated = self._probe_rotation(sub, centre).apply(mu_l)
             # f(Rμ) k(Rμ, ω) / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
             est = sub.evaluate_bsdf(mu_l, rotated, hits_l) * self._kernel_weight(rotated, centre) / pdf[live]
         return scatter(len(mu), live, est, shading.state.dual)
 
-    def _paired(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray, kernel: Any, probes: Any) -> Any:
+    def _paired(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
         """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (DESIGN 2.9)."""
-        m = len(mu)
-        rotation = self._probe_rotation(shading, mu, probes)
+        rotation = self._probe_rotation(shading, mu)
+        u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
         e, w = [], []
-        for _ in range(2):  # the two members of each pair (not a loop over samples)
-            member = sample_vmf(kernel.random((m, 2)), mu, self.kappa)
+        for j in range(2):  # the two members of each pair (not a loop over samples)
+            member = sample_vmf(u[:, j], mu, self.kappa)
             rotated = rotation.apply(member)
             weight = self._kernel_weight(rotated, mu)
             weight = np.where(np.abs(detach(weight)) < SMALL_WEIGHT, 1.0 + 0.0 * weight, weight)

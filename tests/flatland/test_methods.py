@@ -108,17 +108,16 @@ UNBIASED = {
     ("shadow", "light.emission"),
     ("shadow", "floor.albedo"),
     ("shadow", "camera.translate.y"),
-    ("silhouette", "occluder.translate.x"),
-    ("silhouette", "ball.translate.y"),
-    ("silhouette", "ball.scale"),
     ("silhouette", "camera.rotate"),
 }
+# bias below the resolution of these tests at 4096 spp (neither claim holds): the error bound only
+UNRESOLVED = {("silhouette", "occluder.translate.x")}
 # per scene: about 1.3x the largest relative error measured for its biased parameters (test02b)
 BOUNDS = {
     "penumbra": 0.13,
     "polygon": 0.04,
-    "silhouette": 0.03,
-    "two_occluders": 0.05,
+    "silhouette": 0.04,
+    "two_occluders": 0.06,
 }
 CASES = [(n, p) for n in sorted(list_scenes()) for p in load_scene(n).parameters]
 
@@ -151,9 +150,8 @@ def test02a_reparam_is_unbiased_per_pixel_where_the_heuristic_holds(name, param)
     """Neither test of :func:`_bias_seen` rejects: reparam agrees with boundary pixel by pixel.
 
     z = (reparam - boundary) / sqrt(s_reparam² + s_boundary²), both from independent
-    batches (seed 3, 16 pixels). Measured: max |z| 2.1-4.1 against the quantile 4.16;
-    Σ z² 13-41 against 41.3. In the silhouette scene a small bias is possible below
-    this resolution (max |z| 3.6-4.1 there).
+    batches (seed 3, 16 pixels). Measured: max |z| 1.5-3.2 against the quantile 4.16;
+    Σ z² 8-22 against 41.3.
     """
     z, _ = _pixel_z(name, param)
     assert _bias_seen(z) == (False, False), (name, param, np.round(z, 2))
@@ -170,18 +168,23 @@ def test02b_reparam_bias_is_seen_per_pixel_and_bounded(name, param, record_prope
     ============= ==================== ======== ========= ==========
     scene         parameter            max |z|  Σ z²      rel. error
     ============= ==================== ======== ========= ==========
-    penumbra      blocker.vertex.2.x   17.6     572       0.094
-    penumbra      blocker.vertex.0.y   124.9    124 770   0.075
-    penumbra      light.scale          exact    exact     0.063
-    penumbra      camera.translate.x   exact    exact     0.056
-    polygon       polygon.rotate       8.9      250       0.028
-    silhouette    occluder.rotate      4.4      54        0.020
-    two_occluders near.translate.x     8.6      115       0.033
-    two_occluders far.translate.y      35.6     1 584     0.032
-    two_occluders near.rotate          7.5      80        0.036
+    penumbra      blocker.vertex.2.x   9.7      227       0.101
+    penumbra      blocker.vertex.0.y   124.9    109 164   0.066
+    penumbra      light.scale          exact    exact     0.050
+    penumbra      camera.translate.x   exact    exact     0.071
+    polygon       polygon.rotate       10.5     292       0.028
+    silhouette    occluder.translate.x 4.1      35        0.024
+    silhouette    occluder.rotate      4.4      58        0.016
+    silhouette    ball.translate.y     8.1      71        0.015
+    silhouette    ball.scale           8.4      80        0.030
+    two_occluders near.translate.x     11.6     279       0.041
+    two_occluders far.translate.y      42.5     2 003     0.017
+    two_occluders near.rotate          8.4      99        0.027
     ============= ==================== ======== ========= ==========
 
     ("exact": a pixel where both methods have zero standard error but disagree.)
+    The silhouette scene's occluder translation is not resolved by either test at
+    this sample count (:data:`UNRESOLVED`): only its error bound is checked.
     The penumbra scene is the worst: its emitter is unfaded, and where a blocker's
     tangent line happens to separate the emitter from the floor point the heuristic
     follows the blocker while the emitter's edge stays put (see
@@ -193,7 +196,8 @@ def test02b_reparam_bias_is_seen_per_pixel_and_bounded(name, param, record_prope
     """
     z, error = _pixel_z(name, param)
     record_property("relative_error", error)
-    assert any(_bias_seen(z)), (name, param, "bias no longer seen: move the case to UNBIASED")
+    if (name, param) not in UNRESOLVED:
+        assert any(_bias_seen(z)), (name, param, "bias no longer seen: move the case to UNBIASED")
     assert error <= BOUNDS[name], (name, param, error)
 
 

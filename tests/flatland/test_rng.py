@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from flatland.core.rng import Draws, keyed_bits, keyed_normals, keyed_uniforms, philox4x64, stream
+from flatland.core.rng import Draws, keyed_bits, keyed_normals, keyed_uniforms, mix64, stream
 from flatland.core.stats import chi2_gof, sidak
 
 ALPHA = 1e-3
@@ -14,17 +14,24 @@ GOF_TESTS = 2  # chi-square tests in this file, for the Šidák correction
 BINS = 41
 
 
-def test01_philox_matches_numpys_bit_for_bit():
-    # numpy's Philox increments its 256-bit counter before each block: block 0 is philox(counter + 1)
-    rng = np.random.default_rng(5)
-    for _ in range(20):
-        counter = rng.integers(0, 2**63, size=4, dtype=np.uint64)
-        key = rng.integers(0, 2**63, size=2, dtype=np.uint64)
-        expected = np.random.Philox(counter=counter, key=key).random_raw(4)
-        bumped = counter.copy()
-        bumped[0] += np.uint64(1)  # no carry: counter[0] < 2^63
-        got = philox4x64(bumped[None, :], (int(key[0]), int(key[1])))[0]
-        np.testing.assert_array_equal(got, expected)
+def test01_mix64_gives_the_splitmix64_reference_sequence():
+    # SplitMix64 from seed 0: state k * 0x9E3779B97F4A7C15, output mix64(state) (the reference sequence)
+    state = np.arange(1, 5, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+    expected = [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F, 0xF88BB8A8724C81EC]
+    np.testing.assert_array_equal(mix64(state), np.array(expected, dtype=np.uint64))
+
+
+def test01b_neighbouring_keys_give_uncorrelated_words():
+    # consecutive sample indices (the common case) and the two paths of one sample: each output bit
+    # is set with probability 1/2 and independent of the same bit of the neighbour's word
+    bits = keyed_bits(5, "samples", np.arange(20_001), 2)
+    a, b = bits[:-1, 0], bits[1:, 0]
+    for bit in range(0, 64, 7):
+        x = ((a >> np.uint64(bit)) & np.uint64(1)).astype(float)
+        y = ((b >> np.uint64(bit)) & np.uint64(1)).astype(float)
+        # |corr| of two independent fair bits over n pairs is below z / sqrt(n) (z = 4.5, Sidak over 10)
+        assert abs(np.corrcoef(x, y)[0, 1]) < 4.5 / np.sqrt(x.size)
+        assert abs(x.mean() - 0.5) < 4.5 * 0.5 / np.sqrt(x.size)
 
 
 def test02_a_rows_numbers_depend_only_on_its_key():
