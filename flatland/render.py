@@ -34,7 +34,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import flatland.integrator as integrator
 import flatland.methods  # noqa: F401  (registers the gradient methods)
+from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.validate import ValidationError, check_int, check_seed
@@ -52,9 +54,26 @@ def _job(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **target: An
     return Job(scene, p, spp, seed, resolve_batches(spp, batches), **target)
 
 
+def _check_budget(job: Job, options: dict[str, Any]) -> None:
+    """Refuse a request too large for memory or time (:mod:`flatland.core.budget`) before it starts."""
+    target = job.point is None
+    check_request(
+        Request(
+            pixels=job.pixels,
+            spp=job.spp,
+            batches=job.batches,
+            rays=rays_per_sample(options),
+            chunk=integrator.CHUNK,
+            pixels_field="camera.pixels",
+            spp_field="spp" if target else "n",
+        )
+    )
+
+
 def _gradient(job: Job, method: Any, options: dict[str, Any]) -> tuple[BatchResult, dict[str, Any]]:
     spec = GRADIENT_METHODS.get(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
+    _check_budget(job, resolved)
     return spec.func(job, **resolved), resolved
 
 
@@ -67,6 +86,7 @@ def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int
         Naming the field and value (bad scene field, spp < 1, batches not dividing spp, ...).
     """
     job = _job(scene, None, spp, seed, batches)
+    _check_budget(job, {})
     result = run(job, job.geometry(0.0), Hooks())
     return Image.from_batches(result.value, spp=job.spp, seed=job.seed, scene=job.scene.name)
 
@@ -146,6 +166,7 @@ def irradiance(
     point, normal = check_point("point", point), check_direction("normal", normal)
     job = _job(scene, param, n, seed, batches, point=point, normal=normal)
     if param is None:
+        _check_budget(job, {})
         result, resolved = run(job, job.geometry(0.0), Hooks()), {}
     else:
         result, resolved = _gradient(job, method, options)

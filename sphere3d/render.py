@@ -12,9 +12,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.validate import ValidationError, check_int, check_seed
+from sphere3d import tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.scene import check_vector, load_scene
 from sphere3d.tasks import ImageTask, PointTask, Tally
@@ -44,13 +46,27 @@ def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    tally = ImageTask(scene, None, spp, seed, batches).evaluate(0.0)
+    task = ImageTask(scene, None, spp, seed, batches)
+    _check_budget(task, {})
+    tally = task.evaluate(0.0)
     return Image.from_batches(tally.value, spp=spp, seed=seed, scene=scene.name)
+
+
+def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
+    """Refuse a request too large for memory or time (:mod:`flatland.core.budget`) before it starts."""
+    if isinstance(task, ImageTask):
+        pixels, spp, field = task.scene.camera.width * task.scene.camera.height, task.spp, "spp"
+        chunk = max(tasks.CHUNK, task.spp)  # a chunk holds whole pixels: all of a pixel's samples at once
+    else:
+        pixels, spp, field, chunk = 1, task.n, "n", tasks.CHUNK
+    rays = rays_per_sample(options)
+    check_request(Request(pixels, spp, task.batches, rays, chunk, "camera.width", field))
 
 
 def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
     spec = GRADIENT_METHODS.get(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
+    _check_budget(task, resolved)
     return spec.func(task, **resolved), resolved
 
 
@@ -142,6 +158,7 @@ def irradiance(
     batches = resolve_batches(n, batches, "n")
     task = PointTask(scene, param, point, normal, n, seed, batches)
     if param is None:
+        _check_budget(task, {})
         tally, resolved = task.evaluate(0.0), {}
     else:
         tally, resolved = _run(method, task, options)
