@@ -36,6 +36,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from flatland.core.stats import z_score
 from flatland.core.table import format_table, method_label
 from flatland.core.validate import ValidationError, check_int, check_positive, check_seed
 
@@ -149,13 +150,10 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
 
 def _sum_z(g: Any, reference: Any) -> float:
     """(Σg - Σg_ref) / sqrt(Σ se² + Σ se_ref²): the film sum's error in standard errors."""
-    diff = float(np.sum(g.derivative) - np.sum(reference.derivative))
     noise = float(
         np.sqrt(np.sum(np.square(g.derivative_stderr)) + np.sum(np.square(reference.derivative_stderr)))
     )
-    if noise == 0.0:
-        return 0.0 if diff == 0.0 else float(np.copysign(np.inf, diff))
-    return diff / noise
+    return z_score(float(np.sum(g.derivative)), float(np.sum(reference.derivative)), noise)
 
 
 def _film_sum(g: Any) -> str:

@@ -24,7 +24,6 @@ How to add an estimator
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -33,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.image import summarize_batches
-from flatland.core.stats import Interval, normal_quantile
+from flatland.core.stats import Interval, normal_quantile, z_score
 from flatland.core.validate import ValidationError, check_choice
 
 __all__ = ["Estimate", "MethodTable", "Option"]
@@ -95,9 +94,7 @@ class Estimate:
     def z_score(self, reference: float, of: str = "derivative") -> float:
         """Distance to ``reference`` in standard errors of ``of`` ("value" or "derivative")."""
         mean, se = self._mean_stderr(of)
-        if se == 0.0:
-            return 0.0 if mean == reference else math.inf
-        return (mean - reference) / se
+        return z_score(mean, reference, se)  # zero spread: rounding-level differences are no error
 
 
 @dataclass(frozen=True)

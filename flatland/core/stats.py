@@ -9,6 +9,7 @@ corrected for the number of tests run (:func:`sidak`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -28,6 +29,7 @@ __all__ = [
     "sidak",
     "spread",
     "summarize",
+    "z_score",
 ]
 
 ROUNDING = 64 * np.finfo(np.float64).eps
@@ -99,6 +101,21 @@ def spread(std: np.ndarray | float, scale: np.ndarray | float) -> np.ndarray | f
     std = np.asarray(std, dtype=np.float64)
     out = np.where(std <= rounding_floor(np.asarray(scale, dtype=np.float64)), 0.0, std)
     return float(out) if out.ndim == 0 else out
+
+
+def z_score(estimate: float, reference: float, stderr: float) -> float:
+    """``(estimate - reference) / stderr``, the error in standard errors, under the rounding policy.
+
+    With a zero standard error (an exact estimator, or rounding-level spread counted
+    as none by :func:`spread`) a difference within :func:`rounding_floor` of the
+    larger magnitude is rounding, z = 0; a larger one is infinitely significant.
+    """
+    diff = float(estimate) - float(reference)
+    if stderr > 0.0:
+        return diff / float(stderr)
+    if abs(diff) <= rounding_floor(max(abs(float(estimate)), abs(float(reference)))):
+        return 0.0
+    return math.copysign(math.inf, diff)
 
 
 def summarize(samples: np.ndarray, axis: int = 0) -> SampleSummary:

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, relative_error, resolve_batches, summarize_batches
-from flatland.core.stats import ROUNDING, rounding_floor, spread, summarize
+from flatland.core.stats import ROUNDING, rounding_floor, spread, summarize, z_score
 
 
 def test01_batch_summary_is_mean_and_std_over_sqrt_batches():
@@ -86,3 +86,13 @@ def test06_spread_above_the_rounding_floor_is_kept():
     assert above > 0.0 and below == 0.0
     assert spread(np.array([1e-20, 1.0]), np.array([1.0, 1.0])).tolist() == [0.0, 1.0]
     assert rounding_floor(-2.0) == 2.0 * ROUNDING
+
+
+def test07_a_zero_spread_estimate_is_exact_to_rounding_not_bit_for_bit():
+    # the mean of identical samples may be an ulp off the closed form on some CPUs: z = 0, not inf
+    value = -0.35206532676429952  # -K(0.5) of the step integral
+    off_by_ulps = value + 4 * np.spacing(value)
+    e = Estimate.from_batches(np.zeros(4), np.full(4, off_by_ulps), 64, "boundary", {})
+    assert e.derivative_stderr == 0.0 and e.z_score(value) == 0.0
+    assert z_score(value * (1 + 1e-9), value, 0.0) == -np.inf  # beyond rounding (value < 0): significant
+    assert z_score(1.0, 3.0, 0.5) == -4.0
