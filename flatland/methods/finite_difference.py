@@ -6,7 +6,7 @@ Not part of the paper: the reference the other methods are checked against.
 from __future__ import annotations
 
 from flatland.core.contract import Option
-from flatland.core.validate import check_positive
+from flatland.core.validate import ValidationError, check_positive
 from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
 
 __all__ = ["finite_difference"]
@@ -27,7 +27,16 @@ def finite_difference(job: Job, h: float) -> BatchResult:
     edge of a box filter) the error is O(1) in h. Its variance grows like 1 / h at
     discontinuities (like 1 / h² without common random numbers). Cost: three primal
     renders.
+
+    For a ``*.scale`` parameter (scale by 1 + θ) h must be < 1: at θ0 - h the shape
+    would be scaled by 1 - h <= 0, a point or a mirrored shape (a circle of radius <= 0).
     """
+    if job.param is not None and job.param.kind == "scale" and h >= 1.0:
+        raise ValidationError(
+            "h",
+            f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r} "
+            f"for {job.param.name!r}",
+        )
     base = run(job, job.geometry(0.0), Hooks())
     plus = run(job, job.geometry(h), Hooks())
     minus = run(job, job.geometry(-h), Hooks())

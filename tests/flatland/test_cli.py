@@ -149,3 +149,16 @@ def test08_builtin_study_by_name_with_overrides(tmp_path, capsys):
     rows = read_csv(tmp_path / "kappa.csv")
     assert len(rows) == 14 and all(r["n"] == 500 and r["seed"] == 4 and r["trials"] == 20 for r in rows)
     assert "reparam kappa=10000 paired" in capsys.readouterr().out
+
+
+def test09_finite_difference_step_too_large_for_a_scale_parameter(tmp_path):
+    """``--h 1`` on a ``*.scale`` parameter would scale the shape by 1 - h = 0: one line, exit 2."""
+    argv = ["gradient", "polygon", "--param", "polygon.scale", "--method", "finite_difference", "--h", "1"]
+    out = run(*argv, "--spp", "4", "--out", tmp_path, "--quiet")
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and out.stdout == "" and len(lines) == 1, out
+    expected = (
+        "h: must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got 1.0 for 'polygon.scale'"
+    )
+    assert lines[0] == f"error: {expected}"
+    assert not any(tmp_path.iterdir())

@@ -319,3 +319,26 @@ def test12_reparam_refuses_a_box_filter_and_points_to_the_tent():
         irradiance(SKY, (0.0, 0.0), (0.0, 0.0))
     with pytest.raises(ValidationError, match=r"^point\[1\]: must be finite"):
         irradiance(SKY, (0.0, float("nan")), (0.0, 1.0))
+
+
+@pytest.mark.parametrize(
+    ("scene", "param", "h"),
+    [("polygon", "polygon.scale", 1.0), ("silhouette", "ball.scale", 1.5), ("penumbra", "light.scale", 1.0)],
+)
+def test13_finite_difference_refuses_a_step_that_scales_a_shape_to_nothing(scene, param, h):
+    """At θ0 - h a ``*.scale`` parameter scales by 1 - h: a point or a mirrored shape for h >= 1.
+
+    Before the check, ``penumbra``'s ``light.scale`` at h = 1 divided by its zero-length
+    emitter (a RuntimeWarning, an error here) and the others returned derivatives of a
+    scene that does not exist. Just below 1 the step is accepted.
+    """
+    small = load_scene(scene).with_camera(pixels=2)
+    with pytest.raises(ValidationError) as info:
+        render_gradient(small, param, method="finite_difference", spp=4, h=h)
+    message = str(info.value)
+    assert info.value.field == "h" and message.startswith("h: must be < 1 for a scale parameter")
+    assert repr(h) in message and repr(param) in message
+    with pytest.raises(ValidationError, match=r"^h: must be < 1"):
+        irradiance(small, (0.0, 0.0), (0.0, 1.0), param=param, method="finite_difference", n=4, h=h)
+    g = render_gradient(small, param, method="finite_difference", spp=4, h=0.5)
+    assert np.all(np.isfinite(g.derivative))
