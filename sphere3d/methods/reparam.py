@@ -58,10 +58,14 @@ class ReparamTransforms:
         None: no kernel, one rotation per sample from probes drawn from the cosine
         density itself (Sec. 4.1 over a support too large for it: biased).
     probes : int
-        Probe rays per transform.
+        Probe rays per transform, >= 1. With one probe (the kernel's centre, the pixel
+        centre) there is no pair: its attached hit is followed, the identity where it
+        misses (:mod:`sphere3d.probes`).
     spread : float
         Radius of the ring of probes around a kernel's centre, in kernel standard
-        deviations (:mod:`sphere3d.probes`).
+        deviations (:mod:`sphere3d.probes`), >= 0: any value has a ring, whose angle
+        grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film it is
+        capped at the filter's radius.
     paired : bool
         Two kernel samples per outer sample share one rotation (DESIGN 2.9).
     """
@@ -199,7 +203,7 @@ def _check_kappa(name: str, value: Any) -> float | None:
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, _check_kappa),
-    Option("probes", 4, check_int),  # an integer >= 1
+    Option("probes", 4, check_int),  # an integer >= 1; one probe has no pair and stands alone
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("paired", False, check_bool),
 )
