@@ -41,7 +41,7 @@ from sphere3d.tasks import ImageTask, PointTask, Tally
 from sphere3d.tracing import attached_points
 from sphere3d.vector import dot, norm, scatter, zeros
 
-__all__ = ["ReparamTransforms", "reparam"]
+__all__ = ["KAPPA_MAX", "ReparamTransforms", "reparam"]
 
 SMALL_WEIGHT = 1e-5
 """Paired weights with |w| below this count as 1 (DESIGN 2.9)."""
@@ -54,7 +54,8 @@ class ReparamTransforms:
     Attributes
     ----------
     kappa : float or None
-        vMF concentration of the convolution kernel of the cosine-sampled integral;
+        vMF concentration of the convolution kernel of the cosine-sampled integral, in
+        (0, :data:`KAPPA_MAX`];
         None: no kernel, one rotation per sample from probes drawn from the cosine
         density itself (Sec. 4.1 over a support too large for it: biased).
     probes : int
@@ -195,9 +196,23 @@ class ReparamTransforms:
         )
 
 
+KAPPA_MAX = 1e15
+"""Largest vMF concentration: the kernel's width shows in cosines near 1 as 1 - cos σ = 1/(2κ),
+which float64 resolves only down to about 1e-16 (κ = 1e15: 5e-16). Beyond it the samples and the
+weight κ (Rμ·ω - 1) are rounding; at κ = 1e300 the weight's derivatives overflowed the variance."""
+
+
 def _check_kappa(name: str, value: Any) -> float | None:
-    """κ > 0, or None for no convolution kernel."""
-    return None if value is None else check_positive(name, value)
+    """0 < κ <= :data:`KAPPA_MAX`, or None for no convolution kernel."""
+    if value is None:
+        return None
+    kappa = check_positive(name, value)
+    if kappa > KAPPA_MAX:
+        raise ValidationError(
+            name,
+            f"must be <= {KAPPA_MAX:g} (narrower kernels are below float64's resolution), got {value!r}",
+        )
+    return kappa
 
 
 @GRADIENT_METHODS.register(
