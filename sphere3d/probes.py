@@ -12,7 +12,10 @@ the ring with spread 3 did not (0.074 ± 0.003, 0.084 ± 0.005; 16 M samples eac
 Then:
 
 - pair probe 0 with the *last* probe that hits a different shape (a miss counts as
-  its own "shape"); if there is none, probe 0 stands alone;
+  its own "shape"); if there is none, probe 0 stands alone (always so with
+  ``probes=1``: its hit point is followed, the identity where it misses; flatland's
+  heuristic has an extra rule, the identity when every probe sees one primitive,
+  which makes its single probe the identity everywhere);
 - only one of the pair hits: its hit point, moved to the silhouette between the
   two probes by bisection (:data:`REFINE` rays; a refinement argued in
   :func:`select_points`);
@@ -73,10 +76,19 @@ def vmf_spread_angle(kappa: float, spread: float) -> float:
     The angle r with P(angle <= r) equal to the Rayleigh probability ``1 - e^{-spread²/2}``
     of ``spread`` σ (a vMF is a 2D Gaussian of σ = 1/√κ for large κ): from the vMF's
     radial inverse CDF, ``1 - cos r = -log1p(P expm1(-2κ)) / κ``; r ≈ spread / √κ.
+    Defined for every spread >= 0: r grows from 0 to π (the ring closes on the
+    antipode once the vMF's mass beyond the Rayleigh level is below e^{-2κ}).
     """
-    level = -math.expm1(-0.5 * spread * spread)
-    s = min(2.0, -math.log1p(level * math.expm1(-2.0 * kappa)) / kappa)
-    return math.acos(1.0 - s)
+    tail = -0.5 * spread * spread  # log(1 - P), the Rayleigh tail beyond ``spread`` σ (-inf: none)
+    level = -math.expm1(tail)
+    x = level * math.expm1(-2.0 * kappa)
+    if x > -0.5:
+        s = -math.log1p(x) / kappa
+    else:
+        # 1 + x = e^tail + P e^{-2κ} rounds to 0 once both terms are below the float resolution
+        # (spread >= 8.7 with κ >= 19): taken in log space instead of log1p(-1) = -inf
+        s = -float(np.logaddexp(tail, -2.0 * kappa + math.log(level))) / kappa
+    return math.acos(1.0 - min(2.0, max(s, 0.0)))
 
 
 def ring_directions(centre: np.ndarray, angle: float, count: int, u: np.ndarray) -> np.ndarray:
@@ -100,13 +112,15 @@ def ring_offsets(radius: float, count: int, u: np.ndarray) -> np.ndarray:
 
 
 def pair_index(shape: np.ndarray) -> np.ndarray:
-    """Per row, the last probe whose shape differs from probe 0's (0 if none).
+    """Per row, the last probe whose shape differs from probe 0's (0 if none, as always with one probe).
 
     Parameters
     ----------
     shape : ndarray of int, shape (m, P)
         Hit shape per probe, -1 for a miss.
     """
+    if shape.shape[1] < 2:  # a single probe has no partner: it stands alone (argmax of nothing fails)
+        return np.zeros(shape.shape[0], dtype=np.intp)
     different = shape[:, 1:] != shape[:, :1]
     last = shape.shape[1] - 1 - np.argmax(different[:, ::-1], axis=1)
     return np.where(different.any(axis=1), last, 0)

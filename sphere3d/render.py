@@ -19,6 +19,7 @@ from flatland.core.validate import ValidationError, check_int, check_seed
 from sphere3d import tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.scene import check_vector, load_scene
+from sphere3d.state import COORD_MAX
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
@@ -100,7 +101,7 @@ def render_gradient(
     ------
     ValidationError
         One error naming the field and value: unknown scene field, method, option or
-        parameter, spp < 1, κ <= 0, h <= 0, batches not dividing spp.
+        parameter, spp < 1, κ outside (0, 1e15], h <= 0 (or h >= 1 on a scale), batches not dividing spp.
     """
     scene = load_scene(scene)
     param = scene.check_param(param)
@@ -148,6 +149,10 @@ def irradiance(
     scene = load_scene(scene)
     param = scene.check_param(param) if param is not None else None
     point = check_vector("point", point)
+    if max(map(abs, point)) > COORD_MAX:
+        raise ValidationError(
+            "point", f"must lie within ±{COORD_MAX:g} (rays are traced in float32), got {list(point)}"
+        )
     normal = check_vector("normal", normal)
     length = math.hypot(*normal)
     if length == 0.0:

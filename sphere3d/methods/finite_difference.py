@@ -25,8 +25,8 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
         raise ValidationError(
             "h", f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r}"
         )
+    value = task.evaluate(0.0, Identity())  # first: a scene refused at θ0 is reported without the offset
     plus = task.evaluate(h, Identity())
     minus = task.evaluate(-h, Identity())
-    value = task.evaluate(0.0, Identity())
     # per-batch central difference: common random numbers cancel everything that did not move
     return Tally(value=value.value, derivative=(plus.value - minus.value) / (2.0 * h))

@@ -41,7 +41,7 @@ from sphere3d.tasks import ImageTask, PointTask, Tally
 from sphere3d.tracing import attached_points
 from sphere3d.vector import dot, norm, scatter, zeros
 
-__all__ = ["ReparamTransforms", "reparam"]
+__all__ = ["KAPPA_MAX", "ReparamTransforms", "reparam"]
 
 SMALL_WEIGHT = 1e-5
 """Paired weights with |w| below this count as 1 (DESIGN 2.9)."""
@@ -54,14 +54,19 @@ class ReparamTransforms:
     Attributes
     ----------
     kappa : float or None
-        vMF concentration of the convolution kernel of the cosine-sampled integral;
+        vMF concentration of the convolution kernel of the cosine-sampled integral, in
+        (0, :data:`KAPPA_MAX`];
         None: no kernel, one rotation per sample from probes drawn from the cosine
         density itself (Sec. 4.1 over a support too large for it: biased).
     probes : int
-        Probe rays per transform.
+        Probe rays per transform, >= 1. With one probe (the kernel's centre, the pixel
+        centre) there is no pair: its attached hit is followed, the identity where it
+        misses (:mod:`sphere3d.probes`).
     spread : float
         Radius of the ring of probes around a kernel's centre, in kernel standard
-        deviations (:mod:`sphere3d.probes`).
+        deviations (:mod:`sphere3d.probes`), >= 0: any value has a ring, whose angle
+        grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film it is
+        capped at the filter's radius.
     paired : bool
         Two kernel samples per outer sample share one rotation (DESIGN 2.9).
     """
@@ -193,15 +198,29 @@ class ReparamTransforms:
         )
 
 
+KAPPA_MAX = 1e15
+"""Largest vMF concentration: the kernel's width shows in cosines near 1 as 1 - cos σ = 1/(2κ),
+which float64 resolves only down to about 1e-16 (κ = 1e15: 5e-16). Beyond it the samples and the
+weight κ (Rμ·ω - 1) are rounding; at κ = 1e300 the weight's derivatives overflowed the variance."""
+
+
 def _check_kappa(name: str, value: Any) -> float | None:
-    """κ > 0, or None for no convolution kernel."""
-    return None if value is None else check_positive(name, value)
+    """0 < κ <= :data:`KAPPA_MAX`, or None for no convolution kernel."""
+    if value is None:
+        return None
+    kappa = check_positive(name, value)
+    if kappa > KAPPA_MAX:
+        raise ValidationError(
+            name,
+            f"must be <= {KAPPA_MAX:g} (narrower kernels are below float64's resolution), got {value!r}",
+        )
+    return kappa
 
 
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, _check_kappa),
-    Option("probes", 4, check_int),  # an integer >= 1
+    Option("probes", 4, check_int),  # an integer >= 1; one probe has no pair and stands alone
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("paired", False, check_bool),
 )

@@ -146,3 +146,39 @@ def test08_probe_patterns_and_mean_points():
     direction, found = mean_point_direction(Dual(np.zeros((1, 3))), points, np.array([[True, True, False]]))
     assert found[0] and detach(direction)[0].tolist() == [2.0, 0.0, 0.0]
     assert tangent(direction)[0].tolist() == [1.0, 1.0, 1.0]
+
+
+def test09_a_single_probe_stands_alone():
+    # probes=1: no pair (pair_index of one column is 0), the probe's attached hit is followed where it
+    # hits, the identity where it misses; this once raised "argmax of an empty sequence"
+    assert pair_index(np.array([[3], [-1]])).tolist() == [0, 0]
+    _, hits, point, found = _select([[0.1, 0.0, -1.0]])
+    assert found[0] and hits.shape[0].tolist() == [SQUARE]
+    np.testing.assert_allclose(detach(point)[0], [0.1, 0.0, -1.0], atol=1e-12)  # the hit, not moved
+    assert tangent(point)[0].tolist() == [1.0, 0.0, 0.0]  # attached to the moving square
+    _, _, _, found = _select([[0.0, 1.0, 0.2]])
+    assert not found[0]
+    d = ring_directions(normalize(np.array([[0.0, 0.0, -1.0]])), 0.1, 1, np.array([0.3]))
+    assert d.shape == (1, 1, 3) and ring_offsets(2.0, 1, np.array([0.3])).tolist() == [[[0.0, 0.0]]]
+
+
+@pytest.mark.parametrize("kappa", [1e-3, 1.0, 1000.0, 1e8])
+def test10_the_ring_angle_is_defined_for_every_spread(kappa):
+    # P(angle > r) = (e^{-κ(1 - cos r)} - e^{-2κ}) / (1 - e^{-2κ}) must be the Rayleigh tail e^{-spread²/2};
+    # spread >= 8.7 with κ >= 19 once raised "math domain error" (log1p(-1) of a level rounded to 1)
+    previous = 0.0
+    for spread in [0.0, 0.5, 3.0, 8.5, 8.7, 9.0, 20.0, 40.0, 60.0, 1e3, 1e200, 1.7e308]:
+        r = vmf_spread_angle(kappa, spread)
+        assert previous <= r <= math.pi
+        previous = r
+        s, mass = 1.0 - math.cos(r), -math.expm1(-2.0 * kappa)
+        tail = math.exp(-kappa * s) * -math.expm1(-kappa * (1.0 + math.cos(r))) / mass  # e^{-κs} - e^{-2κ}
+        expected = math.exp(-0.5 * spread * spread) if spread < 1e100 else 0.0
+        # s = 1 - cos r is known to a few ulps of 1 (δs = 1e-15): the tail to |d tail / ds| δs
+        slack = kappa * math.exp(-kappa * s) / mass * 1e-15
+        assert tail == pytest.approx(expected, rel=1e-12, abs=slack + 1e-300)
+    assert vmf_spread_angle(kappa, 0.0) == 0.0
+    assert vmf_spread_angle(1000.0, 60.0) == pytest.approx(math.acos(1.0 - 1.8), rel=1e-12)
+    assert (
+        vmf_spread_angle(1000.0, 1e3) == math.pi
+    )  # the mass beyond 1000 σ is below e^{-2κ}: the whole sphere
