@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import flatland as fl
@@ -70,3 +71,21 @@ def test03_huge_requests_are_refused_before_any_work(call, field, estimate):
     with pytest.raises(ValidationError, match=rf"^{field}: .*{estimate}") as info:
         call()
     assert info.value.field == field
+
+
+def test04_a_non_finite_estimate_is_an_internal_error_not_a_result(monkeypatch):
+    # validation keeps inputs finite, so NaN from an estimator is a defect: raised, never returned
+    import flatland.integrator as integrator
+    import sphere3d.integrator as s3_integrator
+
+    real = integrator.shade
+    monkeypatch.setattr(integrator, "shade", lambda *a, **k: real(*a, **k) * float("nan"))
+    real3 = s3_integrator.irradiance_samples
+    monkeypatch.setattr(s3_integrator, "irradiance_samples", lambda *a, **k: real3(*a, **k) * float("inf"))
+    with np.errstate(all="ignore"):  # the injected NaN and inf propagate quietly, as a defect's would
+        with pytest.raises(FloatingPointError, match=r"^internal error: \d+ of \d+ per-batch pixel values"):
+            fl.render("shadow", spp=4)
+        with pytest.raises(FloatingPointError, match=r"internal error: .* per-batch values"):
+            fl.irradiance("shadow", [0.0, 0.0], [0.0, 1.0], n=16)
+        with pytest.raises(FloatingPointError, match=r"per-batch pixel values"):
+            s3.render_gradient("shadow", "occluder.translate.x", method="naive", spp=2)

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.image import summarize_batches
+from flatland.core.image import check_finite_result, summarize_batches
 from flatland.core.stats import Interval, normal_quantile, z_score
 from flatland.core.validate import ValidationError, check_choice
 
@@ -77,6 +77,8 @@ class Estimate:
         options: Mapping[str, Any] | None = None,
     ) -> Estimate:
         """The estimate from per-batch estimates (1D arrays, one entry per independent batch)."""
+        check_finite_result("per-batch values", np.ravel(values))
+        check_finite_result(f"per-batch derivatives ({method})", np.ravel(derivatives))
         v, d = summarize_batches(np.ravel(values)), summarize_batches(np.ravel(derivatives))
         return cls(float(v.mean), float(d.mean), float(v.stderr), float(d.stderr), n, method, options or {})
 

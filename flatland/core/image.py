@@ -24,6 +24,7 @@ __all__ = [
     "BatchSummary",
     "GradientImage",
     "Image",
+    "check_finite_result",
     "relative_error",
     "resolve_batches",
     "summarize_batches",
@@ -53,6 +54,22 @@ class BatchSummary:
 
     mean: np.ndarray
     stderr: np.ndarray
+
+
+def check_finite_result(what: str, estimates: np.ndarray) -> None:
+    """Raise FloatingPointError if an estimator produced NaN or inf: no such value leaves a public function.
+
+    Validation keeps the user's input finite and in range, so a non-finite estimate
+    is a defect of the renderer, reported as an internal error (never as a usage
+    error); the message says how many entries and where, for the bug report.
+    """
+    bad = ~np.isfinite(estimates)
+    if np.any(bad):
+        where = np.argwhere(bad)[:3].tolist()
+        raise FloatingPointError(
+            f"internal error: {int(bad.sum())} of {bad.size} {what} are not finite (first at {where}); "
+            "please report the scene, method, options and seed"
+        )
 
 
 def summarize_batches(per_batch: np.ndarray) -> BatchSummary:
@@ -120,6 +137,7 @@ class Image:
     @classmethod
     def from_batches(cls, per_batch: np.ndarray, *, spp: int, seed: int, scene: str = "") -> Image:
         """The image from per-batch pixel estimates of shape ``(batches, *film)``."""
+        check_finite_result("per-batch pixel values", np.asarray(per_batch))
         summary = summarize_batches(per_batch)
         return cls(summary.mean, summary.stderr, spp, seed, np.shape(per_batch)[0], scene)
 
@@ -180,6 +198,8 @@ class GradientImage:
         scene: str = "",
     ) -> GradientImage:
         """The gradient image from per-batch estimates of shape ``(batches, *film)``."""
+        check_finite_result("per-batch pixel values", np.asarray(values))
+        check_finite_result(f"per-batch pixel derivatives ({method})", np.asarray(derivatives))
         v, d = summarize_batches(values), summarize_batches(derivatives)
         return cls(
             value=v.mean,

@@ -9,6 +9,7 @@ import numpy as np
 
 from flatland.core.contract import Estimate, MethodTable
 from flatland.core.dual import detach, tangent
+from flatland.core.image import check_finite_result
 from flatland.core.rng import stream
 from flatland.core.stats import summarize
 from flatland.integrals import Integrand
@@ -42,6 +43,8 @@ def to_estimate(
     ``extra_derivative`` is a deterministic term added to the derivative (the exact
     discontinuity term of the boundary estimator); it adds no variance.
     """
+    check_finite_result("per-sample values", np.asarray(detach(per_sample)))
+    check_finite_result(f"per-sample derivatives ({method})", np.asarray(tangent(per_sample)))
     values = summarize(detach(per_sample))
     derivs = summarize(tangent(per_sample))
     return Estimate(
