@@ -19,7 +19,7 @@ from flatland.core.contract import Option
 from flatland.core.dual import detach, variable
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
-from flatland.geometry import angle_of, cast, direction, film_coordinate, film_direction
+from flatland.geometry import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction
 from flatland.integrator import (
     GRADIENT_METHODS,
     BatchResult,
@@ -129,9 +129,13 @@ class ReparamHooks(Hooks):
 
         probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
         choice = self._choose(ctx, x0, direction(center), probes, trace)
-        angle = angle_of(np.where(choice.ok[:, None], choice.point - x, direction(center)))
+        offset = choice.point - x
+        # a chosen point on the shading point itself (coincident geometry) defines no direction: the
+        # derivative of atan2 there is 0/0, so that sample keeps the identity transform
+        ok = choice.ok & (np.hypot(*detach(offset).T) > EPS_DIST)
+        angle = angle_of(np.where(ok[:, None], offset, direction(center)))
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (DESIGN 2.6)
-        points = mu + np.where(choice.ok, angle - detach(angle), 0.0)[:, None]
+        points = mu + np.where(ok, angle - detach(angle), 0.0)[:, None]
         c = np.cos(points - center[:, None])
         # von Mises weight exp(κ (cos(T y - ω) - detach(cos(T y - ω))))   (DESIGN 2.7)
         return Members(points, np.exp(kappa * (c - detach(c))), self.paired)

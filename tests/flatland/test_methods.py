@@ -283,3 +283,26 @@ def test04_probe_heuristic_one_configuration_per_rule():
         if point is not None:
             assert np.allclose(detach(choice.point)[i], point), i
     assert np.allclose(tangent(choice.point)[-1], [0.5, 0.5])
+
+
+def test05_a_chosen_point_on_the_shading_point_keeps_the_identity(monkeypatch):
+    """Coincident geometry can make the heuristic choose the shading point itself: no direction, no NaN.
+
+    The probe rule is replaced by one that always returns the ray origin (the
+    degenerate case); the derivative of atan2 at the zero offset is 0/0, so those
+    samples must fall back to the identity: the image is then the naive one.
+    """
+    import flatland.methods.reparam as reparam_module
+    from flatland.methods.heuristic import Choice
+
+    def at_origin(geom, origins, *args, **kwargs):
+        return Choice(np.array(origins, dtype=float), np.zeros(len(origins), dtype=int))
+
+    monkeypatch.setattr(reparam_module, "choose_points", at_origin)
+    scene = load_scene("shadow").with_camera(pixels=8)
+    g = render_gradient(scene, "occluder.translate.x", method="reparam", spp=16, seed=1, kappa_film=1e12)
+    assert np.all(np.isfinite(g.derivative))
+    naive = render_gradient(scene, "occluder.translate.x", method="naive", spp=16, seed=1)
+    np.testing.assert_allclose(
+        g.derivative, naive.derivative, rtol=0, atol=1e-9 * np.abs(naive.derivative).max()
+    )
