@@ -287,8 +287,8 @@ def _run_task(task: _Task) -> _Run:
     """Worker entry point (module level, so processes and Dask can import it)."""
     try:
         return _run_one(task.problem, task.cell, task.seed)
-    except ValidationError as e:  # its two-argument constructor does not survive pickling
-        raise ValueError(f"methods cell {task.cell.index} ({task.cell.label}): {e}") from None
+    except ValidationError as e:  # named by its cell; pickles back from a worker (ValidationError.__reduce__)
+        raise ValidationError(f"methods cell {task.cell.index} ({task.cell.label})", str(e)) from None
 
 
 def _execute(tasks: Sequence[_Task], workers: int, scheduler: str | None, progress: Any) -> list[_Run]:
