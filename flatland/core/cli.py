@@ -383,11 +383,11 @@ def main(package: Package, argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
-    except Exception as e:  # a bug (e.g. a ValueError deep in numpy): never reported as a usage error
+    except Exception as e:  # e.g. a ValueError deep in numpy, a MemoryError: never reported as a usage error
         traceback.print_exc(file=sys.stderr)
         print(
-            f"internal error: {type(e).__name__} in python -m {package.name} (a bug, not a problem with"
-            f" the arguments): {_one_line(e)}",
+            f"internal error: {type(e).__name__} in python -m {package.name}: {_one_line(e)} (an unexpected"
+            " exception, not a problem found in the arguments; the traceback above shows where)",
             file=sys.stderr,
         )
         return EXIT_INTERNAL

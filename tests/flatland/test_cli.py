@@ -248,7 +248,7 @@ def test14_a_real_internal_error_exits_1_with_its_traceback(tmp_path):
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 1 and lines[0] == "Traceback (most recent call last):", result.stderr
-    assert lines[-1].startswith("internal error: ValueError in python -m flatland (a bug")
+    assert lines[-1].startswith("internal error: ValueError in python -m flatland: operands could not")
     assert "error: " not in lines[-1].split("internal error: ", 1)[0]
 
 
@@ -259,3 +259,14 @@ def test15_an_unwritable_output_folder_is_a_user_error(tmp_path, capsys):
     assert main(["render", "shadow", "--spp", "1", "--out", str(blocker)]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and str(blocker) in lines[0], lines
+
+
+def test16_a_malformed_scheduler_address_is_a_user_error(tmp_path, capsys):
+    """dask raises a plain ValueError for it, which would otherwise be reported as an internal error."""
+    pytest.importorskip("distributed")
+    argv = ["study", "kappa", "--spp", "100", "--scheduler", "nonsense", "--quiet", "--out", str(tmp_path)]
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [
+        "error: scheduler: cannot connect to 'nonsense': missing port number in address 'nonsense'"
+    ]
