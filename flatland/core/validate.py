@@ -46,6 +46,10 @@ shape list); 64 leaves room and stays far below Python's recursion limit (1000),
 which the json parser and ``repr`` of a bad value would otherwise run into."""
 
 
+_SCALARS = (str, int, float, type(None))
+"""JSON's scalar types (bool is an int), skipped by :func:`check_depth` before the slower ABC test."""
+
+
 class ValidationError(ValueError):
     """A bad input value; ``field`` names it (a dotted path for scene files)."""
 
@@ -111,9 +115,10 @@ def check_choice(field: str, value: Any, choices: Iterable[str]) -> str:
 def check_depth(field: str, data: Any, limit: int = MAX_JSON_DEPTH) -> Any:
     """``data`` if its dicts, lists and tuples nest at most ``limit`` levels deep.
 
-    A scalar has depth 0, ``[]`` depth 1, ``[[1]]`` depth 2. The walk keeps its own
-    stack (no recursion) and stops at the first container deeper than ``limit``, so
-    any depth, and a container holding itself, is refused with one error.
+    A scalar has depth 0, ``[]`` depth 1, ``[[1]]`` depth 2. The walk goes level by
+    level (no recursion), each distinct container once per level, and stops at the
+    first level past ``limit``: any depth, a container holding itself and shared
+    sub-lists are refused or passed in at most ``limit`` sweeps.
 
     Raises
     ------
@@ -121,13 +126,17 @@ def check_depth(field: str, data: Any, limit: int = MAX_JSON_DEPTH) -> Any:
         ``<field>: JSON nested deeper than <limit> levels``.
     """
     containers = Mapping | list | tuple
-    stack = [(data, 1)] if isinstance(data, containers) else []
-    while stack:
-        node, depth = stack.pop()
+    level = [data] if isinstance(data, containers) else []
+    depth = 0
+    while level:
+        depth += 1
         if depth > limit:
             raise ValidationError(field, f"JSON nested deeper than {limit} levels")
-        children = node.values() if isinstance(node, Mapping) else node
-        stack.extend((child, depth + 1) for child in children if isinstance(child, containers))
+        below: list[Any] = []
+        for node in level:
+            children = node.values() if isinstance(node, Mapping) else node
+            below += [c for c in children if not isinstance(c, _SCALARS) and isinstance(c, containers)]
+        level = list({id(c): c for c in below}.values())  # a container shared n times: walked once
     return data
 
 

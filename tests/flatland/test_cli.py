@@ -225,6 +225,10 @@ def test12_depth_is_counted_without_recursion_up_to_the_limit():
     cycle["shapes"].append(cycle)  # a dict that holds itself: refused, not an endless walk
     with pytest.raises(ValidationError, match="nested deeper"):
         load_scene(cycle)
+    shared = [0.0]
+    for _ in range(MAX_JSON_DEPTH - 2):
+        shared = [shared, shared]  # 2**62 paths through 63 distinct lists: each walked once per level
+    assert check_depth("scene", {"a": shared})["a"] is shared
 
 
 def test13_validation_errors_cross_process_boundaries_as_themselves():
