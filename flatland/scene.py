@@ -49,7 +49,6 @@ segments, circles and materials that the ray caster and renderer use; with θ a
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Mapping
@@ -61,7 +60,15 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach
-from flatland.core.validate import ValidationError, check_bool, check_choice, check_finite, check_int
+from flatland.core.validate import (
+    ValidationError,
+    check_bool,
+    check_choice,
+    check_depth,
+    check_finite,
+    check_int,
+    read_json,
+)
 
 __all__ = [
     "FILTERS",
@@ -76,6 +83,7 @@ __all__ = [
     "check_point",
     "list_scenes",
     "load_scene",
+    "parameter_names",
     "parse_parameter",
 ]
 
@@ -357,18 +365,11 @@ def load_scene(source: Any) -> Scene:
     if isinstance(source, Scene):
         return source
     if isinstance(source, Mapping):
-        return _from_dict(source)
+        return _from_dict(check_depth("scene", source))
     if isinstance(source, str) and source in list_scenes():
-        return _from_dict(json.loads((_scene_dir() / f"{source}.json").read_text(encoding="utf-8")))
+        return _from_dict(read_json(_scene_dir() / f"{source}.json", "built-in scene"))
     if isinstance(source, str | Path) and str(source).endswith(".json"):
-        path = Path(source)
-        if not path.is_file():
-            raise ValidationError("scene", f"no such scene file {str(source)!r}")
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as err:
-            raise ValidationError("scene", f"{str(source)!r} is not valid JSON: {err}") from None
-        return _from_dict(data)
+        return _from_dict(read_json(source, "scene"))
     raise ValidationError(
         "scene",
         f"unknown scene {source!r}: not a built-in ({', '.join(list_scenes())}), a .json path or a dict",
@@ -422,6 +423,23 @@ def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
             raise bad(f"shape {target!r} has {len(shape.points)} vertices")
         return Parameter(name, target, "vertex", axis=axes[rest[2]], index=k)
     raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, emission or albedo")
+
+
+def parameter_names(scene: Scene) -> tuple[str, ...]:
+    """Every parameter name :func:`parse_parameter` accepts for ``scene``, in scene order.
+
+    The camera's three, then per shape ``translate.x|y``, ``rotate`` (not circles),
+    ``scale``, ``vertex.K.x|y`` for each point, ``emission`` and ``albedo``.
+    ``scene.parameters`` holds only the ones the scene file declares.
+    """
+    names = ["camera.translate.x", "camera.translate.y", "camera.rotate"]
+    for shape in scene.shapes:
+        names += [f"{shape.name}.translate.x", f"{shape.name}.translate.y"]
+        names += [] if shape.type == "circle" else [f"{shape.name}.rotate"]
+        names.append(f"{shape.name}.scale")
+        names += [f"{shape.name}.vertex.{k}.{axis}" for k in range(len(shape.points)) for axis in "xy"]
+        names += [f"{shape.name}.emission", f"{shape.name}.albedo"]
+    return tuple(names)
 
 
 # ------------------------------------------------------------------ bound geometry

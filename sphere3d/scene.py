@@ -38,7 +38,6 @@ field path and the value, e.g. ``shapes[2].radius: must be > 0, got -1.0``.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -52,9 +51,11 @@ import numpy as np
 from flatland.core.validate import (
     ValidationError,
     check_choice,
+    check_depth,
     check_finite,
     check_int,
     check_positive,
+    read_json,
 )
 from sphere3d import shapes as shp
 from sphere3d.sampling import FILTERS
@@ -68,6 +69,7 @@ __all__ = [
     "check_vector",
     "list_scenes",
     "load_scene",
+    "parameter_names",
 ]
 
 SHAPE_TYPES = ("rectangle", "box", "icosphere", "disk", "mesh")
@@ -352,6 +354,11 @@ class Scene:
         return build_state(self, param, theta, tracer)
 
 
+def parameter_names(scene: Scene) -> tuple[str, ...]:
+    """Every parameter name of ``scene``: ``scene.parameters`` (the name flatland shares)."""
+    return scene.parameters
+
+
 # ------------------------------------------------------------------- loading
 def _builtin_dir():
     return resources.files("sphere3d") / "scenes"
@@ -360,13 +367,6 @@ def _builtin_dir():
 def list_scenes() -> tuple[str, ...]:
     """Names of the built-in scenes (``sphere3d/scenes/*.json``)."""
     return tuple(sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".json")))
-
-
-def _read_json(field: str, text: str, where: str) -> Any:
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValidationError(field, f"{where} is not valid JSON: {exc}") from None
 
 
 def load_scene(source: Any) -> Scene:
@@ -380,21 +380,14 @@ def load_scene(source: Any) -> Scene:
     if isinstance(source, Scene):
         return source
     if isinstance(source, Mapping):
-        return Scene.from_dict(source)
+        return Scene.from_dict(check_depth("scene", source))
     if isinstance(source, str | Path):
         text = str(source)
         if isinstance(source, str) and text in list_scenes():
-            data = _read_json(
-                "scene", (_builtin_dir() / f"{text}.json").read_text(), f"built-in scene {text!r}"
-            )
-            return Scene.from_dict(data)
+            return Scene.from_dict(read_json(_builtin_dir() / f"{text}.json", "built-in scene"))
         path = Path(source)
         if path.suffix.lower() == ".json":
-            if not path.is_file():
-                raise ValidationError("scene", f"no such file: {text!r}")
-            return Scene.from_dict(
-                _read_json("scene", path.read_text(), repr(text)), base_dir=path.parent.resolve()
-            )
+            return Scene.from_dict(read_json(path, "scene"), base_dir=path.parent.resolve())
         raise ValidationError(
             "scene",
             f"unknown scene {text!r}; built-in scenes: {', '.join(list_scenes())}, or a path to a .json file",

@@ -2,7 +2,9 @@
 
 API names, result types, method and option names, the command-line verbs and the
 one-line error behaviour (DESIGN 5), in-process and as real commands in a subprocess
-(a missing file, a malformed JSON scene, an unknown parameter, a negative spp).
+(a missing file, a malformed JSON scene, an unknown parameter, a negative spp, a scene
+nested 100 000 deep). An internal error is a traceback and status 1, never a usage
+error. The command line names what exists: scenes, methods, parameters, studies.
 Scenes are the built-in ``shadow`` on a small film.
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import json
+import re
 import subprocess
 import sys
 
@@ -19,7 +22,8 @@ import pytest
 
 from flatland.core.contract import MethodTable
 from flatland.core.image import GradientImage, Image
-from flatland.core.validate import ValidationError
+from flatland.core.study import load_config
+from flatland.core.validate import MAX_JSON_DEPTH, ValidationError
 
 PACKAGES = [
     "flatland",
@@ -33,6 +37,22 @@ PACKAGES = [
 SHARED_METHODS = ("naive", "finite_difference", "reparam")
 VERBS = ("demo", "render", "gradient", "study")
 PARAM = "occluder.translate.x"
+DEEP = 100_000
+"""Nesting depth of the deep JSON files: far past Python's recursion limit (1000)."""
+TOO_DEEP = f"JSON nested deeper than {MAX_JSON_DEPTH} levels"
+
+
+def _deep_text(depth=DEEP):
+    """A JSON object holding ``depth`` nested lists, as text."""
+    return '{"name": ' + "[" * depth + "]" * depth + "}"
+
+
+def _deep_value(depth=DEEP):
+    """The same as a Python dict (built without recursion)."""
+    value = []
+    for _ in range(depth - 1):
+        value = [value]
+    return {"name": value}
 
 
 def _small_scene(name):
@@ -147,18 +167,22 @@ def test05_same_cli_verbs_and_one_line_errors(package, tmp_path, capsys):
 
 @pytest.fixture(scope="module", params=PACKAGES)
 def error_runs(request, tmp_path_factory):
-    """The four bad commands of the CLI issue, as real ``python -m PACKAGE`` processes, started together."""
+    """The bad commands, as real ``python -m PACKAGE`` processes, started together."""
     package = request.param
     folder = tmp_path_factory.mktemp(f"errors_{package}")
     scene_file = folder / "small_shadow.json"
     scene_file.write_text(json.dumps(_small_scene(package)[0].to_dict()))
     broken = folder / "broken.json"
     broken.write_text('{"name": "broken", "shapes": [}')
+    deep = folder / "deep.json"
+    deep.write_text(_deep_text())
     commands = {
         "missing file": ["render", folder / "missing.json"],
         "malformed JSON": ["gradient", broken, "--param", PARAM],
         "unknown parameter": ["gradient", scene_file, "--param", "occluder.spin"],
         "negative spp": ["render", scene_file, "--spp", -4],
+        "deep scene": ["render", deep],
+        "deep study": ["study", deep],
     }
     procs = {
         name: subprocess.Popen(
@@ -183,6 +207,8 @@ def error_runs(request, tmp_path_factory):
         ("malformed JSON", ["broken.json", "JSON"]),
         ("unknown parameter", ["param", "occluder.spin"]),
         ("negative spp", ["spp", "-4"]),
+        ("deep scene", ["scene file", "deep.json", TOO_DEEP]),
+        ("deep study", ["config file", "deep.json", TOO_DEEP]),
     ],
 )
 def test06_real_commands_fail_with_one_line_and_status_2(error_runs, case, fragments):
@@ -192,3 +218,131 @@ def test06_real_commands_fail_with_one_line_and_status_2(error_runs, case, fragm
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
     assert "Traceback" not in result.stderr and result.stdout == ""
     assert all(f in lines[0] for f in fragments), (fragments, lines[0])
+
+
+def test07_deep_json_is_one_error_from_every_load_function(package, tmp_path):
+    """Scene and study loaders, from a file and from a dict: a ValidationError, not a RecursionError."""
+    load_scene = importlib.import_module(f"{package}.scene").load_scene
+    deep = tmp_path / "deep.json"
+    deep.write_text(_deep_text())
+    loads = {
+        "scene file": lambda: load_scene(deep),
+        "scene dict": lambda: load_scene(_deep_value()),
+        "config file": lambda: load_config(deep, package=package),
+        "config dict": lambda: load_config(_deep_value(), package=package),
+    }
+    for source, load in loads.items():
+        with pytest.raises(ValidationError) as info:
+            load()
+        assert TOO_DEEP in str(info.value), (source, str(info.value)[:200])
+        assert info.value.field == (
+            f"{source.split()[0]} file {str(deep)!r}" if "file" in source else source.split()[0]
+        )
+
+
+@pytest.mark.parametrize("verb", ["render", "gradient", "study"])
+def test08_deep_json_on_the_command_line_is_one_line_and_status_2(package, verb, tmp_path, capsys):
+    main = importlib.import_module(f"{package}.__main__").main
+    deep = tmp_path / "deep.json"
+    deep.write_text(_deep_text())
+    extra = ["--param", PARAM] if verb == "gradient" else []
+    assert main([verb, str(deep), *extra, "--out", str(tmp_path)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and TOO_DEEP in lines[0], captured.err
+    assert captured.out == ""
+
+
+@pytest.mark.parametrize(
+    ("verb", "target"),
+    [("render", "render.render"), ("gradient", "render.render_gradient"), ("study", "study.run_study")],
+)
+@pytest.mark.parametrize("error", [ValueError("operands could not be broadcast"), IndexError("index 7")])
+def test09_an_internal_error_is_a_traceback_and_status_1_not_a_usage_error(
+    package, verb, target, error, tmp_path, capsys, monkeypatch
+):
+    """A ValueError or IndexError from deep inside (a bug) is never reported as the user's mistake."""
+    main = importlib.import_module(f"{package}.__main__").main
+    module, name = target.split(".")
+    owner = importlib.import_module(f"flatland.core.{module}" if module == "study" else f"{package}.{module}")
+
+    def broken(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(owner, name, broken)
+    argv = {
+        "render": ["render", "shadow", "--spp", "1"],
+        "gradient": ["gradient", "shadow", "--param", PARAM, "--spp", "1"],
+        "study": ["study", "shadow", "--spp", "1", "--quiet"],
+    }[verb]
+    assert main([*argv, "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert lines[0] == "Traceback (most recent call last):" and f"{type(error).__name__}: {error}" in err
+    assert lines[-1].startswith("internal error: ") and str(error) in lines[-1]
+    assert not any(line.startswith("error: ") for line in lines)
+
+
+def test10_a_validation_error_from_the_same_place_is_one_line_and_status_2(
+    package, tmp_path, capsys, monkeypatch
+):
+    """The counterpart of test09: the class decides, not where it is raised."""
+    main = importlib.import_module(f"{package}.__main__").main
+    render = importlib.import_module(f"{package}.render")
+
+    def refuses(*args, **kwargs):
+        raise ValidationError("spp", "must be an integer >= 1, got 0")
+
+    monkeypatch.setattr(render, "render", refuses)
+    assert main(["render", "shadow", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == "error: spp: must be an integer >= 1, got 0\n"
+
+
+def _help(main, argv, capsys):
+    assert main([*argv, "--help"]) == 0
+    return capsys.readouterr().out.split()
+
+
+def test11_help_lists_the_builtin_scenes_and_only_the_package_methods(package, capsys):
+    main = importlib.import_module(f"{package}.__main__").main
+    scenes = importlib.import_module(f"{package}.scene").list_scenes()
+    methods = importlib.import_module(f"{package}.render").GRADIENT_METHODS.names
+    for verb in ("render", "gradient"):
+        words = " ".join(_help(main, [verb], capsys))
+        assert all(re.search(rf"\b{name}\b", words) for name in scenes), (verb, words)
+    words = " ".join(_help(main, ["gradient"], capsys))
+    assert "--method {" + ",".join(methods) + "}" in words
+    assert ("boundary" in words) == ("boundary" in methods)  # sphere3d's help does not offer boundary
+
+
+def test12_a_method_the_package_lacks_is_a_usage_error_listing_the_choices(package, tmp_path, capsys):
+    main = importlib.import_module(f"{package}.__main__").main
+    methods = importlib.import_module(f"{package}.render").GRADIENT_METHODS.names
+    assert main(["gradient", "shadow", "--param", PARAM, "--method", "magic", "--out", str(tmp_path)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "invalid choice: 'magic'" in lines[0]
+    assert all(repr(m) in lines[0] for m in methods)
+
+
+def test13_gradient_without_param_names_the_scene_parameters(package, tmp_path, capsys):
+    main = importlib.import_module(f"{package}.__main__").main
+    scene_module = importlib.import_module(f"{package}.scene")
+    names = scene_module.parameter_names(scene_module.load_scene("shadow"))
+    assert PARAM in names and len(names) == len(set(names))
+    assert main(["gradient", "shadow", "--out", str(tmp_path)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and captured.out == ""
+    assert lines[0] == f"error: gradient: --param is required; parameters of 'shadow': {', '.join(names)}"
+
+
+def test14_an_unknown_study_lists_the_builtin_studies(package, tmp_path, capsys):
+    main = importlib.import_module(f"{package}.__main__")
+    studies = tuple(main.PACKAGE.studies)
+    assert studies and "shadow" in studies
+    assert main.main(["study", "nosuch", "--out", str(tmp_path)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "'nosuch'" in lines[0]
+    assert lines[0].endswith("built-in studies: " + ", ".join(studies))
+    words = " ".join(_help(main.main, ["study"], capsys))
+    assert all(re.search(rf"\b{name}\b", words) for name in studies)

@@ -11,23 +11,32 @@ Verbs (the same in both packages):
     The image as PNG and ``.npy``.
 ``gradient SCENE --param P --method M``
     The derivative image as PNG and ``.npy`` (structured array with fields
-    ``value``, ``value_stderr``, ``derivative``, ``derivative_stderr``).
+    ``value``, ``value_stderr``, ``derivative``, ``derivative_stderr``). Without
+    ``--param`` it names the scene's parameters.
 ``study CONFIG``
     A study (:mod:`flatland.core.study`): CSV and figures in ``--out``.
 
-``SCENE`` is a built-in scene name or a JSON file. Bad arguments, scene files or
-configurations print one line ``error: <what is wrong>`` on stderr and exit with
-status 2, never a traceback.
+``SCENE`` is a built-in scene name (listed by ``render --help``) or a JSON file;
+``--method`` offers the methods of the package's method table.
+
+Two kinds of failure, told apart by the exit status:
+
+* a user's mistake (a bad argument, or a missing, unreadable, malformed or invalid
+  scene file or configuration: argparse errors, :class:`ValidationError` and
+  :class:`OSError`) prints one line ``error: <what is wrong>`` on stderr and exits
+  with status 2 (:data:`EXIT_USAGE`), never a traceback;
+* any other exception is a bug: its traceback and a last line ``internal error:
+  ...`` go to stderr and the status is 1 (:data:`EXIT_INTERNAL`).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import os
 import sys
 import time
+import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,10 +49,12 @@ from flatland.core.stats import z_score
 from flatland.core.table import format_table, method_label
 from flatland.core.validate import ValidationError, check_int, check_positive, check_seed
 
-__all__ = ["EXIT_USAGE", "Package", "main"]
+__all__ = ["EXIT_INTERNAL", "EXIT_USAGE", "Package", "main"]
 
 EXIT_USAGE = 2
 """Exit status for bad arguments, scene files or configurations."""
+EXIT_INTERNAL = 1
+"""Exit status for an internal error (an exception that is not a user's mistake)."""
 
 DEMO_METHODS = ("naive", "boundary", "reparam", "finite_difference")
 """Panel columns after the primal, in order (those the package has)."""
@@ -58,8 +69,8 @@ class Package:
     ----------
     name : str
         Import name; ``<name>.scene``, ``<name>.render`` and ``<name>.plot`` provide
-        the shared API (``load_scene``, ``list_scenes``, ``render``,
-        ``render_gradient``, ``GRADIENT_METHODS``, ``plot_*``).
+        the shared API (``load_scene``, ``list_scenes``, ``parameter_names``,
+        ``render``, ``render_gradient``, ``GRADIENT_METHODS``, ``plot_*``).
     demo_scene, demo_param : str
         The embedded default scene of ``demo`` and the parameter it differentiates.
     demo_spp : int
@@ -111,12 +122,8 @@ def _check_counts(args: argparse.Namespace) -> None:
 
 
 def _load_scene(pkg: Package, source: str) -> Any:
-    """The scene ``source`` (name or JSON file), with JSON syntax errors naming the file."""
-    try:
-        return pkg.module("scene").load_scene(source)
-    except json.JSONDecodeError as e:
-        where = f"line {e.lineno}, column {e.colno}"
-        raise ValidationError(source, f"invalid JSON: {e.msg} ({where})") from None
+    """The scene ``source`` (name or JSON file); every bad source is a ValidationError."""
+    return pkg.module("scene").load_scene(source)
 
 
 def _stem(source: str) -> str:
@@ -224,6 +231,9 @@ def _render(pkg: Package, args: argparse.Namespace) -> int:
 def _gradient(pkg: Package, args: argparse.Namespace) -> int:
     render = pkg.module("render")
     scene = _load_scene(pkg, args.scene)
+    if args.param is None:
+        names = ", ".join(pkg.module("scene").parameter_names(scene))
+        raise _UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
     g = render.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
         **_options(args),
@@ -248,7 +258,13 @@ def _study(pkg: Package, args: argparse.Namespace) -> int:
     from flatland.core.study import load_config, run_study
 
     source: Any = args.config
-    if not Path(source).exists() and source in pkg.studies:
+    if not Path(source).exists():
+        if source not in pkg.studies:
+            raise ValidationError(
+                "study",
+                f"no file {source!r} and no built-in study of that name; built-in studies: "
+                + ", ".join(pkg.studies),
+            )
         source = pkg.studies[args.config]
     config = load_config(source, package=pkg.name, seed=args.seed, samples=args.spp, name=_stem(args.config))
     out = Path(args.out)
@@ -285,8 +301,10 @@ def _parser(pkg: Package) -> _Parser:
         p.add_argument("--out", default="out", help="output folder (default ./out)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    scenes = ", ".join(pkg.module("scene").list_scenes())
+
     def scene_arg(p: argparse.ArgumentParser) -> None:
-        p.add_argument("scene", metavar="SCENE", help="built-in scene name or JSON scene file")
+        p.add_argument("scene", metavar="SCENE", help=f"a JSON scene file or a built-in scene: {scenes}")
         p.add_argument("--batches", type=int, default=None, help="independent batches behind the stderr")
 
     demo = verbs.add_parser("demo", help="the default scene: panel of methods and error table (< 1 min)")
@@ -300,8 +318,13 @@ def _parser(pkg: Package) -> _Parser:
 
     gradient = verbs.add_parser("gradient", help="derivative image of SCENE w.r.t. --param, PNG and .npy")
     scene_arg(gradient)
-    gradient.add_argument("--param", required=True, help="scene parameter, e.g. occluder.translate.x")
-    gradient.add_argument("--method", default="reparam", help="naive, finite_difference, boundary, reparam")
+    gradient.add_argument(
+        "--param", default=None, help="scene parameter, e.g. occluder.translate.x (omit it to list them)"
+    )
+    methods = pkg.module("render").GRADIENT_METHODS.names
+    gradient.add_argument(
+        "--method", default="reparam", choices=methods, help="gradient method (default reparam)"
+    )
     gradient.add_argument(
         "--kappa", type=float, default=None, help="reparam: convolution kernel concentration"
     )
@@ -333,7 +356,12 @@ def _one_line(error: BaseException) -> str:
 
 
 def main(package: Package, argv: Sequence[str] | None = None) -> int:
-    """Parse ``argv`` (default ``sys.argv[1:]``) and run the verb; returns the exit status."""
+    """Parse ``argv`` (default ``sys.argv[1:]``) and run the verb; returns the exit status.
+
+    A user's mistake (argparse error, :class:`ValidationError`, :class:`OSError`)
+    prints one line and returns :data:`EXIT_USAGE`; any other exception prints its
+    traceback and an ``internal error`` line and returns :data:`EXIT_INTERNAL`.
+    """
     try:
         args = _parser(package).parse_args(argv)
         _check_counts(args)
@@ -345,7 +373,7 @@ def main(package: Package, argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
-    except (ValueError, OSError) as e:  # ValidationError, JSONDecodeError, missing files, unreachable cluster
+    except (ValidationError, OSError) as e:  # bad input; missing or unwritable files, unreachable cluster
         print(f"error: {_one_line(e)}", file=sys.stderr)
         return EXIT_USAGE
     except SystemExit as e:  # --help
@@ -353,3 +381,11 @@ def main(package: Package, argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    except Exception as e:  # e.g. a ValueError deep in numpy, a MemoryError: never reported as a usage error
+        traceback.print_exc(file=sys.stderr)
+        print(
+            f"internal error: {type(e).__name__} in python -m {package.name}: {_one_line(e)} (an unexpected"
+            " exception, not a problem found in the arguments; the traceback above shows where)",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL

@@ -289,16 +289,24 @@ def _run_task(task: _Task) -> _Run:
     """Worker entry point (module level, so processes and Dask can import it)."""
     try:
         return _run_one(task.problem, task.cell, task.seed)
-    except ValidationError as e:  # its two-argument constructor does not survive pickling
-        raise ValueError(f"methods cell {task.cell.index} ({task.cell.label}): {e}") from None
+    except ValidationError as e:  # named by its cell; pickles back from a worker (ValidationError.__reduce__)
+        raise ValidationError(f"methods cell {task.cell.index} ({task.cell.label})", str(e)) from None
 
 
 def _execute(tasks: Sequence[_Task], workers: int, scheduler: str | None, progress: Any) -> list[_Run]:
     """Run the tasks serially, in a process pool or on a Dask cluster; runs in task order."""
     if scheduler is not None:
         from dask.distributed import Client
+        from distributed.comm import parse_address, parse_host_port
 
-        with Client(scheduler, set_as_default=False) as client:
+        try:  # a malformed address fails before a Client exists (a half-built one stalls the exit)
+            scheme, location = parse_address(scheduler)
+            if scheme in ("tcp", "tls"):
+                parse_host_port(location)
+            client = Client(scheduler, set_as_default=False)
+        except (ValueError, OSError) as e:  # a malformed address, or no scheduler there
+            raise ValidationError("scheduler", f"cannot connect to {scheduler!r}: {e}") from None
+        with client:
             futures = client.map(_run_task, tasks, pure=False)
             for future in futures:  # waited for in submission order; they run in any order
                 future.result()

@@ -26,7 +26,6 @@ from __future__ import annotations
 import copy
 import importlib
 import itertools
-import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -39,10 +38,12 @@ from flatland.core.table import method_label
 from flatland.core.validate import (
     ValidationError,
     check_choice,
+    check_depth,
     check_finite,
     check_int,
     check_positive,
     check_seed,
+    read_json,
 )
 
 __all__ = ["Cell", "Problem", "ReferenceSpec", "StudyConfig", "load_config", "trial_seed"]
@@ -188,17 +189,12 @@ def load_config(
     count of the grid (``n`` or ``spp``, swept or not) with one value.
     """
     if isinstance(source, Mapping):
-        data: Any = copy.deepcopy(dict(source))
+        data: Any = copy.deepcopy(dict(check_depth("config", source)))  # deepcopy recurses: depth first
         base_dir = None
         name = name or "study"
     else:
         path = Path(source)
-        text = path.read_text(encoding="utf-8")
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as e:
-            where = f"line {e.lineno}, column {e.colno}"
-            raise ValidationError(str(path), f"invalid JSON: {e.msg} ({where})") from None
+        data = read_json(path, "config")
         base_dir, name = path.parent, name or path.stem
     if isinstance(data, dict):
         if seed is not None:

@@ -2,12 +2,15 @@
 
 The one-line errors of the real commands are checked for both packages in tests/test_contract.py.
 
-Extra error cases that need no subprocess run through ``flatland.__main__.main`` in-process.
+Extra error cases that need no subprocess run through ``flatland.__main__.main`` in-process:
+bad arguments and bad JSON files are one line and status 2; an internal error is a
+traceback and status 1.
 """
 
 from __future__ import annotations
 
 import json
+import pickle
 import subprocess
 import sys
 
@@ -15,8 +18,9 @@ import numpy as np
 import pytest
 
 from flatland.__main__ import main
-from flatland.core.study import read_csv
-from flatland.scene import load_scene
+from flatland.core.study import load_config, read_csv
+from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_depth
+from flatland.scene import load_scene, parameter_names, parse_parameter
 
 
 def run(*args, cwd=None):
@@ -151,7 +155,128 @@ def test08_builtin_study_by_name_with_overrides(tmp_path, capsys):
     assert "reparam kappa=10000 paired" in capsys.readouterr().out
 
 
-def test09_finite_difference_step_too_large_for_a_scale_parameter(tmp_path):
+def test09_parameter_names_are_exactly_those_parse_parameter_accepts():
+    """``gradient SCENE`` without --param lists these: a circle and a triangle, counted by hand."""
+    scene = load_scene(
+        {
+            "name": "two",
+            "camera": {"position": [0, -3], "direction": [0, 1], "fov": 0.8, "pixels": 4},
+            "shapes": [
+                {"name": "ball", "type": "circle", "center": [0, 0], "radius": 0.5, "emission": 1.0},
+                {"name": "tri", "type": "polygon", "points": [[1, 0], [2, 0], [1, 1]]},
+            ],
+        }
+    )
+    names = parameter_names(scene)
+    # camera: translate.x|y, rotate (3); circle: translate.x|y, scale, emission, albedo (5);
+    # triangle: translate.x|y, rotate, scale, vertex.0-2.x|y, emission, albedo (12)
+    assert len(names) == 3 + 5 + 12 == len(set(names))
+    assert all(parse_parameter(scene, name).name == name for name in names)
+    for refused in ("ball.rotate", "ball.vertex.0.x", "tri.vertex.3.x", "camera.scale"):
+        assert refused not in names
+        with pytest.raises(ValidationError):
+            parse_parameter(scene, refused)
+    shadow = load_scene("shadow")
+    assert set(shadow.parameters) <= set(parameter_names(shadow))  # the declared ones are among them
+
+
+def _bad_json_files(folder):
+    """Files ``load_scene`` and ``load_config`` must refuse with one ValidationError, and what it says."""
+    folder.mkdir(exist_ok=True)
+    files = {
+        "deep.json": ("[" * 65 + "]" * 65, "JSON nested deeper than 64 levels"),  # one past the limit
+        "binary.json": (b"\xff\xfe{}", "is not UTF-8 text (byte 0)"),
+        "huge_int.json": ('{"name": ' + "9" * 5000 + "}", "invalid JSON: Exceeds the limit"),
+        "trailing.json": ('{"name": "x",}', "invalid JSON: Expecting property name"),
+    }
+    for name, (content, _) in files.items():
+        path = folder / name
+        path.write_bytes(content) if isinstance(content, bytes) else path.write_text(content)
+    (folder / "folder.json").mkdir(exist_ok=True)
+    return {folder / k: v for k, (_, v) in files.items()} | {folder / "folder.json": "cannot be read"}
+
+
+def test10_every_bad_json_file_is_one_validation_error_naming_the_file(tmp_path):
+    """A binary file or a 5000-digit integer raised UnicodeDecodeError/ValueError: now a user error."""
+    for path, message in _bad_json_files(tmp_path / "bad").items():
+        for load, what in ((load_scene, "scene"), (load_config, "config")):
+            with pytest.raises(ValidationError) as info:
+                load(path)
+            assert info.value.field == f"{what} file {str(path)!r}"
+            assert str(info.value).startswith(f"{what} file {str(path)!r}: {message}"), str(info.value)
+
+
+def test11_bad_json_files_on_the_command_line_are_one_line_and_status_2(tmp_path, capsys):
+    for path, message in _bad_json_files(tmp_path / "bad").items():
+        for argv in (["render", str(path)], ["study", str(path)]):
+            assert main([*argv, "--out", str(tmp_path / "out")]) == 2, argv
+            lines = capsys.readouterr().err.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], lines
+
+
+def test12_depth_is_counted_without_recursion_up_to_the_limit():
+    value = 0  # a scalar has depth 0, [0] depth 1
+    for _ in range(MAX_JSON_DEPTH):
+        value = [value]
+    assert check_depth("scene", {"a": value[0]}) == {"a": value[0]}  # depth exactly 64
+    with pytest.raises(ValidationError, match=r"^scene: JSON nested deeper than 64 levels$"):
+        check_depth("scene", {"a": value})
+    cycle = {"shapes": []}
+    cycle["shapes"].append(cycle)  # a dict that holds itself: refused, not an endless walk
+    with pytest.raises(ValidationError, match="nested deeper"):
+        load_scene(cycle)
+    shared = [0.0]
+    for _ in range(MAX_JSON_DEPTH - 2):
+        shared = [shared, shared]  # 2**62 paths through 63 distinct lists: each walked once per level
+    assert check_depth("scene", {"a": shared})["a"] is shared
+
+
+def test13_validation_errors_cross_process_boundaries_as_themselves():
+    """Study workers send their errors back pickled; they used to arrive as a plain ValueError."""
+    error = pickle.loads(pickle.dumps(ValidationError("methods[0].kappa", "must be > 0, got -2")))
+    assert type(error) is ValidationError and error.field == "methods[0].kappa"
+    assert str(error) == "methods[0].kappa: must be > 0, got -2"
+
+
+def test14_a_real_internal_error_exits_1_with_its_traceback(tmp_path):
+    """As a real process: a ValueError from inside render (a bug) is not reported as a usage error."""
+    code = (
+        "import importlib, sys\n"
+        "r = importlib.import_module('flatland.render')  # the module (flatland.render is also a function)\n"
+        "def broken(*a, **k):\n"
+        "    raise ValueError('operands could not be broadcast together')\n"
+        "r.render = broken\n"
+        "from flatland.__main__ import main\n"
+        f"sys.exit(main(['render', 'shadow', '--out', {str(tmp_path)!r}]))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 1 and lines[0] == "Traceback (most recent call last):", result.stderr
+    assert lines[-1].startswith("internal error: ValueError in python -m flatland: operands could not")
+    assert "error: " not in lines[-1].split("internal error: ", 1)[0]
+
+
+def test15_an_unwritable_output_folder_is_a_user_error(tmp_path, capsys):
+    """OSError stays a user error: --out names an existing file."""
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert main(["render", "shadow", "--spp", "1", "--out", str(blocker)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and str(blocker) in lines[0], lines
+
+
+def test16_a_malformed_scheduler_address_is_a_user_error(tmp_path, capsys):
+    """dask raises a plain ValueError for it, which would otherwise be reported as an internal error."""
+    pytest.importorskip("distributed")
+    argv = ["study", "kappa", "--spp", "100", "--scheduler", "nonsense", "--quiet", "--out", str(tmp_path)]
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [
+        "error: scheduler: cannot connect to 'nonsense': missing port number in address 'nonsense'"
+    ]
+
+
+def test17_finite_difference_step_too_large_for_a_scale_parameter(tmp_path):
     """``--h 1`` on a ``*.scale`` parameter would scale the shape by 1 - h = 0: one line, exit 2."""
     argv = ["gradient", "polygon", "--param", "polygon.scale", "--method", "finite_difference", "--h", "1"]
     out = run(*argv, "--spp", "4", "--out", tmp_path, "--quiet")

@@ -187,7 +187,7 @@ def test09_load_config_reads_json_and_applies_overrides(tmp_path):
     assert replaced.seed == 11 and [c.n for c in replaced.cells] == [64]
     bad = tmp_path / "bad.json"
     bad.write_text('{"problem": {"integral": "arc"},}')
-    with pytest.raises(ValidationError, match=r"bad\.json: invalid JSON: .*line 1"):
+    with pytest.raises(ValidationError, match=r"bad\.json': invalid JSON: .*line 1"):
         load_config(bad)
 
 

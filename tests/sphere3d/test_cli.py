@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("embreex")
 
 from sphere3d.__main__ import main
-from sphere3d.scene import load_scene
+from sphere3d.scene import load_scene, parameter_names
 
 W, H = 16, 12
 
@@ -82,3 +82,24 @@ def test03_study_on_a_scene_pixel(tmp_path, scene_file):
     text = (tmp_path / "s3.csv").read_text()
     assert text.count("\n") == 4 and "small_shadow:occluder.translate.x[6,8]" in text
     assert (tmp_path / "s3_kappa.png").is_file() and (tmp_path / "s3_efficiency.png").is_file()
+
+
+def test04_help_offers_only_sphere3d_methods_and_boundary_is_a_usage_error(tmp_path, capsys):
+    """The help used to offer boundary, which sphere3d lacks; argparse now refuses it, naming the choices."""
+    assert main(["gradient", "--help"]) == 0
+    assert "--method {naive,finite_difference,reparam}" in capsys.readouterr().out
+    argv = ["gradient", "shadow", "--param", "occluder.translate.x", "--method", "boundary"]
+    assert main([*argv, "--out", str(tmp_path)]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == (
+        "error: gradient: argument --method: invalid choice: 'boundary' "
+        "(choose from 'naive', 'finite_difference', 'reparam')\n"
+    )
+
+
+def test05_parameter_names_are_the_scene_parameters_and_all_accepted():
+    scene = load_scene("shadow")
+    names = parameter_names(scene)
+    assert names == scene.parameters and all(scene.check_param(name) == name for name in names)
+    # camera.translate.x|y|z, sky.emission; per shape translate.x|y|z, rotate.x|y|z, scale, albedo, emission
+    assert len(names) == 3 + 1 + 9 * len(scene.shapes)

@@ -187,7 +187,7 @@ def test06_bad_scenes_raise_one_error_naming_the_field(mutate, message):
 def test07_bad_sources_and_parameters():
     with pytest.raises(ValidationError, match="unknown scene 'nope'; built-in scenes: shadow"):
         load_scene("nope")
-    with pytest.raises(ValidationError, match="scene: no such file"):
+    with pytest.raises(ValidationError, match=r"scene file 'missing\.json': no such file"):
         load_scene("missing.json")
     with pytest.raises(ValidationError, match=r"param: unknown parameter 'occluder\.spin'; choose from"):
         load_scene("shadow").check_param("occluder.spin")
