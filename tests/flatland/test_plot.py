@@ -119,13 +119,17 @@ def test05_study_figures_kappa_and_efficiency(tmp_path):
     )
     result = run_study(config, progress=False)
     paths = plot.plot_study(result, tmp_path)
-    assert [p.name for p in paths] == ["fig_kappa.png", "fig_efficiency.png"]
+    assert [p.name for p in paths] == ["fig_error_time.png", "fig_kappa.png", "fig_efficiency.png"]
     for p in paths:
         rgb = _pixels(p)
-        assert p.stat().st_size > 20_000 and min(rgb.shape[:2]) > 300 and _not_blank(rgb) > 0.05
+        ink = 0.02 if p.name.endswith("error_time.png") else 0.05  # a line plot: less ink than bars
+        assert p.stat().st_size > 20_000 and min(rgb.shape[:2]) > 300 and _not_blank(rgb) > ink
     flat = {"name": "flat", "problem": {"integral": "step"}, "n": 500, "trials": 3}
     flat["methods"] = [{"method": "naive"}, {"method": "reparam"}]
     no_sweep = run_study(StudyConfig.from_dict(flat), progress=False)
-    assert [p.name for p in plot.plot_study(no_sweep, tmp_path)] == ["flat_efficiency.png"]
+    assert [p.name for p in plot.plot_study(no_sweep, tmp_path)] == [
+        "flat_error_time.png",
+        "flat_efficiency.png",
+    ]
     with pytest.raises(ValueError, match="kappa"):
         plot.plot_kappa(no_sweep, tmp_path / "none.png")
