@@ -686,8 +686,8 @@ def run_study(
         smallest standard error among the cells it does not flag as biased (a flag
         counts the reference's noise in its z, so it stands whatever that noise):
         True recomputes it at the sample count :func:`~flatland.core.bias.reference_spp_needed`
-        gives (times 1.25, for the scatter of the estimated standard errors; at most
-        two rounds), False raises a ValidationError naming ``reference`` and that count.
+        gives (times 1.25, for the scatter of the estimated standard errors; at most three
+        rounds), False raises a ValidationError naming ``reference`` and that count.
 
     Returns
     -------
@@ -721,12 +721,12 @@ def run_study(
         ]
 
     rows = summarize(reference)
-    for attempt in range(3):
+    for attempt in range(4):
         needed = _reference_needed(config, reference, rows)
         if needed is None:
             break
         count = f"reference.{config.problem.count_name}"
-        if not grow_reference or attempt == 2:
+        if not grow_reference or attempt == 3:
             judged = min(r.stderr for r in rows if not r.biased and r.stderr > 0.0)
             raise ValidationError(
                 count,

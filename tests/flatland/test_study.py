@@ -262,3 +262,40 @@ def test12_labels_show_the_options_set_true_ones_by_name_floats_by_g():
     assert config.cells[0].label == "reparam kappa=0.5"  # the defaults filled in are not shown
     source = study.resolve_reference(config).source
     assert source.startswith("reparam kappa=2000 ") and source.endswith(" paired n=20 seed=2147483647")
+
+
+def _shadow_study(**overrides):
+    data = {
+        "problem": {"scene": "shadow", "param": "occluder.translate.x"},
+        "methods": [{"method": "naive"}, {"method": "boundary"}, {"method": "reparam", "kappa": 1000}],
+        "spp": 4,
+        "trials": 4,
+        "seed": 2,
+        "reference": {"spp": 512, "seed": 9},
+    }
+    data.update(overrides)
+    return StudyConfig.from_dict(data)
+
+
+def test13_naive_on_the_shadow_is_flagged_has_no_efficiency_and_never_ranks_first():
+    """Naive drops the moving shadow edge: its film sum is ~0 against ~10.7 (z far beyond 3.3)."""
+    result = run_study(_shadow_study(), progress=False)
+    naive = result.row("naive")
+    assert naive.biased and abs(naive.bias_z) > 3.3 and naive.efficiency is None
+    assert naive.rank == len(result.rows) and result.ranking()[0].cell.method != "naive"
+    assert all(r.rank < naive.rank for r in result.rows if not r.biased)
+    table = result.table()
+    assert "BIASED" in table and "inf" not in table.split("naive")[1].splitlines()[0].replace(
+        "-inf (σ=0)", ""
+    )
+    assert table.splitlines()[1].split()[:4] == ["method", "rank", "bias", "z"]
+
+
+def test14_the_reference_ratio_check_raises_or_grows_the_reference(tmp_path):
+    """A 4-spp reference against 4 trials of 4 spp has about the cells' standard error: the 1/4 rule fails."""
+    config = _shadow_study(reference={"spp": 4, "seed": 9})
+    with pytest.raises(ValidationError, match=r"^reference.spp: .* give at least \d+"):
+        run_study(config, progress=False, grow_reference=False)
+    grown = run_study(config, progress=False, cache_dir=tmp_path)
+    judged = min(r.stderr for r in grown.rows if not r.biased and r.stderr > 0)
+    assert grown.reference.n > 4 and grown.reference.stderr <= 0.25 * judged
