@@ -6,15 +6,18 @@ diverging map ``RdBu_r`` centred on zero, one symmetric scale shared by all meth
 of a figure. The panel puts "primal | naive | boundary | reparam | finite
 differences" side by side as strips and overlays every method's derivative as
 curves below, where the spike naive differentiation misses at a moving shadow edge
-is plain to see. Study figures: bias ± CI and standard deviation against κ, and
-equal-time efficiency bars. The drawing code is shared with sphere3d
-(:mod:`flatland.core.plotting`), which draws its 2D films as images.
+is plain to see. Study figures: RMSE against wall time per estimate (log-log, a biased
+method's floor next to the 1/√t fall of the unbiased ones), bias ± CI and
+standard deviation against κ, and equal-time efficiency bars (unbiased cells
+only). The drawing code is shared with sphere3d (:mod:`flatland.core.plotting`),
+which draws its 2D films as images.
 """
 
 from __future__ import annotations
 
 from flatland.core.plotting import (
     plot_efficiency,
+    plot_error_time,
     plot_gradient,
     plot_image,
     plot_kappa,
@@ -22,4 +25,12 @@ from flatland.core.plotting import (
     plot_study,
 )
 
-__all__ = ["plot_efficiency", "plot_gradient", "plot_image", "plot_kappa", "plot_panel", "plot_study"]
+__all__ = [
+    "plot_efficiency",
+    "plot_error_time",
+    "plot_gradient",
+    "plot_image",
+    "plot_kappa",
+    "plot_panel",
+    "plot_study",
+]

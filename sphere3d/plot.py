@@ -3,9 +3,11 @@
 A sphere3d film is a (height, width) image. Images are drawn in grey; derivatives on
 the diverging map ``RdBu_r`` centred on zero, one symmetric scale shared by all
 methods of a figure. The panel puts "primal | naive | reparam | finite differences"
-side by side (sphere3d has no boundary method). Study figures: bias ± CI and
-standard deviation against κ, and equal-time efficiency bars. The drawing code is
-shared with flatland (:mod:`flatland.core.plotting`), which draws its 1D films as
+side by side (sphere3d has no boundary method). Study figures: RMSE against
+wall time per estimate (log-log, a biased method's floor next to the 1/√t fall of
+the unbiased ones), bias ± CI and standard deviation against κ, and equal-time
+efficiency bars (unbiased cells only). The drawing code is shared with flatland
+(:mod:`flatland.core.plotting`), which draws its 1D films as
 strips and curves.
 """
 
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 from flatland.core.plotting import (
     plot_efficiency,
+    plot_error_time,
     plot_gradient,
     plot_image,
     plot_kappa,
@@ -20,4 +23,12 @@ from flatland.core.plotting import (
     plot_study,
 )
 
-__all__ = ["plot_efficiency", "plot_gradient", "plot_image", "plot_kappa", "plot_panel", "plot_study"]
+__all__ = [
+    "plot_efficiency",
+    "plot_error_time",
+    "plot_gradient",
+    "plot_image",
+    "plot_kappa",
+    "plot_panel",
+    "plot_study",
+]

@@ -30,12 +30,14 @@ __all__ = [
     "DIVERGING",
     "PRIMAL",
     "efficiency_figure",
+    "error_time_figure",
     "gradient_figure",
     "has_kappa_series",
     "image_figure",
     "kappa_figure",
     "panel_figure",
     "plot_efficiency",
+    "plot_error_time",
     "plot_gradient",
     "plot_image",
     "plot_kappa",
@@ -263,31 +265,35 @@ def _linthresh(rows: Sequence[Any]) -> float:
 def efficiency_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
     """Equal-time comparison: efficiency 1/(variance × time) bars and the RMSE a fixed budget buys.
 
-    Efficiency ignores bias; the right-hand bars (``equal_time_rmse``) count it. A
-    zero-variance estimator has infinite efficiency: its bar is drawn to the top
-    and labelled "σ² = 0".
+    Efficiency ignores bias, so a cell without one (``efficiency`` None: biased, or
+    its interval excludes 0) gets no bar, only the label "biased" or "bias CI ∌ 0";
+    a zero-variance unbiased estimator's bar is drawn to the top and labelled
+    "σ² = 0". The right-hand bars (``equal_time_rmse``) count the bias.
     """
-    labels = [r.cell.label for r in rows]
+    labels = [r.cell.label + ("" if len({x.cell.n for x in rows}) == 1 else f" n={r.cell.n}") for r in rows]
     colors = [f"C{sorted({r.cell.method for r in rows}).index(r.cell.method)}" for r in rows]
-    finite = [r.efficiency for r in rows if math.isfinite(r.efficiency) and r.efficiency > 0]
+    shown = [r.efficiency for r in rows if r.efficiency is not None]
+    finite = [e for e in shown if math.isfinite(e) and e > 0]
     top = 10 * max(finite) if finite else 1.0
     bottom = min(finite) / 10 if finite else 0.1
-    heights = [r.efficiency if math.isfinite(r.efficiency) else top for r in rows]
     y = np.arange(len(rows))
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 0.45 * len(rows) + 1.6), sharey=True)
-    left.barh(y, [h - bottom for h in heights], color=colors, left=bottom)
-    for yi, r in zip(y, rows, strict=True):
+    for yi, r, color in zip(y, rows, colors, strict=True):
+        if r.efficiency is None:  # no bar: an efficiency would rank a biased estimator
+            text = "biased" if r.biased else "bias CI ∌ 0"
+            left.text(bottom, yi, f" {text}", ha="left", va="center", fontsize=8, color="C3")
+            continue
+        height = r.efficiency if math.isfinite(r.efficiency) else top
+        left.barh(yi, height - bottom, color=color, left=bottom)
         if math.isfinite(r.efficiency):
-            left.text(
-                max(r.efficiency, bottom), yi, f" {r.efficiency:.2g}", ha="left", va="center", fontsize=7
-            )
+            left.text(max(height, bottom), yi, f" {height:.2g}", ha="left", va="center", fontsize=7)
         else:
             left.text(top, yi, " σ² = 0 ", ha="right", va="center", fontsize=8, color="white")
     left.set_xscale("log")
     left.set_xlim(bottom, top)
     left.set_yticks(y, labels, fontsize=8)
     left.invert_yaxis()
-    left.set_xlabel("efficiency 1 / (variance per sample × seconds per sample)")
+    left.set_xlabel("efficiency 1 / (variance per sample × seconds per sample), unbiased cells only")
     budget = rows[0].time_budget
     rmse = [r.equal_time_rmse for r in rows]
     # a log axis spanning four decades below the worst RMSE; smaller values sit on its edge, labelled
@@ -305,11 +311,62 @@ def efficiency_figure(rows: Sequence[Any], path: str | os.PathLike, title: str =
     return _save(fig, path)
 
 
+def error_time_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
+    """RMSE against the reference versus wall time per estimate, log-log, one line per method.
+
+    Each line joins one method's cells (same options) at its sample counts. An
+    unbiased estimator's RMSE falls as 1/sqrt(t) (the dotted guide, drawn through
+    the geometric centre of the unbiased points); a biased one levels off at its
+    |bias| (dashed line, "BIASED" in the legend, its |bias| at the largest count
+    drawn as a thin horizontal line). Cells with an RMSE of 0 cannot sit on a log
+    axis and are left out (their method's legend entry says so).
+    """
+    groups: dict[str, list[Any]] = {}
+    for r in rows:
+        groups.setdefault(r.cell.label, []).append(r)
+    fig, ax = plt.subplots(figsize=(7.5, 5.2), layout="constrained")
+    unbiased_points = []
+    for i, (label, group) in enumerate(groups.items()):
+        group = sorted(group, key=lambda r: r.cell.n)
+        points = [(r.seconds_per_trial, r.rmse) for r in group if r.rmse > 0.0 and r.seconds_per_trial > 0.0]
+        biased = any(r.biased for r in group)
+        name = (
+            label
+            + (" (BIASED)" if biased else "")
+            + ("" if len(points) == len(group) else " (rmse 0 left out)")
+        )
+        color = f"C{i % 10}"
+        if points:
+            t, e = np.array(points).T
+            ax.plot(t, e, marker="o", ms=4, lw=1.4, ls="--" if biased else "-", color=color, label=name)
+        else:
+            ax.plot([], [], marker="o", color=color, label=name)
+        if biased:
+            ax.axhline(abs(group[-1].bias), color=color, lw=0.7, ls=":", alpha=0.8)
+        elif points:
+            unbiased_points.extend(points)
+    if unbiased_points:
+        t, e = np.array(unbiased_points).T
+        t0, e0 = math.exp(np.mean(np.log(t))), math.exp(np.mean(np.log(e)))
+        guide = np.geomspace(t.min(), t.max(), 20)
+        ax.plot(guide, e0 * np.sqrt(t0 / guide), color="0.3", lw=1.0, ls=":", label="∝ 1/√t (guide)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time per estimate (s)")
+    ax.set_ylabel("RMSE of dI/dθ vs the reference")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return _save(fig, path)
+
+
 def study_figures(result: Any, out_dir: str | os.PathLike) -> list[Path]:
-    """The figures of a study: ``<name>_kappa.png`` (if κ is swept) and ``<name>_efficiency.png``."""
+    """The figures of a study: ``<name>_error_time.png`` (the main one), ``<name>_kappa.png`` (if κ
+    is swept) and ``<name>_efficiency.png``."""
     out_dir = Path(out_dir)
     name = result.config.name
-    paths = []
+    paths = [plot_error_time(result, out_dir / f"{name}_error_time.png")]
     if has_kappa_series(result.rows):
         paths.append(plot_kappa(result, out_dir / f"{name}_kappa.png"))
     paths.append(plot_efficiency(result, out_dir / f"{name}_efficiency.png"))
@@ -339,6 +396,11 @@ def plot_panel(primal: Any, gradients: Mapping[str, Any], path: str | os.PathLik
 def plot_kappa(result: Any, path: str | os.PathLike) -> Path:
     """Bias ± CI and standard deviation against κ for a study result."""
     return kappa_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
+
+
+def plot_error_time(result: Any, path: str | os.PathLike) -> Path:
+    """RMSE versus wall time per estimate for a study result (log-log, one line per method)."""
+    return error_time_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
 
 
 def plot_efficiency(result: Any, path: str | os.PathLike) -> Path:

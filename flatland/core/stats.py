@@ -103,18 +103,21 @@ def spread(std: np.ndarray | float, scale: np.ndarray | float) -> np.ndarray | f
     return float(out) if out.ndim == 0 else out
 
 
-def z_score(estimate: float, reference: float, stderr: float) -> float:
+def z_score(estimate: float, reference: float, stderr: float, tolerance: float | None = None) -> float:
     """``(estimate - reference) / stderr``, the error in standard errors, under the rounding policy.
 
-    With a zero standard error (an exact estimator, or rounding-level spread counted
-    as none by :func:`spread`) a difference within :func:`rounding_floor` of the
-    larger magnitude is rounding, z = 0; a larger one is infinitely significant.
+    A difference within ``tolerance`` (default :func:`rounding_floor` of the larger
+    magnitude) is rounding: z = 0. With a zero standard error (an exact estimator,
+    or rounding-level spread counted as none by :func:`spread`) a larger difference
+    is infinitely significant.
     """
     diff = float(estimate) - float(reference)
+    if tolerance is None:
+        tolerance = float(rounding_floor(max(abs(float(estimate)), abs(float(reference)))))
+    if abs(diff) <= tolerance:
+        return 0.0
     if stderr > 0.0:
         return diff / float(stderr)
-    if abs(diff) <= rounding_floor(max(abs(float(estimate)), abs(float(reference)))):
-        return 0.0
     return math.copysign(math.inf, diff)
 
 

@@ -49,15 +49,39 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
     measured wall time (time.perf_counter) / (T · samples)
 ``rmse``
     sqrt(mean_k (d_k - reference)²): the error of one trial
+``bias_z``, ``biased``
+    z = bias / sqrt(stderr² + reference_stderr²) (0 within the floating-point
+    allowance, ±inf with no noise at all); ``biased`` when |z| > 3.3 (two-sided
+    99.9 %); for scenes the per-pixel test of the mean image over the
+    trials flags it (:mod:`flatland.core.bias`: |z_j| above the Student-t
+    quantile with T - 1 degrees of freedom at the Sidak-corrected level
+    1 - 0.99^(1/m) over the m pixels, the stderr the larger of the trials' scatter
+    and their pooled batch stderrs; ``pixels_exceeding`` of ``pixels_tested``: shown, not
+    a flag, as heavy-tailed pixels break its t law at 8-16 trials)
 ``efficiency``
-    1 / (variance_per_sample · seconds_per_sample); infinite for a zero-variance
-    estimator
+    1 / (variance_per_sample · seconds_per_sample), infinite for a zero-variance
+    estimator; only for a cell that is not ``biased`` and whose interval contains
+    0, else None (blank in the CSV, "biased" or "-" in the table): efficiency
+    ignores bias, so a biased cell has none
+``rank``
+    1 = best: cells with an efficiency by efficiency, then the others by
+    ``equal_time_rmse``, so a biased cell never ranks above an unbiased one
+``seconds_per_trial``
+    seconds_per_sample · samples, the wall time of one estimate (the x axis of the
+    error-versus-time figure)
 ``equal_time_rmse``
     sqrt(bias² + variance_per_sample · seconds_per_sample / B): the error expected
     from a time budget of B seconds (``"time_budget"``, default 1 s), which unlike
     efficiency counts the bias
 
 For scenes a "sample" is one camera sample: spp × pixels.
+
+Reference rule: a Monte Carlo reference's standard error must be at most 1/4 of
+the smallest standard error among the cells it does not flag as biased (a flag
+already counts the reference's noise in its z). :func:`run_study` checks this after
+the trials and recomputes the reference at (stderr / target)² × its sample count
+(× 1.25), or raises with that count (``grow_reference=False``); the table's footer
+states the reference's method, sample count, stderr and the ratio.
 
 Configurations are parsed and validated in :mod:`flatland.core.study_config`
 (re-exported here). Example (JSON)::
@@ -88,8 +112,9 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from flatland.core.bias import REFERENCE_RATIO, Z_FLAG, PixelTest, pixel_test, reference_spp_needed
 from flatland.core.image import relative_error
-from flatland.core.stats import rounding_floor, spread
+from flatland.core.stats import ROUNDING, rounding_floor, spread, z_score
 from flatland.core.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
 from flatland.core.table import format_table, method_label
 from flatland.core.validate import ValidationError, check_int
@@ -115,9 +140,10 @@ OPTION_COLUMNS = ("kappa", "probes", "paired", "h")
 
 CSV_COLUMNS = (
     "cell", "problem", "method", "label", *OPTION_COLUMNS, "options", "n", "samples", "trials", "seed",
-    "reference", "reference_stderr", "mean_derivative", "stderr", "bias", "bias_low", "bias_high", "level",
-    "variance_per_sample", "seconds_per_sample", "rmse", "efficiency", "equal_time_rmse", "time_budget",
-    "relative_error", "mean_value",
+    "rank", "biased", "bias_z", "pixels_exceeding", "pixels_tested", "pixel_threshold",
+    "reference", "reference_stderr", "reference_n", "mean_derivative", "stderr", "bias", "bias_low",
+    "bias_high", "level", "variance_per_sample", "seconds_per_sample", "seconds_per_trial", "rmse",
+    "efficiency", "equal_time_rmse", "time_budget", "relative_error", "mean_value",
 )  # fmt: skip
 """Columns of the study CSV, in order."""
 
@@ -138,6 +164,7 @@ class Reference:
     source: str
     image: np.ndarray | None = None
     image_stderr: np.ndarray | None = None
+    n: int | None = None
 
 
 def _functional(problem: Problem, image: np.ndarray) -> float:
@@ -233,9 +260,14 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
                 np.savez(f, derivative=derivative, stderr=stderr)
             os.replace(tmp, path)
     if not problem.is_scene:
-        return Reference(float(derivative), float(stderr), label)
+        return Reference(float(derivative), float(stderr), label, n=spec.n)
     return Reference(
-        _functional(problem, derivative), _functional_stderr(problem, stderr), label, derivative, stderr
+        _functional(problem, derivative),
+        _functional_stderr(problem, stderr),
+        label,
+        derivative,
+        stderr,
+        spec.n,
     )
 
 
@@ -350,16 +382,43 @@ class CellResult:
     variance_per_sample: float
     seconds_per_sample: float
     rmse: float
-    efficiency: float
+    efficiency: float | None
     equal_time_rmse: float
     time_budget: float
     relative_error: float
     mean_value: float
+    bias_z: float = 0.0
+    pixels: PixelTest | None = None
+    seconds_per_trial: float = 0.0
+    reference_n: int | None = None
+    rank: int = 0
     derivatives: tuple[float, ...] = field(repr=False, default=())
 
     def bias_contains_zero(self) -> bool:
         """True if the bias interval contains 0."""
         return self.bias_low <= 0.0 <= self.bias_high
+
+    @property
+    def biased(self) -> bool:
+        """True if the bias is significant: |bias_z| > 3.3. The per-pixel test (``pixels``) is shown
+        but does not flag: with 8-16 trials its t law fails for heavy-tailed pixels (measured: a
+        finite-difference cell against a same-method reference exceeded)."""
+        return abs(self.bias_z) > Z_FLAG
+
+    @property
+    def pixels_exceeding(self) -> int | None:
+        """Pixels whose |z| exceeds the per-pixel threshold (None for integrals)."""
+        return None if self.pixels is None else self.pixels.exceeding
+
+    @property
+    def pixels_tested(self) -> int | None:
+        """Pixels in the per-pixel test (None for integrals)."""
+        return None if self.pixels is None else self.pixels.pixels
+
+    @property
+    def pixel_threshold(self) -> float | None:
+        """The per-pixel |z| threshold (None for integrals)."""
+        return None if self.pixels is None else self.pixels.threshold
 
 
 def _relative_error(run: _Run, reference: Reference) -> float:
@@ -388,9 +447,26 @@ def _summarize(
         float(stats.t.ppf(0.5 + 0.5 * level, t - 1)) * math.sqrt(var / t + reference.stderr**2) + resolution
     )
     bias = float(mean - reference.derivative)
+    bias_z = z_score(mean, reference.derivative, math.hypot(stderr, reference.stderr), resolution)
+    pixels = None
+    if reference.image is not None:  # the mean image over the trials against the reference image
+        images = np.array([np.asarray(r.derivative_image, dtype=np.float64) for r in runs])
+        image = images.mean(axis=0)
+        # the larger of two estimates of the mean image's stderr: the scatter of the T trials and the
+        # trials' own batch stderrs pooled (T × batches samples: fewer pixels whose rare large samples
+        # all missed the T trials); conservative, for a test whose null law is only approximately t
+        pooled = np.sqrt(np.sum([np.square(r.stderr_image) for r in runs], axis=0)) / t
+        image_se = np.maximum(images.std(axis=0, ddof=1) / math.sqrt(t), pooled)
+        # rounding at the scale of the film (a finite difference of radiances ~1 leaves ~ε/h in dark pixels)
+        tolerance = ROUNDING * max(float(np.max(np.abs(image))), float(np.max(np.abs(reference.image))))
+        pixels = pixel_test(image, image_se, reference.image, reference.image_stderr, t - 1, tolerance)
     var_ps = var * samples
     sec_ps = sum(r.seconds for r in runs) / (t * samples)
     cost = var_ps * sec_ps
+    # efficiency ignores bias: defined only for a cell that passes both bias tests and whose interval
+    # contains 0 (infinite for a zero-variance estimator), never for a biased one
+    unbiased = abs(bias_z) <= Z_FLAG and bias - half <= 0 <= bias + half
+    efficiency = (1.0 / cost if cost > 0.0 else math.inf) if unbiased else None
     return CellResult(
         cell=cell,
         trials=t,
@@ -406,13 +482,30 @@ def _summarize(
         variance_per_sample=var_ps,
         seconds_per_sample=sec_ps,
         rmse=float(np.sqrt(np.mean(np.square(d - reference.derivative)))),
-        efficiency=1.0 / cost if cost > 0.0 else math.inf,
+        efficiency=efficiency,
         equal_time_rmse=math.sqrt(bias * bias + cost / budget),
         time_budget=budget,
         relative_error=float(np.mean([_relative_error(r, reference) for r in runs])),
         mean_value=float(np.mean([r.value for r in runs])),
+        bias_z=bias_z,
+        pixels=pixels,
+        seconds_per_trial=sec_ps * samples,
+        reference_n=reference.n,
         derivatives=tuple(float(x) for x in d),
     )
+
+
+def _ranked(rows: Sequence[CellResult]) -> tuple[CellResult, ...]:
+    """The rows (in their order) with ``rank`` set: cells with an efficiency first, by efficiency
+    (largest first), then every other cell (biased, or an interval that excludes 0) by equal-time
+    RMSE; a biased cell never ranks above an unbiased one."""
+    order = sorted(
+        range(len(rows)),
+        key=lambda i: (0, -rows[i].efficiency, i) if rows[i].efficiency is not None
+        else (1, rows[i].equal_time_rmse, i),
+    )  # fmt: skip
+    rank = {i: k + 1 for k, i in enumerate(order)}
+    return tuple(replace(r, rank=rank[i]) for i, r in enumerate(rows))
 
 
 @dataclass(frozen=True)
@@ -445,26 +538,74 @@ class StudyResult:
                 writer.writerow(_csv_row(r, self.config))
         return path
 
+    def ranking(self) -> tuple[CellResult, ...]:
+        """The rows best first: unbiased cells by efficiency, then the rest (see ``rank``)."""
+        return tuple(sorted(self.rows, key=lambda r: r.rank))
+
     def table(self) -> str:
-        """A fixed-width text table of the main columns."""
+        """A fixed-width text table, best first; the bias columns lead, the footer states the tests."""
         level = f"{self.config.level:.0%} CI"
-        head = ("method", "mean dI/dθ", "bias", level, "var/sample", "s/sample", "rmse", "efficiency")
+        scene = self.config.problem.is_scene
+        head = ("method", "rank", "bias z", "flag", *(("px |z|>t",) if scene else ()), f"bias [{level}]",
+                "efficiency", "rmse", "var/sample", "s/trial", "mean dI/dθ")  # fmt: skip
         rows = [
             (
-                r.cell.label,
-                f"{r.mean_derivative:.5g}",
-                f"{r.bias:+.3g}",
-                f"[{r.bias_low:+.3g}, {r.bias_high:+.3g}]",
-                f"{r.variance_per_sample:.3g}",
-                f"{r.seconds_per_sample:.3g}",
+                r.cell.label
+                + ("" if len(self.sample_counts) == 1 else f" {self.config.problem.count_name}={r.cell.n}"),
+                str(r.rank),
+                _format_z(r.bias_z),
+                "BIASED" if r.biased else "",
+                *((r.pixels.summary(),) if r.pixels is not None else ()),
+                f"{r.bias:+.3g} [{r.bias_low:+.3g}, {r.bias_high:+.3g}]",
+                _format_efficiency(r),
                 f"{r.rmse:.3g}",
-                f"{r.efficiency:.3g}",
+                f"{r.variance_per_sample:.3g}",
+                f"{r.seconds_per_trial:.3g}",
+                f"{r.mean_derivative:.5g}",
             )
-            for r in self.rows
+            for r in self.ranking()
         ]
         ref = self.reference
-        title = f"{self.config.problem.label}: reference dI/dθ = {ref.derivative:.6g} ({ref.source})"
-        return format_table(head, rows, title)
+        title = f"{self.config.problem.label}: reference dI/dθ = {ref.derivative:.6g} ± {ref.stderr:.2g}"
+        return format_table(head, rows, title) + "\n" + self.footer()
+
+    @property
+    def sample_counts(self) -> tuple[int, ...]:
+        """The distinct per-trial sample counts of the grid, ascending."""
+        return tuple(sorted({r.cell.n for r in self.rows}))
+
+    def footer(self) -> str:
+        """What the bias columns mean and how the reference was made."""
+        ref = self.reference
+        judged = [r.stderr for r in self.rows if not r.biased and r.stderr > 0.0]
+        ratio = f"{ref.stderr / min(judged):.2f}" if judged else "n/a"
+        lines = [
+            f"reference: {ref.source}, stderr {ref.stderr:.2g} = {ratio} × the smallest unbiased-row stderr"
+            f" (required <= {REFERENCE_RATIO:g})",
+            f"bias z = bias / sqrt(stderr² + stderr_ref²) of the studied scalar; |z| > {Z_FLAG}"
+            " (two-sided 99.9 %) flags BIASED",
+        ]
+        if self.config.problem.is_scene:
+            lines.append(
+                "px |z|>t: pixels of the mean image whose |z| exceeds the Student-t quantile (trials - 1 dof)"
+                " at the Sidak-corrected level 1-(1-0.01)^(1/m), m pixels; ~0.01 expected if unbiased"
+                " (shown, not a flag: heavy-tailed pixels break its t law at these trial counts)"
+            )
+        lines.append(
+            "efficiency = 1/(var/sample × s/sample), shown only for an unbiased row whose interval"
+            " contains 0; rank: those by efficiency, then the rest by equal-time RMSE"
+        )
+        return "\n".join(lines)
+
+
+def _format_z(z: float) -> str:
+    return f"{z:+.1f}" if math.isfinite(z) else ("+inf" if z > 0 else "-inf") + " (σ=0)"
+
+
+def _format_efficiency(row: CellResult) -> str:
+    if row.efficiency is None:
+        return "biased" if row.biased else "-"
+    return f"{row.efficiency:.3g}" if math.isfinite(row.efficiency) else "σ²=0"
 
 
 def _csv_row(row: CellResult, config: StudyConfig) -> list[Any]:
@@ -530,6 +671,7 @@ def run_study(
     cache_dir: str | os.PathLike | None = None,
     progress: bool | None = None,
     on_reference: Callable[[Reference], None] | None = None,
+    grow_reference: bool = True,
 ) -> StudyResult:
     """Run every cell's trials and summarize them against the reference.
 
@@ -549,6 +691,13 @@ def run_study(
         Show a tqdm progress bar over the trials; default: when stderr is a terminal.
     on_reference : callable, optional
         Called with the reference once it is known (e.g. to print it).
+    grow_reference : bool
+        What to do when a Monte Carlo reference's standard error exceeds 1/4 of the
+        smallest standard error among the cells it does not flag as biased (a flag
+        counts the reference's noise in its z, so it stands whatever that noise):
+        True recomputes it at the sample count :func:`~flatland.core.bias.reference_spp_needed`
+        gives (times 1.25, for the scatter of the estimated standard errors; at most three
+        rounds), False raises a ValidationError naming ``reference`` and that count.
 
     Returns
     -------
@@ -574,11 +723,40 @@ def run_study(
     finally:
         bar.close()
     t = config.trials  # tasks are ordered cell by cell, trial by trial
-    rows = [
-        _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget)
-        for c, cell in enumerate(config.cells)
-    ]
-    return StudyResult(config, reference, tuple(rows), time.perf_counter() - start)
+
+    def summarize(reference: Reference) -> list[CellResult]:
+        return [
+            _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget)
+            for c, cell in enumerate(config.cells)
+        ]
+
+    rows = summarize(reference)
+    for attempt in range(4):
+        needed = _reference_needed(config, reference, rows)
+        if needed is None:
+            break
+        count = f"reference.{config.problem.count_name}"
+        if not grow_reference or attempt == 3:
+            judged = min(r.stderr for r in rows if not r.biased and r.stderr > 0.0)
+            raise ValidationError(
+                count,
+                f"the reference's standard error {reference.stderr:.3g} is more than {REFERENCE_RATIO:g}"
+                f" × the smallest standard error it judges ({judged:.3g}); give at least {needed}",
+            )
+        spec = replace(config.reference, n=needed)
+        reference = resolve_reference(replace(config, reference=spec), cache_dir)
+        rows = summarize(reference)
+    return StudyResult(config, reference, _ranked(rows), time.perf_counter() - start)
+
+
+def _reference_needed(config: StudyConfig, reference: Reference, rows: Sequence[CellResult]) -> int | None:
+    """The reference sample count the 1/4 rule asks for, or None if the reference meets it."""
+    if config.reference is None or reference.n is None:
+        return None  # closed form: no noise
+    judged = [r.stderr for r in rows if not r.biased and r.stderr > 0.0]
+    if not judged or reference.stderr <= REFERENCE_RATIO * min(judged):
+        return None
+    return math.ceil(1.25 * reference_spp_needed(reference.n, reference.stderr, min(judged)))
 
 
 def _preflight(config: StudyConfig) -> None:

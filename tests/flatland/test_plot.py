@@ -119,13 +119,44 @@ def test05_study_figures_kappa_and_efficiency(tmp_path):
     )
     result = run_study(config, progress=False)
     paths = plot.plot_study(result, tmp_path)
-    assert [p.name for p in paths] == ["fig_kappa.png", "fig_efficiency.png"]
+    assert [p.name for p in paths] == ["fig_error_time.png", "fig_kappa.png", "fig_efficiency.png"]
     for p in paths:
         rgb = _pixels(p)
-        assert p.stat().st_size > 20_000 and min(rgb.shape[:2]) > 300 and _not_blank(rgb) > 0.05
+        ink = 0.02 if p.name.endswith("error_time.png") else 0.05  # a line plot: less ink than bars
+        assert p.stat().st_size > 20_000 and min(rgb.shape[:2]) > 300 and _not_blank(rgb) > ink
     flat = {"name": "flat", "problem": {"integral": "step"}, "n": 500, "trials": 3}
     flat["methods"] = [{"method": "naive"}, {"method": "reparam"}]
     no_sweep = run_study(StudyConfig.from_dict(flat), progress=False)
-    assert [p.name for p in plot.plot_study(no_sweep, tmp_path)] == ["flat_efficiency.png"]
+    assert [p.name for p in plot.plot_study(no_sweep, tmp_path)] == [
+        "flat_error_time.png",
+        "flat_efficiency.png",
+    ]
     with pytest.raises(ValueError, match="kappa"):
         plot.plot_kappa(no_sweep, tmp_path / "none.png")
+
+
+def test06_error_time_figure_is_log_log_with_one_line_per_method(tmp_path, monkeypatch):
+    config = StudyConfig.from_dict(
+        {
+            "name": "et",
+            "problem": {"integral": "step"},
+            "methods": [{"method": "naive", "n": [500, 2000]}, {"method": "reparam", "n": [500, 2000, 8000]}],
+            "trials": 3,
+        }
+    )
+    result = run_study(config, progress=False)
+    seen = {}
+    original = plotting.plt.close
+
+    def keep(fig):  # inspect the axes before the figure is closed
+        ax = fig.axes[0]
+        seen.update(
+            x=ax.get_xscale(), y=ax.get_yscale(), labels=[line.get_label() for line in ax.get_lines()]
+        )
+        original(fig)
+
+    monkeypatch.setattr(plotting.plt, "close", keep)
+    path = plot.plot_error_time(result, tmp_path / "et.png")
+    assert path.stat().st_size > 10_000 and seen["x"] == "log" and seen["y"] == "log"
+    methods = [label for label in seen["labels"] if not label.startswith(("∝", "_"))]
+    assert methods == ["naive (BIASED)", "reparam"] and "∝ 1/√t (guide)" in seen["labels"]

@@ -106,7 +106,8 @@ def test04_cell_statistics_follow_their_definitions():
         assert row.bias_high - row.bias_low == pytest.approx(2 * half, rel=1e-9, abs=1e-14)
         assert row.seconds_per_sample > 0.0
         cost = row.variance_per_sample * row.seconds_per_sample
-        assert row.efficiency == (1.0 / cost if cost > 0 else math.inf)
+        if row.efficiency is not None:  # unbiased cells only (test05, test13)
+            assert row.efficiency == (1.0 / cost if cost > 0 else math.inf)
         assert row.equal_time_rmse == pytest.approx(math.sqrt(row.bias**2 + cost / row.time_budget))
 
 
@@ -120,7 +121,7 @@ def test05_biased_and_unbiased_methods_are_told_apart():
     naive = result.row("naive")
     assert naive.mean_derivative == 0.0 and naive.variance_per_sample == 0.0
     assert naive.bias == -result.reference.derivative and not naive.bias_contains_zero()
-    assert math.isinf(naive.efficiency)
+    assert naive.biased and naive.efficiency is None  # efficiency ignores bias: none for a biased cell
     for method in ("reparam", "finite_difference"):
         row = result.row(method)
         assert row.bias_contains_zero(), (method, row.bias_low, row.bias_high)
@@ -148,7 +149,7 @@ def test07_csv_round_trips_every_number_exactly(tmp_path):
             assert written[column] == getattr(row, column)
         assert written["method"] == row.cell.method and written["n"] == 4000 and written["trials"] == 3
     assert rows[2]["h"] == 0.05 and rows[1]["h"] is None and rows[0]["kappa"] is None
-    assert rows[0]["efficiency"] == math.inf
+    assert rows[0]["efficiency"] is None and rows[0]["biased"] is True  # naive: biased, no efficiency
 
 
 def test08_monte_carlo_reference_is_cached_by_its_inputs(tmp_path, monkeypatch):
@@ -261,3 +262,40 @@ def test12_labels_show_the_options_set_true_ones_by_name_floats_by_g():
     assert config.cells[0].label == "reparam kappa=0.5"  # the defaults filled in are not shown
     source = study.resolve_reference(config).source
     assert source.startswith("reparam kappa=2000 ") and source.endswith(" paired n=20 seed=2147483647")
+
+
+def _shadow_study(**overrides):
+    data = {
+        "problem": {"scene": "shadow", "param": "occluder.translate.x"},
+        "methods": [{"method": "naive"}, {"method": "boundary"}, {"method": "reparam", "kappa": 1000}],
+        "spp": 4,
+        "trials": 4,
+        "seed": 2,
+        "reference": {"spp": 512, "seed": 9},
+    }
+    data.update(overrides)
+    return StudyConfig.from_dict(data)
+
+
+def test13_naive_on_the_shadow_is_flagged_has_no_efficiency_and_never_ranks_first():
+    """Naive drops the moving shadow edge: its film sum is ~0 against ~10.7 (z far beyond 3.3)."""
+    result = run_study(_shadow_study(), progress=False)
+    naive = result.row("naive")
+    assert naive.biased and abs(naive.bias_z) > 3.3 and naive.efficiency is None
+    assert naive.rank == len(result.rows) and result.ranking()[0].cell.method != "naive"
+    assert all(r.rank < naive.rank for r in result.rows if not r.biased)
+    table = result.table()
+    assert "BIASED" in table and "inf" not in table.split("naive")[1].splitlines()[0].replace(
+        "-inf (σ=0)", ""
+    )
+    assert table.splitlines()[1].split()[:4] == ["method", "rank", "bias", "z"]
+
+
+def test14_the_reference_ratio_check_raises_or_grows_the_reference(tmp_path):
+    """A 4-spp reference against 4 trials of 4 spp has about the cells' standard error: the 1/4 rule fails."""
+    config = _shadow_study(reference={"spp": 4, "seed": 9})
+    with pytest.raises(ValidationError, match=r"^reference.spp: .* give at least \d+"):
+        run_study(config, progress=False, grow_reference=False)
+    grown = run_study(config, progress=False, cache_dir=tmp_path)
+    judged = min(r.stderr for r in grown.rows if not r.biased and r.stderr > 0)
+    assert grown.reference.n > 4 and grown.reference.stderr <= 0.25 * judged

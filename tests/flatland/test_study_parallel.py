@@ -9,7 +9,13 @@ import pytest
 
 from flatland.core.study import CSV_COLUMNS, StudyConfig, run_study
 
-TIMED = {"seconds_per_sample", "efficiency", "equal_time_rmse"}
+TIMED = {
+    "seconds_per_sample",
+    "seconds_per_trial",
+    "efficiency",
+    "equal_time_rmse",
+    "rank",
+}  # rank: by efficiency
 CONFIG = {
     "problem": {"integral": "arc_stretch", "theta": 1.0},
     "methods": [

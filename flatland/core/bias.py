@@ -1,0 +1,147 @@
+"""Bias tests behind every error table: a method is flagged BIASED before its error or speed is shown.
+
+Two tests, both against a reference with its own standard error:
+
+film sum (the studies' functional)
+    z = (S - S_ref) / sqrt(se² + se_ref²), S the sum over the film (or the studied
+    scalar), computed by :func:`flatland.core.stats.z_score` (the project's one rounding
+    policy); flagged when |z| > :data:`Z_FLAG` = 3.3 (two-sided normal level 99.9 %).
+per pixel (image outputs)
+    z_j = (g_j - r_j) / sqrt(se_j² + se_ref,j²) for each of the m pixels whose
+    method standard error is positive (a pixel where every sample of the method
+    gave the same value, often the zero of a rare event such as a finite
+    difference straddling an edge, has no variance estimate to test against; an
+    estimator that is exactly zero everywhere is caught by the film-sum test); a
+    pixel exceeds when |z_j| is above the two-sided Student-t quantile (``dof`` degrees of
+    freedom: the method's batches or trials minus one, its variance dominating the
+    reference's) at the Sidak-corrected level 1 - (1 - α)^(1/m), α =
+    :data:`PIXEL_ALPHA` = 0.01. An unbiased method has no exceeding pixel with
+    probability 1 - α, i.e. m × level ≈ α = 0.01 exceeding pixels are expected.
+    The count is reported beside the film-sum flag but does not set it: the batch
+    standard errors of pixels dominated by rare large samples (a finite difference
+    straddling an edge, a boundary sample) are themselves noisy, and unbiased
+    methods exceeded in measured runs (boundary 1 of 31 pixels at 16 spp, z = 7.2
+    against 6.5; finite differences 12 of 575 in the sphere3d demo). A test that
+    can see a per-pixel bias needs more batches than these outputs use.
+
+In both tests a difference within the floating-point allowance ``tolerance`` is no
+difference (z = 0); a film sum that differs with zero standard errors has z = ±inf.
+:data:`PixelTest.flagged` says whether any pixel exceeded, for callers that test one
+image with enough batches.
+
+The reference rule (:func:`reference_spp_needed`): a reference's standard error
+must be at most :data:`REFERENCE_RATIO` = 1/4 of the smallest method standard
+error it judges, so that its own noise moves no z by more than ~3 %.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from flatland.core.stats import sidak
+
+__all__ = [
+    "PIXEL_ALPHA",
+    "REFERENCE_RATIO",
+    "Z_FLAG",
+    "PixelTest",
+    "pixel_test",
+    "reference_spp_needed",
+]
+
+Z_FLAG = 3.3
+"""|z| above this flags a biased film sum (two-sided normal 99.9 %: 3.29)."""
+PIXEL_ALPHA = 0.01
+"""Family-wise level of the per-pixel test."""
+REFERENCE_RATIO = 0.25
+"""Largest allowed reference stderr / smallest method stderr."""
+
+
+@dataclass(frozen=True)
+class PixelTest:
+    """Outcome of the per-pixel bias test (see the module docstring).
+
+    Attributes
+    ----------
+    pixels : int
+        m, the number of pixels tested (those with a positive method standard error).
+    threshold : float
+        The |z| a pixel must exceed (Student-t quantile at the Sidak-corrected level).
+    exceeding : int
+        Pixels with |z| above the threshold.
+    expected : float
+        Exceeding pixels expected of an unbiased method, m × per-pixel level (≈ α).
+    max_abs_z : float
+        The largest |z| over the tested pixels (0 if none).
+    """
+
+    pixels: int
+    threshold: float
+    exceeding: int
+    expected: float
+    max_abs_z: float
+
+    @property
+    def flagged(self) -> bool:
+        """True if more pixels exceed than the test allows (one or more)."""
+        return self.exceeding > 0
+
+    def summary(self) -> str:
+        """``exceeding/pixels`` as shown in the tables, e.g. ``7/64``."""
+        return f"{self.exceeding}/{self.pixels}"
+
+
+def pixel_test(
+    image: np.ndarray,
+    stderr: np.ndarray,
+    reference: np.ndarray,
+    reference_stderr: np.ndarray,
+    dof: int,
+    tolerance: float = 0.0,
+    alpha: float = PIXEL_ALPHA,
+) -> PixelTest:
+    """Per-pixel z of ``image`` against ``reference`` and the count above the Sidak-corrected quantile.
+
+    Parameters
+    ----------
+    image, stderr : ndarray
+        The method's mean image and its per-pixel standard error.
+    reference, reference_stderr : ndarray
+        The reference image and its per-pixel standard error (same shape).
+    dof : int
+        Degrees of freedom of the method's standard errors (batches or trials - 1).
+    tolerance : float
+        Floating-point allowance: smaller differences count as none.
+    alpha : float
+        Family-wise level over the pixels.
+    """
+    stderr = np.asarray(stderr, dtype=np.float64)
+    tested = np.broadcast_to(stderr > 0.0, np.shape(image))  # pixels with a variance estimate
+    diff = (np.asarray(image, dtype=np.float64) - np.asarray(reference, dtype=np.float64))[tested]
+    noise = np.hypot(stderr, np.asarray(reference_stderr, dtype=np.float64))[tested]
+    tolerance = np.broadcast_to(np.asarray(tolerance, dtype=np.float64), np.shape(image))[tested]
+    m = int(diff.size)
+    if m == 0:
+        return PixelTest(0, math.inf, 0, 0.0, 0.0)
+    level = sidak(alpha, m)  # per-pixel two-sided level
+    threshold = float(stats.t.isf(0.5 * level, max(int(dof), 1)))
+    abs_z = np.where(np.abs(diff) <= tolerance, 0.0, np.abs(diff) / noise)  # noise > 0 on tested pixels
+    return PixelTest(m, threshold, int(np.count_nonzero(abs_z > threshold)), m * level, float(abs_z.max()))
+
+
+def reference_spp_needed(
+    spp: int, reference_stderr: float, smallest_stderr: float, ratio: float = REFERENCE_RATIO
+) -> int:
+    """Samples per pixel (or n) that bring a reference's stderr to ``ratio`` × ``smallest_stderr``.
+
+    The stderr falls as 1/sqrt(spp), so the count grows by (stderr / target)²; ``spp``
+    itself when the reference already meets the target (or there is nothing to judge).
+    """
+    target = ratio * smallest_stderr
+    if reference_stderr <= target or target <= 0.0:
+        return int(spp)
+    return math.ceil(spp * (reference_stderr / target) ** 2)
