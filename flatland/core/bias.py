@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from flatland.core.image import DEFAULT_MAX_BATCHES
 from flatland.core.stats import sidak
 
 __all__ = [
@@ -134,14 +135,26 @@ def pixel_test(
 
 
 def reference_spp_needed(
-    spp: int, reference_stderr: float, smallest_stderr: float, ratio: float = REFERENCE_RATIO
+    spp: int,
+    reference_stderr: float,
+    smallest_stderr: float,
+    ratio: float = REFERENCE_RATIO,
+    margin: float = 1.25,
+    multiple: int = DEFAULT_MAX_BATCHES,
 ) -> int:
     """Samples per pixel (or n) that bring a reference's stderr to ``ratio`` × ``smallest_stderr``.
 
-    The stderr falls as 1/sqrt(spp), so the count grows by (stderr / target)²; ``spp``
-    itself when the reference already meets the target (or there is nothing to judge).
+    The stderr falls as 1/sqrt(spp), so the count grows by (stderr / target)², times
+    ``margin`` for the scatter of the estimated standard errors, rounded up to a
+    multiple of ``multiple`` so the reference keeps that many equal batches (a count
+    without a divisor above 1 would leave one batch and an infinite standard error);
+    ``spp`` itself when the reference already meets the target (or there is nothing
+    to judge).
     """
+    if not math.isfinite(reference_stderr):
+        raise ValueError(f"reference_stderr: must be finite (two or more batches), got {reference_stderr}")
     target = ratio * smallest_stderr
     if reference_stderr <= target or target <= 0.0:
         return int(spp)
-    return math.ceil(spp * (reference_stderr / target) ** 2)
+    needed = math.ceil(margin * spp * (reference_stderr / target) ** 2)
+    return -(-needed // multiple) * multiple

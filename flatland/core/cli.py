@@ -165,7 +165,7 @@ def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int
     ratio = _reference_ratio(gradients, reference)
     if ratio <= REFERENCE_RATIO:
         return None
-    return math.ceil(1.25 * reference_spp_needed(ref_spp, ref_se, ref_se / ratio))
+    return reference_spp_needed(ref_spp, ref_se, ref_se / ratio)
 
 
 def _reference_ratio(gradients: Mapping[str, Any], reference: Any) -> float:

@@ -393,19 +393,25 @@ def plot_panel(primal: Any, gradients: Mapping[str, Any], path: str | os.PathLik
     return panel_figure(primal.value, columns, path, title)
 
 
+def _study_title(result: Any) -> str:
+    """One title for every figure of a study: its name, the scalar studied and the reference."""
+    config = result.config
+    return f"study {config.name!r}: dI/dθ of {config.problem.label}\n(reference: {result.reference.source})"
+
+
 def plot_kappa(result: Any, path: str | os.PathLike) -> Path:
     """Bias ± CI and standard deviation against κ for a study result."""
-    return kappa_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
+    return kappa_figure(result.rows, path, _study_title(result))
 
 
 def plot_error_time(result: Any, path: str | os.PathLike) -> Path:
     """RMSE versus wall time per estimate for a study result (log-log, one line per method)."""
-    return error_time_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
+    return error_time_figure(result.rows, path, _study_title(result))
 
 
 def plot_efficiency(result: Any, path: str | os.PathLike) -> Path:
     """Equal-time efficiency bars for a study result."""
-    return efficiency_figure(result.rows, path, f"{result.config.name}: {result.config.problem.label}")
+    return efficiency_figure(result.rows, path, _study_title(result))
 
 
 plot_study = study_figures

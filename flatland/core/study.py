@@ -756,7 +756,7 @@ def _reference_needed(config: StudyConfig, reference: Reference, rows: Sequence[
     judged = [r.stderr for r in rows if not r.biased and r.stderr > 0.0]
     if not judged or reference.stderr <= REFERENCE_RATIO * min(judged):
         return None
-    return math.ceil(1.25 * reference_spp_needed(reference.n, reference.stderr, min(judged)))
+    return reference_spp_needed(reference.n, reference.stderr, min(judged))
 
 
 def _preflight(config: StudyConfig) -> None:

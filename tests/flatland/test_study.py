@@ -299,3 +299,14 @@ def test14_the_reference_ratio_check_raises_or_grows_the_reference(tmp_path):
     grown = run_study(config, progress=False, cache_dir=tmp_path)
     judged = min(r.stderr for r in grown.rows if not r.biased and r.stderr > 0)
     assert grown.reference.n > 4 and grown.reference.stderr <= 0.25 * judged
+
+
+def test15_a_grown_reference_keeps_sixteen_equal_batches():
+    """457 spp (prime) left one batch and an infinite standard error: counts are multiples of 16."""
+    from flatland.core.bias import reference_spp_needed
+
+    # stderr 1 at 4 spp, target 0.25 x 0.8: (1 / 0.2)^2 x 4 x 1.25 = 125, rounded up to 128
+    assert reference_spp_needed(4, 1.0, 0.8) == 128
+    assert reference_spp_needed(4, 0.1, 0.8) == 4  # already precise enough
+    with pytest.raises(ValueError, match="reference_stderr: must be finite"):
+        reference_spp_needed(457, float("inf"), 0.8)
