@@ -86,4 +86,12 @@ def error_table(
         "rank: unbiased methods by relative error = mean|g - g_ref| / max|g_ref| (bias and noise), then the"
         " BIASED ones"
     )
+    source = getattr(reference, "method", "")
+    shared = [m for m in gradients if m == source]
+    if shared:  # e.g. finite differences judged by a finite-difference reference with the same step
+        which = " (finite differences: O(h²))" if shared[0] == "finite_difference" else ""
+        footer += (
+            f"\n{shared[0]} is the reference's own method: a bias it has{which} is the reference's too"
+            "\nand cancels here, so its row cannot show it"
+        )
     return format_table(heads, body, title) + "\n" + footer
