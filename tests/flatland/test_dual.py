@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -89,7 +89,9 @@ def test01_unary_rules_match_central_difference(name):
 
     @given(x=arrays(lo, hi), t=arrays(-1, 1))
     def check(x, t):
-        if name in ("max", "min", "sort", "clip", "where", "interp"):  # keep away from kinks
+        if name in ("max", "min", "sort"):  # ties are kinks: the ordering must not change within ±H t
+            assume(np.min(np.diff(np.sort(x))) > 1e-4)
+        if name in ("clip", "where", "interp"):  # keep away from kinks
             x = x + 1e-3 * np.arange(x.size)
             if name == "clip":
                 x = np.where(np.abs(np.abs(x) - 1.0) < 1e-3, x + 0.01, x)
