@@ -116,7 +116,7 @@ from flatland.core.bias import REFERENCE_RATIO, Z_FLAG, PixelTest, pixel_test, r
 from flatland.core.image import relative_error
 from flatland.core.stats import ROUNDING, rounding_floor, spread, z_score
 from flatland.core.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
-from flatland.core.table import format_table, method_label
+from flatland.core.table import format_table, method_label, own_method_note
 from flatland.core.validate import ValidationError, check_int
 
 __all__ = [
@@ -595,6 +595,9 @@ class StudyResult:
             "efficiency = 1/(var/sample × s/sample), shown only for an unbiased row whose interval"
             " contains 0; rank: those by efficiency, then the rest by equal-time RMSE"
         )
+        if self.config.reference is not None:
+            note = own_method_note((c.method for c in self.config.cells), self.config.reference.method)
+            lines += [note] if note else []
         return "\n".join(lines)
 
 

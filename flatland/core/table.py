@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["error_table", "format_table", "method_label"]
+__all__ = ["error_table", "format_table", "method_label", "own_method_note"]
 
 
 def method_label(method: str, options: Iterable[tuple[str, Any]] = ()) -> str:
@@ -39,6 +39,21 @@ def format_table(headers: Sequence[str], rows: Sequence[Sequence[str]], title: s
     out = [title] if title else []
     out += [line(headers), line(["-" * w for w in widths]), *(line(r) for r in rows)]
     return "\n".join(out)
+
+
+def own_method_note(methods: Iterable[str], reference_method: str) -> str:
+    """The footer line for a method judged by a reference made with that same method ('' if none).
+
+    Finite differences against a finite-difference reference with the same step share
+    its O(h²) bias, which then cancels: the table cannot show it.
+    """
+    if reference_method not in set(methods):
+        return ""
+    which = " (finite differences: O(h²))" if reference_method == "finite_difference" else ""
+    return (
+        f"{reference_method} is the reference's own method: a bias it has{which} is the reference's too"
+        "\nand cancels here, so its rows cannot show it"
+    )
 
 
 def error_table(
@@ -86,12 +101,7 @@ def error_table(
         "rank: unbiased methods by relative error = mean|g - g_ref| / max|g_ref| (bias and noise), then the"
         " BIASED ones"
     )
-    source = getattr(reference, "method", "")
-    shared = [m for m in gradients if m == source]
-    if shared:  # e.g. finite differences judged by a finite-difference reference with the same step
-        which = " (finite differences: O(h²))" if shared[0] == "finite_difference" else ""
-        footer += (
-            f"\n{shared[0]} is the reference's own method: a bias it has{which} is the reference's too"
-            "\nand cancels here, so its row cannot show it"
-        )
+    note = own_method_note(gradients, getattr(reference, "method", ""))
+    if note:
+        footer += "\n" + note
     return format_table(heads, body, title) + "\n" + footer

@@ -310,3 +310,13 @@ def test15_a_grown_reference_keeps_sixteen_equal_batches():
     assert reference_spp_needed(4, 0.1, 0.8) == 4  # already precise enough
     with pytest.raises(ValueError, match="reference_stderr: must be finite"):
         reference_spp_needed(457, float("inf"), 0.8)
+
+
+def test16_a_method_judged_by_its_own_kind_of_reference_is_noted():
+    """Finite differences against a finite-difference reference share its O(h²) bias: the footer says so."""
+    from flatland.core.table import own_method_note
+
+    note = own_method_note(["naive", "finite_difference"], "finite_difference")
+    assert note.startswith("finite_difference is the reference's own method") and "O(h²)" in note
+    assert own_method_note(["naive", "reparam"], "finite_difference") == ""
+    assert "O(h²)" not in own_method_note(["boundary"], "boundary")
