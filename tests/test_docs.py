@@ -282,11 +282,11 @@ def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tm
         [
             "# Page",
             "",
-            "```{py:function} flatland.estimators.reparam.follow_nearest(domain, discontinuities, points)",
+            "```{py:function} flatland.textbook.reparam.follow_nearest(domain, discontinuities, points)",
             "```",
             "",
             "```{implements} DESIGN 2.5",
-            "flatland.estimators.reparam.follow_nearest",
+            "flatland.textbook.reparam.follow_nearest",
             "flatland.no_such_function",
             "```",
             "",
@@ -295,7 +295,7 @@ def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tm
     )
     warnings, html = build_tiny_site(tmp_path, page)
     assert "DESIGN 2.5 in the code" in html
-    assert 'href="#flatland.estimators.reparam.follow_nearest"' in html
+    assert 'href="#flatland.textbook.reparam.follow_nearest"' in html
     assert "flatland.no_such_function cannot be imported" in warnings
     assert "reference target not found: flatland.also_missing" in warnings
     assert warnings.count("WARNING") == 3  # the bad name: not importable, and no page to link to

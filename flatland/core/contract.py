@@ -2,7 +2,11 @@
 
 How to add an estimator
 -----------------------
-1. Write one module ``<package>/estimators/<name>.py`` (100-300 lines) with one
+(A textbook estimator; for an image gradient method, a module of
+``<package>/methods/`` called with a job or task, see the guide
+``docs/guides/add_image_method.md``.)
+
+1. Write one module ``flatland/textbook/<name>.py`` (100-300 lines) with one
    public function ``<name>(problem, theta, n, seed, **options) -> Estimate``. Its
    numpydoc docstring cites the paper's section (e.g. "Loubet et al. 2019,
    Sec. 4.2"), states what the estimator assumes and where it is biased.
