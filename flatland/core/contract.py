@@ -28,7 +28,8 @@ How to add an estimator
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -147,6 +148,30 @@ class MethodTable:
             return func
 
         return decorate
+
+    def unregister(self, name: str) -> None:
+        """Remove method ``name`` (KeyError if it is not registered: a programming error, not bad input)."""
+        if name not in self._methods:
+            raise KeyError(f"{self.kind} {name!r} is not registered")
+        del self._methods[name]
+
+    @contextmanager
+    def registered(
+        self, name: str, func: Callable[..., Any], *options: Option
+    ) -> Iterator[Callable[..., Any]]:
+        """Register ``func`` as method ``name`` for the duration of a ``with`` block, then remove it.
+
+        For tests and examples that plug a method into the package's own table without
+        leaving it there. A name already registered is refused (ValueError), so an
+        existing method is never shadowed and then lost on exit.
+        """
+        if name in self._methods:
+            raise ValueError(f"{self.kind} {name!r} is already registered")
+        self.register(name, *options)(func)
+        try:
+            yield func
+        finally:
+            self.unregister(name)
 
     @property
     def names(self) -> tuple[str, ...]:
