@@ -1,9 +1,9 @@
 """flatland: differentiating discontinuous integrals in 2D, a reference for Loubet et al. 2019.
 
-Textbook 1D integrals (:mod:`flatland.integrals`) with the four estimators behind
-:func:`estimate`; 2D scenes (:mod:`flatland.scene`) rendered with :func:`render` and
-differentiated with :func:`render_gradient` by the same four methods; all on
-forward-mode AD (:mod:`flatland.core`).
+Textbook 1D integrals (:mod:`flatland.integrals`) with the four estimators of
+:mod:`flatland.textbook` behind :func:`estimate`; 2D scenes (:mod:`flatland.scene`)
+rendered with :func:`render` and differentiated with :func:`render_gradient` by the
+same four methods (:mod:`flatland.methods`); all on forward-mode AD (:mod:`flatland.core`).
 """
 
 from flatland.core import (
@@ -17,10 +17,10 @@ from flatland.core import (
     tangent,
     variable,
 )
-from flatland.estimators import METHODS, estimate
 from flatland.integrals import INTEGRALS, get_integral
 from flatland.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from flatland.scene import Scene, list_scenes, load_scene
+from flatland.textbook import METHODS, estimate
 
 __all__ = [
     "GRADIENT_METHODS",

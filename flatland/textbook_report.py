@@ -21,8 +21,8 @@ from typing import Any
 from flatland.core.stats import normal_quantile
 from flatland.core.table import format_table, method_label
 from flatland.core.validate import check_int, check_seed
-from flatland.estimators import estimate
 from flatland.integrals import INTEGRALS
+from flatland.textbook import estimate
 
 __all__ = ["DEFAULT_METHODS", "Z_FLAG", "TextbookRow", "textbook_rows", "textbook_table"]
 

@@ -5,7 +5,9 @@ one-line error behaviour (DESIGN 5), in-process and as real commands in a subpro
 (a missing file, a malformed JSON scene, an unknown parameter, a negative spp, a scene
 nested 100 000 deep). An internal error is a traceback and status 1, never a usage
 error. The command line names what exists: scenes, methods, parameters, studies.
-Scenes are the built-in ``shadow`` on a small film.
+A new gradient method plugs in through the method table and ``render_gradient``, and
+the table is as before once it is unregistered. Scenes are the built-in ``shadow`` on
+a small film.
 """
 
 from __future__ import annotations
@@ -20,10 +22,10 @@ import sys
 import numpy as np
 import pytest
 
-from flatland.core.contract import MethodTable
+from flatland.core.contract import MethodTable, Option
 from flatland.core.image import GradientImage, Image
 from flatland.core.study import load_config
-from flatland.core.validate import MAX_JSON_DEPTH, ValidationError
+from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_positive
 
 PACKAGES = [
     "flatland",
@@ -346,3 +348,98 @@ def test14_an_unknown_study_lists_the_builtin_studies(package, tmp_path, capsys)
     assert lines[0].endswith("built-in studies: " + ", ".join(studies))
     words = " ".join(_help(main.main, ["study"], capsys))
     assert all(re.search(rf"\b{name}\b", words) for name in studies)
+
+
+# ------------------------------------------------------------------ a new method plugs in
+SMOOTH_PARAM = "light.translate.x"
+"""A parameter whose naive derivative is nonzero on the small films of both packages."""
+
+
+def _naive_scaled(package):
+    """A method defined here: the naive estimator through identity hooks/transforms written out, its
+    derivative times the option ``scale`` (``scale=1`` is the naive method, by construction)."""
+    from flatland.core.dual import variable
+
+    if package == "flatland":
+        from flatland.integrator import BatchResult, Hooks, Members, run
+
+        class PassThrough(Hooks):  # the identity, as a new method's hooks start out
+            def film(self, ctx, t, pixel, draws):
+                return Members(t[:, None])
+
+            def directions(self, ctx, x, ignore, phi, draws):
+                return Members(phi[:, None])
+
+        def naive_scaled(job, scale):
+            result = run(job, job.geometry(variable(0.0)), PassThrough())
+            return BatchResult(result.value, scale * result.derivative)
+
+        return naive_scaled
+
+    from sphere3d.integrator import Identity
+    from sphere3d.rotation import Rotation
+    from sphere3d.tasks import Tally
+
+    class PassThroughTransforms:  # the identity, as a new method's transforms start out
+        def camera(self, state, rows, cols, u):
+            return Rotation.identity(rows.shape)
+
+        def emitter(self, shading):
+            return Rotation.identity((len(shading),))
+
+        def bsdf(self, shading, mu, pdf):
+            return Identity().bsdf(shading, mu, pdf)
+
+    def naive_scaled(task, scale):
+        tally = task.evaluate(variable(0.0), PassThroughTransforms())
+        return Tally(value=tally.value, derivative=scale * tally.derivative)
+
+    return naive_scaled
+
+
+def test15_a_new_method_plugs_in_through_render_gradient_and_is_removed_after(package):
+    render = importlib.import_module(f"{package}.render")
+    table = render.GRADIENT_METHODS
+    before = table.names
+    scene, _ = _small_scene(package)
+    naive = render.render_gradient(scene, SMOOTH_PARAM, "naive", spp=4, seed=5)
+    assert np.any(naive.derivative != 0.0)  # else the comparisons below could not fail
+    with table.registered("naive_scaled", _naive_scaled(package), Option("scale", 1.0, check_positive)):
+        assert table.names == (*before, "naive_scaled")
+        one = render.render_gradient(scene, SMOOTH_PARAM, "naive_scaled", spp=4, seed=5)
+        two = render.render_gradient(scene, SMOOTH_PARAM, "naive_scaled", spp=4, seed=5, scale=2.0)
+        assert (one.method, dict(one.options), dict(two.options)) == (
+            "naive_scaled",
+            {"scale": 1.0},
+            {"scale": 2.0},
+        )
+        # identity hooks/transforms at θ0 are the naive estimator, bit for bit
+        for field in ("value", "derivative", "value_stderr", "derivative_stderr"):
+            assert np.array_equal(getattr(one, field), getattr(naive, field)), field
+        # scaling by 2 is exact in binary floating point: the mean and its standard error double exactly
+        assert np.array_equal(two.value, naive.value)
+        assert np.array_equal(two.derivative, 2.0 * naive.derivative)
+        assert np.array_equal(two.derivative_stderr, 2.0 * naive.derivative_stderr)
+        with pytest.raises(ValidationError, match=r"scale.*-1\.0"):
+            render.render_gradient(scene, SMOOTH_PARAM, "naive_scaled", spp=4, seed=5, scale=-1.0)
+        with pytest.raises(ValidationError, match=r"kappa.*naive_scaled.*\(options: scale\)"):
+            render.render_gradient(scene, SMOOTH_PARAM, "naive_scaled", spp=4, seed=5, kappa=1.0)
+    assert table.names == before
+    with pytest.raises(ValidationError, match="unknown gradient method 'naive_scaled'"):
+        render.render_gradient(scene, SMOOTH_PARAM, "naive_scaled", spp=4, seed=5)
+
+
+def test16_a_temporary_registration_survives_an_error_and_never_shadows_a_method(package):
+    table = importlib.import_module(f"{package}.render").GRADIENT_METHODS
+    before, naive = table.names, table.get("naive")
+    with (
+        pytest.raises(RuntimeError, match="inside the block"),
+        table.registered("temporary", lambda job: None),
+    ):
+        raise RuntimeError("inside the block")
+    assert table.names == before
+    with pytest.raises(ValueError, match="'naive' is already registered"), table.registered("naive", print):
+        pass
+    assert table.names == before and table.get("naive") is naive
+    with pytest.raises(KeyError, match="'temporary' is not registered"):
+        table.unregister("temporary")

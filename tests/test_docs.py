@@ -15,6 +15,10 @@
    pages (``{func}`~flatland.x.y```) names an importable object.
 5. The guide "How to add an estimator" runs its example, ``docs/guides/edge_sampling.py``:
    it must be unbiased and show the variance the guide predicts.
+6. The guide "How to add an image gradient method" runs its example,
+   ``docs/guides/image_method_example.py``, in both packages: plugged into the real
+   method table for the test only, it renders through ``render_gradient`` and is the
+   combination of finite differences it claims to be, bit for bit.
 """
 
 from __future__ import annotations
@@ -282,11 +286,11 @@ def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tm
         [
             "# Page",
             "",
-            "```{py:function} flatland.estimators.reparam.follow_nearest(domain, discontinuities, points)",
+            "```{py:function} flatland.textbook.reparam.follow_nearest(domain, discontinuities, points)",
             "```",
             "",
             "```{implements} DESIGN 2.5",
-            "flatland.estimators.reparam.follow_nearest",
+            "flatland.textbook.reparam.follow_nearest",
             "flatland.no_such_function",
             "```",
             "",
@@ -295,7 +299,7 @@ def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tm
     )
     warnings, html = build_tiny_site(tmp_path, page)
     assert "DESIGN 2.5 in the code" in html
-    assert 'href="#flatland.estimators.reparam.follow_nearest"' in html
+    assert 'href="#flatland.textbook.reparam.follow_nearest"' in html
     assert "flatland.no_such_function cannot be imported" in warnings
     assert "reference target not found: flatland.also_missing" in warnings
     assert warnings.count("WARNING") == 3  # the bad name: not importable, and no page to link to
@@ -459,3 +463,63 @@ def test10_every_rendered_docstring_is_valid_restructuredtext(package):
             first = report.getvalue().strip().splitlines()[0]
             problems.append(f"{name}: {first.removeprefix(name + ':')}")
     assert not problems, "docstrings the docs build rejects:\n" + "\n".join(problems)
+
+
+# ------------------------------------------------------------------ the image-method guide's example
+IMAGE_PARAM = "light.translate.x"
+"""A parameter with a nonzero derivative on the small films below, in both packages."""
+RENDERABLE = [
+    "flatland",
+    pytest.param(
+        "sphere3d",
+        marks=pytest.mark.skipif(
+            importlib.util.find_spec("embreex") is None, reason="needs the embree extra"
+        ),
+    ),
+]
+
+
+@pytest.fixture(scope="module")
+def image_example():
+    spec = importlib.util.spec_from_file_location(
+        "image_method_example", DOCS / "guides" / "image_method_example.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _example_table(image_example, package):
+    return getattr(image_example, f"{package.upper()}_EXAMPLE_METHODS")
+
+
+def test11_the_image_method_guides_example_registers_in_its_own_tables_only(image_example):
+    for package in PACKAGES:
+        assert _example_table(image_example, package).names == ("richardson",)
+        assert "richardson" not in importlib.import_module(f"{package}.render").GRADIENT_METHODS.names
+
+
+@pytest.mark.parametrize("package", RENDERABLE)
+def test12_the_image_method_guides_example_plugs_in_and_is_richardsons_combination(image_example, package):
+    """One batch: the image is that batch's estimate, so the claimed combination holds bit for bit."""
+    render = importlib.import_module(f"{package}.render")
+    scene = importlib.import_module(f"{package}.scene").load_scene("shadow").to_dict()
+    if package == "flatland":
+        scene["camera"]["pixels"] = 12
+    else:
+        scene["camera"].update(width=8, height=6)
+    method = _example_table(image_example, package).get("richardson")
+    h = method.options["h"].default
+    run = dict(spp=8, seed=3, batches=1)
+    wide = render.render_gradient(scene, IMAGE_PARAM, "finite_difference", h=h, **run)
+    narrow = render.render_gradient(scene, IMAGE_PARAM, "finite_difference", h=0.5 * h, **run)
+    naive = render.render_gradient(scene, IMAGE_PARAM, "naive", **run)
+    assert np.any(wide.derivative != narrow.derivative)  # else the combination could not be told apart
+    with render.GRADIENT_METHODS.registered("richardson", method.func, *method.options.values()):
+        g = render.render_gradient(scene, IMAGE_PARAM, "richardson", **run)
+        with pytest.raises(ValueError, match=r"h.*-0\.5"):
+            render.render_gradient(scene, IMAGE_PARAM, "richardson", h=-0.5, **run)
+    assert "richardson" not in render.GRADIENT_METHODS.names
+    assert (g.method, dict(g.options)) == ("richardson", {"h": h})
+    assert np.array_equal(g.value, naive.value)  # the same primary samples: the naive value, bit for bit
+    assert np.array_equal(g.derivative, (4.0 * narrow.derivative - wide.derivative) / 3.0)

@@ -44,7 +44,7 @@ from scipy import integrate, special, stats
 from flatland import estimate, get_integral, tangent, variable
 from flatland import plot_textbook as pt
 from flatland.core.stats import normal_quantile, sidak
-from flatland.estimators.reparam import follow_nearest
+from flatland.textbook.reparam import follow_nearest
 
 SEED = 20191117
 N = 200_000

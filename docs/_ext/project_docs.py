@@ -6,8 +6,8 @@ Every theory page ties each DESIGN section it explains to the code that implemen
 it, in one machine-checkable form (MyST syntax)::
 
     ```{implements} DESIGN 2.5
-    flatland.estimators.reparam.follow_nearest
-    flatland.estimators.reparam.reparam
+    flatland.textbook.reparam.follow_nearest
+    flatland.textbook.reparam.reparam
     ```
 
 The argument names the DESIGN section, the body lists fully qualified names of
@@ -25,7 +25,7 @@ leaving a dead link. References to numpy or Python types stay unchecked.
 Re-exported names
 -----------------
 ``flatland.estimate`` and ``flatland.Dual`` are documented where they are defined
-(``flatland.estimators.estimate``, ``flatland.core.dual.Dual``); a reference to the
+(``flatland.textbook.estimate``, ``flatland.core.dual.Dual``); a reference to the
 re-exported name resolves to that page.
 
 Plain-text mathematics in docstrings

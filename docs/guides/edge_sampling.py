@@ -3,7 +3,7 @@
 The worked example of the guide "How to add an estimator". It is a complete estimator,
 tested by ``tests/test_docs.py``, registered in a method table of its own so that
 importing it leaves the package's table unchanged; a real new estimator registers in
-``flatland.estimators._common.METHODS`` instead (step 5 of the guide).
+``flatland.textbook._common.METHODS`` instead (step 5 of the guide).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import numpy as np
 from flatland.core.contract import Estimate, MethodTable
 from flatland.core.dual import Dual, detach, tangent, variable
 from flatland.core.rng import stream
-from flatland.estimators._common import primary_samples, to_estimate
 from flatland.integrals import Integrand
+from flatland.textbook._common import primary_samples, to_estimate
 
 __all__ = ["EXAMPLE_METHODS", "edge_sampling"]
 
@@ -26,7 +26,7 @@ EXAMPLE_METHODS = MethodTable("example estimator")
 def edge_sampling(integrand: Integrand, theta: float, n: int, seed: int) -> Estimate:
     """Interior term by AD plus the jump term sampled: one jump per sample, chosen ∝ |jump · c'|.
 
-    The Monte Carlo counterpart of :func:`flatland.estimators.boundary.boundary`, in the
+    The Monte Carlo counterpart of :func:`flatland.textbook.boundary.boundary`, in the
     spirit of edge sampling (Li et al. 2018; Loubet et al. 2019, Sec. 2): instead of
     summing the Leibniz term ``Σ_j t_j``, ``t_j = [f(c_j⁻) - f(c_j⁺)] c_j'(θ)`` (DESIGN
     2.1, 2.10), each sample picks one jump J with probability ``P_j = |t_j| / Σ_k |t_k|``

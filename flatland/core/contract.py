@@ -2,7 +2,11 @@
 
 How to add an estimator
 -----------------------
-1. Write one module ``<package>/estimators/<name>.py`` (100-300 lines) with one
+(A textbook estimator; for an image gradient method, a module of
+``<package>/methods/`` called with a job or task, see the guide
+``docs/guides/add_image_method.md``.)
+
+1. Write one module ``flatland/textbook/<name>.py`` (100-300 lines) with one
    public function ``<name>(problem, theta, n, seed, **options) -> Estimate``. Its
    numpydoc docstring cites the paper's section (e.g. "Loubet et al. 2019,
    Sec. 4.2"), states what the estimator assumes and where it is biased.
@@ -24,7 +28,8 @@ How to add an estimator
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -143,6 +148,30 @@ class MethodTable:
             return func
 
         return decorate
+
+    def unregister(self, name: str) -> None:
+        """Remove method ``name`` (KeyError if it is not registered: a programming error, not bad input)."""
+        if name not in self._methods:
+            raise KeyError(f"{self.kind} {name!r} is not registered")
+        del self._methods[name]
+
+    @contextmanager
+    def registered(
+        self, name: str, func: Callable[..., Any], *options: Option
+    ) -> Iterator[Callable[..., Any]]:
+        """Register ``func`` as method ``name`` for the duration of a ``with`` block, then remove it.
+
+        For tests and examples that plug a method into the package's own table without
+        leaving it there. A name already registered is refused (ValueError), so an
+        existing method is never shadowed and then lost on exit.
+        """
+        if name in self._methods:
+            raise ValueError(f"{self.kind} {name!r} is already registered")
+        self.register(name, *options)(func)
+        try:
+            yield func
+        finally:
+            self.unregister(name)
 
     @property
     def names(self) -> tuple[str, ...]:

@@ -299,7 +299,7 @@ def _run_one(problem: Problem, cell: Cell, seed: int) -> _Run:
     """One estimate of the problem by one cell's method, timed (scene loading excluded)."""
     options = cell.options_dict
     if not problem.is_scene:
-        from flatland.estimators import estimate
+        from flatland.textbook import estimate
 
         start = time.perf_counter()
         e = estimate(problem.integral, problem.theta, method=cell.method, n=cell.n, seed=seed, **options)

@@ -267,7 +267,7 @@ def _parse_problem(data: Any, package: str, base_dir: Any) -> Problem:
 
 def _method_table(problem: Problem) -> Any:
     if not problem.is_scene:
-        from flatland.estimators import METHODS
+        from flatland.textbook import METHODS
 
         return METHODS
     return importlib.import_module(f"{problem.package}.render").GRADIENT_METHODS

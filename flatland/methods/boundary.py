@@ -1,5 +1,11 @@
 """The boundary method: naive interior term plus the exact discontinuity terms (edge sampling in 2D).
 
+Where the integrator calls it: one :func:`~flatland.integrator.run` at θ =
+``variable(0.0)`` with :class:`BoundaryHooks`. ``film`` and ``directions`` stay the
+identity (the naive interior term); ``shading_extra`` adds the jump terms seen from
+each shading point inside :func:`~flatland.integrator.shade`, after its MIS estimate;
+``pixel_extra`` adds the camera's jump terms per batch and pixel after the sums.
+
 Loubet et al. 2019 compare against edge sampling (Li et al. 2018); in flatland the
 discontinuities of every integrand are points that can be enumerated, so the
 Leibniz rule's jump term (DESIGN 2.1, 2.10) is computed exactly instead of sampled.

@@ -1,5 +1,10 @@
 """Central finite differences of whole images, with common random numbers.
 
+Where the integrator calls it: three :func:`~flatland.integrator.run` calls with
+the identity :class:`~flatland.integrator.Hooks` on plain-float geometry bound at
+θ = 0, +h and -h; no hook is involved, the method combines the three results (the
+value from θ = 0, the derivative as the central difference per batch).
+
 Not part of the paper: the reference the other methods are checked against.
 """
 

@@ -1,5 +1,9 @@
 """Choosing the point a reparameterization follows, from probe rays (Loubet et al. 2019, Sec. 4.3).
 
+Where the integrator calls it: not directly. :class:`~flatland.methods.reparam.ReparamHooks`
+calls :func:`choose_points` from its ``film`` and ``directions`` hooks, once per chunk
+of samples, after tracing the probes and before forming the evaluation points.
+
 The 2D form of DESIGN 2.8. Per sample, a few probe rays are traced inside the
 kernel's support from the integral's origin o (the camera, or a shading point), in
 angular (film) order:

@@ -1,5 +1,10 @@
 """The naive image gradient: forward-mode AD of the renderer's estimator as it stands.
 
+Where the integrator calls it: one :func:`~flatland.integrator.run` on the geometry
+bound at θ = ``variable(0.0)``, with the identity :class:`~flatland.integrator.Hooks`:
+no hook changes anything, so every step (film samples, radiance, shading by MIS,
+per-pixel sums) is differentiated as it stands.
+
 Loubet et al. 2019, Sec. 3.1-3.2. The baseline that is wrong wherever visibility
 makes an integrand jump at a point that moves with θ.
 """

@@ -1,5 +1,13 @@
 """Reparameterization of the pixel and shading integrals by translations chosen with probe rays.
 
+Where the integrator calls it: one :func:`~flatland.integrator.run` at θ =
+``variable(0.0)`` with :class:`ReparamHooks`. ``film`` gets each chunk's film samples
+t ~ k_j before the camera rays are traced and returns the translated points T(t) with
+kernel weights; ``directions`` gets the cosine and emitter samples φ inside
+:func:`~flatland.integrator.shade`, before the shading rays are traced, and returns
+T(φ) likewise; both choose the translation with :mod:`flatland.methods.heuristic`.
+The extras stay ``None``.
+
 Loubet et al. 2019: Sec. 3.2 (change of variables), 4.1 (in 2D a rotation of
 directions is a translation of the angle, and the film is a line), 4.2 (convolution
 kernels), 4.3 (choosing the transform by ray tracing, DESIGN 2.8,

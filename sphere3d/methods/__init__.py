@@ -1,5 +1,14 @@
 """Gradient methods of sphere3d, one module each, registered in :data:`GRADIENT_METHODS`.
 
+Data flow of :meth:`~sphere3d.tasks.ImageTask.evaluate`, where the methods'
+:class:`~sphere3d.integrator.Transforms` come in: primary samples ->
+``Transforms.camera`` (one rotation per batch and pixel) -> camera rays and the filter
+weight -> at each diffuse hit, ``Transforms.emitter`` (the emitter-sampling strategy)
+and ``Transforms.bsdf`` (the cosine-sampled strategy, estimated by the method) -> the
+per-batch means. A :class:`~sphere3d.tasks.PointTask` skips the camera step. Each
+module's docstring says which of these it changes; the guide
+``docs/guides/add_image_method.md`` says how to add a method.
+
 ========================  =====================================================
 ``naive``                 differentiate the renderer (biased at moving edges)
 ``finite_difference``     central difference of renders, common random numbers,

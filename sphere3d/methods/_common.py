@@ -1,4 +1,7 @@
-"""The method table of sphere3d: every gradient method maps a task to a :class:`~sphere3d.tasks.Tally`."""
+"""The method table of sphere3d: every gradient method maps a task to a :class:`~sphere3d.tasks.Tally`.
+
+Each method module registers here; :mod:`sphere3d.methods` imports them in listing order.
+"""
 
 from __future__ import annotations
 

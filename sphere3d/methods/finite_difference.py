@@ -1,4 +1,10 @@
-"""Central finite differences of whole renders, with common random numbers."""
+"""Central finite differences of whole renders, with common random numbers.
+
+Where the integrator calls it: three ``task.evaluate`` calls with
+:class:`~sphere3d.integrator.Identity` at the plain-float offsets θ = 0, +h and -h;
+no transform is involved, the method combines the three tallies (the value from θ = 0,
+the derivative as the central difference per batch).
+"""
 
 from __future__ import annotations
 

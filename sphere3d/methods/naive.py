@@ -1,4 +1,10 @@
-"""The naive gradient: differentiate the renderer as it stands (forward mode, no change of variables)."""
+"""The naive gradient: differentiate the renderer as it stands (forward mode, no change of variables).
+
+Where the integrator calls it: one ``task.evaluate(variable(0.0), Identity())``: the
+camera, emitter and bsdf transforms of :class:`~sphere3d.integrator.Identity` change
+nothing, so the pixel integral and both strategies of the irradiance are
+differentiated as they stand.
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,13 @@
 """Reparameterization by rotations on S², with probe rays, vMF convolution and paired samples.
 
+Where the integrator calls it: one ``task.evaluate(variable(0.0), ReparamTransforms(...))``.
+``camera`` is called once per chunk for every batch and pixel, before the camera rays
+are traced (the pixel integral's rotation); ``emitter`` once per set of shading points,
+before the emitter samples' directions are rotated (the emitter-sampling strategy);
+``bsdf`` estimates the cosine-sampled strategy itself (vMF kernel, probes, paired
+samples), calling back ``Shading.trace`` and ``Shading.evaluate_bsdf``. A
+:class:`~sphere3d.tasks.PointTask` calls only ``emitter`` and ``bsdf``.
+
 Loubet et al. 2019, Sec. 3.2 (change of variables), 4.1 (one rotation per integral),
 4.2 (convolution kernels for integrands of large support), 4.3 (choosing the
 rotation by ray tracing), and the paired-sample control variate of the authors'

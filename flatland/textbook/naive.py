@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from flatland.core.contract import Estimate
 from flatland.core.dual import variable
-from flatland.estimators._common import METHODS, primary_samples, to_estimate
 from flatland.integrals import Integrand
+from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
 
 @METHODS.register("naive")

@@ -1,4 +1,6 @@
-"""The four textbook estimators behind one entry point, :func:`estimate`.
+"""The four textbook estimators of the 1D integrals of :mod:`flatland.integrals`, behind :func:`estimate`.
+
+The image gradient methods, which have the same names, are in :mod:`flatland.methods`.
 
 ========================  =====================================================
 ``naive``                 differentiate the estimator (biased at moving jumps)
@@ -15,12 +17,12 @@ from typing import Any
 
 from flatland.core.contract import Estimate
 from flatland.core.validate import check_int, check_seed
-from flatland.estimators import boundary as _boundary  # noqa: F401  (registers the method)
-from flatland.estimators import finite_difference as _finite_difference  # noqa: F401
-from flatland.estimators import naive as _naive  # noqa: F401
-from flatland.estimators import reparam as _reparam  # noqa: F401
-from flatland.estimators._common import METHODS
 from flatland.integrals import Integrand, get_integral
+from flatland.textbook import boundary as _boundary  # noqa: F401  (registers the method)
+from flatland.textbook import finite_difference as _finite_difference  # noqa: F401
+from flatland.textbook import naive as _naive  # noqa: F401
+from flatland.textbook import reparam as _reparam  # noqa: F401
+from flatland.textbook._common import METHODS
 
 __all__ = ["METHODS", "estimate"]
 

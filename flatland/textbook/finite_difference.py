@@ -5,8 +5,8 @@ from __future__ import annotations
 from flatland.core.contract import Estimate, Option
 from flatland.core.dual import Dual, detach
 from flatland.core.validate import check_positive
-from flatland.estimators._common import METHODS, primary_samples, to_estimate
 from flatland.integrals import Integrand
+from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
 
 @METHODS.register("finite_difference", Option("h", 1e-2, check_positive))

@@ -15,8 +15,8 @@ from flatland.core.contract import Estimate, Option
 from flatland.core.dual import Dual, detach, variable
 from flatland.core.rng import stream
 from flatland.core.validate import ValidationError, check_bool, check_positive
-from flatland.estimators._common import METHODS, primary_samples, to_estimate
 from flatland.integrals import Discontinuity, Integrand
+from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
 __all__ = ["follow_nearest", "reparam"]
 
