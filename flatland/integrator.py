@@ -41,6 +41,7 @@ from scipy import special
 from flatland.core.contract import MethodTable
 from flatland.core.dual import Dual, detach, is_dual, tangent
 from flatland.core.rng import Draws
+from flatland.core.translation import paired_combine
 from flatland.geometry import Attached, Hits, attach, cast, direction, film_direction, zeros
 from flatland.lights import Lights
 from flatland.sampling import sample_gaussian, sample_tent, sample_uniform
@@ -152,12 +153,7 @@ def combine(e: Any, w: Any, paired: bool) -> Any:
     """
     if not paired:
         return e[:, 0]
-    w0, w1 = w[:, 0], w[:, 1]
-    e0, e1 = e[:, 0], e[:, 1]
-    # weights with |w| < 1e-5 count as 1 (DESIGN 2.9); ours have value exactly 1
-    w0s = np.where(np.abs(detach(w0)) < 1e-5, 1.0, w0)
-    w1s = np.where(np.abs(detach(w1)) < 1e-5, 1.0, w1)
-    return 0.5 * (e0 - e1 / w1s * (w0 - detach(w0))) + 0.5 * (e1 - e0 / w0s * (w1 - detach(w1)))
+    return paired_combine(e[:, 0], e[:, 1], w[:, 0], w[:, 1])
 
 
 class Hooks:

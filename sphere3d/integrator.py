@@ -41,6 +41,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach
 from flatland.core.rng import Draws
+from flatland.core.translation import unit_weight
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -271,7 +272,7 @@ def pixel_samples(
         log_kj = log_filter_value(np.stack([fx - cx, fy - cy], axis=-1), cam.filter) + cam.log_jacobian(
             rotated
         )
-        weight = weight * np.exp(log_kj - detach(log_kj))
+        weight = weight * unit_weight(log_kj)
     else:
         rotated = d
     hits = state.tracer.intersect(detach(cam.origin), d)

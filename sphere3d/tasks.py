@@ -26,6 +26,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws, stream
+from flatland.core.translation import control_variate
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
     Identity,
@@ -106,7 +107,7 @@ class ImageTask:
         radiance = np.asarray(detach(samples.radiance), dtype=np.float64).reshape(-1, per_batch)
         others = (radiance.sum(axis=1, keepdims=True) - radiance) / (per_batch - 1)
         weight = samples.weight.reshape(-1, per_batch)
-        return est - others * (weight - detach(weight))
+        return control_variate(est, others, weight)
 
     def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
         """Render every pixel with the parameter offset by ``theta`` (float or Dual) under ``transforms``.

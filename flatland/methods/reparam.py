@@ -26,7 +26,8 @@ import numpy as np
 from flatland.core.contract import Option
 from flatland.core.dual import detach, variable
 from flatland.core.rng import Draws
-from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
+from flatland.core.translation import check_continuous_filter, translation_offset, unit_weight
+from flatland.core.validate import check_bool, check_int, check_positive
 from flatland.geometry import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction
 from flatland.integrator import (
     GRADIENT_METHODS,
@@ -116,10 +117,10 @@ class ReparamHooks(Hooks):
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (DESIGN 2.5)
-        points = mu + np.where(ok, t_p - detach(t_p), 0.0)[:, None]
+        points = mu + translation_offset(t_p, ok)[:, None]
         sq = (points - center[:, None]) ** 2
-        # w = k(T y, ω) / detach(k(T y, ω)) = exp(-κ/2 (x² - detach(x²))) for the Gaussian   (DESIGN 2.7)
-        return Members(points, np.exp(-0.5 * self.kappa_film * (sq - detach(sq))), self.paired, density)
+        # w = k(T y, ω) / detach(k(T y, ω)), log k = -κ/2 x² + const for the Gaussian   (DESIGN 2.7)
+        return Members(points, unit_weight(-0.5 * self.kappa_film * sq), self.paired, density)
 
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         kappa = self.kappa
@@ -143,10 +144,10 @@ class ReparamHooks(Hooks):
         ok = choice.ok & (np.hypot(*detach(offset).T) > EPS_DIST)
         angle = angle_of(np.where(ok[:, None], offset, direction(center)))
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (DESIGN 2.6)
-        points = mu + np.where(ok, angle - detach(angle), 0.0)[:, None]
+        points = mu + translation_offset(angle, ok)[:, None]
         c = np.cos(points - center[:, None])
-        # von Mises weight exp(κ (cos(T y - ω) - detach(cos(T y - ω))))   (DESIGN 2.7)
-        return Members(points, np.exp(kappa * (c - detach(c))), self.paired)
+        # von Mises weight, log k = κ cos(T y - ω) + const   (DESIGN 2.7)
+        return Members(points, unit_weight(kappa * c), self.paired)
 
 
 @GRADIENT_METHODS.register(
@@ -215,13 +216,8 @@ def reparam(
     log-derivative grows like 1 / distance near its support's end (a mildly heavy
     tail); the Gaussian filter's does not.
     """
-    if job.point is None and job.scene.camera.filter == "box":
-        raise ValidationError(
-            "camera.filter",
-            "the reparam method needs a continuous pixel filter, got 'box': reparameterizing the film "
-            "moves samples across the box's edges, which become moving discontinuities (DESIGN 2.11); "
-            "use 'tent' or 'gaussian'",
-        )
+    if job.point is None:
+        check_continuous_filter(job.scene.camera.filter)
     if kappa_film is None:
         kappa_film = default_kappa_film(job.scene.camera.pixel_width)
     hooks = ReparamHooks(kappa, kappa_film, probes, spread, refine, paired)

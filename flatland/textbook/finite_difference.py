@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from flatland.core.contract import Estimate, Option
 from flatland.core.dual import Dual, detach
+from flatland.core.translation import central_difference
 from flatland.core.validate import check_positive
 from flatland.integrals import Integrand
 from flatland.textbook._common import METHODS, primary_samples, to_estimate
@@ -24,8 +27,10 @@ def finite_difference(integrand: Integrand, theta: float, n: int, seed: int, h: 
     integrand.check_theta(theta - h, "theta - h")
     integrand.check_theta(theta + h, "theta + h")
     s = primary_samples(integrand, n, seed)
-    f_plus = detach(integrand.f(s.x, theta + h)) / s.pdf
-    f_minus = detach(integrand.f(s.x, theta - h)) / s.pdf
+
+    def estimates(t: float) -> np.ndarray:  # per-sample f(x_i, t) / p(x_i), the same x_i at every t
+        return detach(integrand.f(s.x, t)) / s.pdf
+
     # per-sample central difference as the tangent: common random numbers cancel everything that did not move
-    per_sample = Dual(detach(integrand.f(s.x, theta)) / s.pdf, (f_plus - f_minus) / (2.0 * h))
+    per_sample = Dual(estimates(theta), central_difference(estimates, theta, h))
     return to_estimate(per_sample, n, "finite_difference", {"h": h})

@@ -14,6 +14,7 @@ import numpy as np
 from flatland.core.contract import Estimate, Option
 from flatland.core.dual import Dual, detach, variable
 from flatland.core.rng import stream
+from flatland.core.translation import paired_combine, translation_offset, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_positive
 from flatland.integrals import Discontinuity, Integrand
 from flatland.textbook._common import METHODS, primary_samples, to_estimate
@@ -35,16 +36,7 @@ def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], poin
     distance = domain.distance(points[None, :], detach(locations)[:, None])  # (m, n)
     chosen = locations[np.argmin(distance, axis=0)]  # gather: Dual, shape (n,)
     # T(y, θ) = y + c(θ) - c(θ0): value 0, tangent c'(θ)   (DESIGN 2.5)
-    return chosen - detach(chosen)
-
-
-def _kernel_weight(domain: Any, y: Dual, center: np.ndarray, kappa: float) -> Dual:
-    """w = k(y, center) / detach(k(y, center)): value exactly 1, derivative (d log k) (DESIGN 2.7).
-
-    Evaluated in log space, so a kernel value that underflows cannot make 0/0.
-    """
-    log_k = domain.log_kernel(y, center, kappa)
-    return np.exp(log_k - detach(log_k))
+    return translation_offset(chosen)
 
 
 @METHODS.register(
@@ -100,13 +92,11 @@ def reparam(
         for j in range(2):  # the two members of each pair (not a loop over samples)
             mu = domain.sample_kernel(u[j], s.x, kappa)
             y = mu + shift
-            w.append(_kernel_weight(domain, y, s.x, kappa))
+            w.append(unit_weight(domain.log_kernel(y, s.x, kappa)))  # k / detach(k), value 1 (DESIGN 2.7)
             e.append(integrand.f(y, theta_d) * w[j] / s.pdf)
         # each weight's derivative has zero mean given ω and is independent of the other sample:
         # a control variate scaled by the other sample's estimate          (DESIGN 2.9)
-        pair = 0.5 * (e[0] - e[1] / w[1] * (w[0] - detach(w[0]))) + 0.5 * (
-            e[1] - e[0] / w[0] * (w[1] - detach(w[1]))
-        )
+        pair = paired_combine(e[0], e[1], w[0], w[1])
         return to_estimate(pair, 2 * pairs, "reparam", options)
 
     s = primary_samples(integrand, n, seed)
@@ -117,6 +107,6 @@ def reparam(
     # kernel centre ω_i ~ k(·, x_i) from its own stream: the primary samples stay the naive ones
     center = domain.sample_kernel(stream(seed, "kernel").random(n), s.x, kappa)
     y = s.x + follow_nearest(domain, discontinuities, center)
-    w = _kernel_weight(domain, y, center, kappa)
+    w = unit_weight(domain.log_kernel(y, center, kappa))  # k / detach(k), value 1 (DESIGN 2.7)
     # f(T x) k(T x, ω) / (p(x) k(x, ω)): value f(x) / p(x), derivative with the kernel factor   (DESIGN 2.7)
     return to_estimate(integrand.f(y, theta_d) * w / s.pdf, n, "reparam", options)

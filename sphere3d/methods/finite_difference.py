@@ -9,6 +9,7 @@ the derivative as the central difference per batch).
 from __future__ import annotations
 
 from flatland.core.contract import Option
+from flatland.core.translation import central_difference
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.integrator import Identity
 from sphere3d.methods._common import GRADIENT_METHODS
@@ -32,7 +33,6 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
             "h", f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r}"
         )
     value = task.evaluate(0.0, Identity())  # first: a scene refused at θ0 is reported without the offset
-    plus = task.evaluate(h, Identity())
-    minus = task.evaluate(-h, Identity())
     # per-batch central difference: common random numbers cancel everything that did not move
-    return Tally(value=value.value, derivative=(plus.value - minus.value) / (2.0 * h))
+    derivative = central_difference(lambda theta: task.evaluate(theta, Identity()).value, 0.0, h)
+    return Tally(value=value.value, derivative=derivative)

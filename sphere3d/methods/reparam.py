@@ -24,6 +24,7 @@ import numpy as np
 
 from flatland.core.contract import Option
 from flatland.core.dual import detach, tangent, variable
+from flatland.core.translation import check_continuous_filter, paired_combine, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from sphere3d.integrator import Shading
 from sphere3d.methods._common import GRADIENT_METHODS
@@ -50,9 +51,6 @@ from sphere3d.tracing import attached_points
 from sphere3d.vector import dot, norm, scatter, zeros
 
 __all__ = ["KAPPA_MAX", "ReparamTransforms", "reparam"]
-
-SMALL_WEIGHT = 1e-5
-"""Paired weights with |w| below this count as 1 (DESIGN 2.9)."""
 
 
 @dataclass(frozen=True)
@@ -159,8 +157,7 @@ class ReparamTransforms:
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
         """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (DESIGN 2.7)."""
-        log_k = self.kappa * dot(rotated, centre)  # the vMF normalization cancels in the ratio
-        return np.exp(log_k - detach(log_k))
+        return unit_weight(self.kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
         """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
@@ -191,8 +188,7 @@ class ReparamTransforms:
         for j in range(2):  # the two members of each pair (not a loop over samples)
             member = sample_vmf(u[:, j], mu, self.kappa)
             rotated = rotation.apply(member)
-            weight = self._kernel_weight(rotated, mu)
-            weight = np.where(np.abs(detach(weight)) < SMALL_WEIGHT, 1.0 + 0.0 * weight, weight)
+            weight = self._kernel_weight(rotated, mu)  # |w| < SMALL_WEIGHT counts as 1 in paired_combine
             w.append(weight)
             # centres ω are cosine samples, confined to the hemisphere: 1 / C(n·Rμ) restores the kernel
             # mass that lies below the horizon, ∫_H k(y, ω) dω = C(n·y)   (sampling.vmf_hemisphere_fraction)
@@ -201,9 +197,7 @@ class ReparamTransforms:
             e.append(shading.evaluate_bsdf(member, rotated, shading.trace(member)) * weight / (pdf * mass))
         # each weight's derivative has zero mean given ω and is independent of the other member:
         # a control variate scaled by the other member's estimate                      (DESIGN 2.9)
-        return 0.5 * (e[0] - e[1] / w[1] * (w[0] - detach(w[0]))) + 0.5 * (
-            e[1] - e[0] / w[0] * (w[1] - detach(w[1]))
-        )
+        return paired_combine(e[0], e[1], w[0], w[1])
 
 
 KAPPA_MAX = 1e15
@@ -274,13 +268,8 @@ def reparam(
     horizon is restored by :func:`~sphere3d.sampling.vmf_hemisphere_fraction` (a
     different, still unbiased primal, at twice the rays per sample).
     """
-    if isinstance(task, ImageTask) and task.scene.camera.filter == "box":
-        raise ValidationError(
-            "camera.filter",
-            "the reparam method needs a continuous pixel filter, got 'box': reparameterizing the film "
-            "moves samples across the box's edges, which become moving discontinuities (DESIGN 2.11); "
-            "use 'tent' or 'gaussian'",
-        )
+    if isinstance(task, ImageTask):
+        check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
     return task.evaluate(variable(0.0), ReparamTransforms(kappa, probes, spread, paired))
