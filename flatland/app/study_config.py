@@ -155,7 +155,9 @@ class StudyConfig:
     ) -> StudyConfig:
         """Validate a configuration dict (the JSON file's content); errors name the field.
 
-        Scene paths are resolved relative to ``base_dir`` (the config file's folder).
+        ``package`` describes the package that runs the study (its method tables and
+        textbook integrals check the configuration). Scene paths are resolved relative
+        to ``base_dir`` (the config file's folder).
         """
         if not isinstance(data, Mapping):
             raise ValidationError("config", f"must be a JSON object, got {type(data).__name__}")
@@ -194,8 +196,10 @@ def load_config(
 ) -> StudyConfig:
     """Read and validate a study configuration: a JSON file (its stem is the default name) or a dict.
 
-    ``seed`` replaces the configuration's seed; ``samples`` replaces every sample
-    count of the grid (``n`` or ``spp``, swept or not) with one value.
+    ``package`` describes the package that runs the study (``PACKAGE`` of
+    ``flatland.__main__`` or ``sphere3d.__main__``); ``seed`` replaces the configuration's
+    seed; ``samples`` replaces every sample count of the grid (``n`` or ``spp``, swept or
+    not) with one value.
     """
     if isinstance(source, Mapping):
         data: Any = copy.deepcopy(dict(check_depth("config", source)))  # deepcopy recurses: depth first
