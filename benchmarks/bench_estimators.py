@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from benchmarks import Row, best_seconds
 from flatland import estimate
-from flatland.core.table import method_label
+from flatland.app.table import method_label
 from flatland.textbook_report import DEFAULT_METHODS
 
 N = 1_000_000

@@ -10,7 +10,8 @@ from __future__ import annotations
 import time
 
 from benchmarks import Row
-from flatland.core.study import StudyConfig, run_study
+from flatland.__main__ import PACKAGE
+from flatland.app.study import StudyConfig, run_study
 
 CONFIG = {
     "problem": {"integral": "two_steps", "theta": 1.0},
@@ -23,7 +24,7 @@ CONFIG = {
 
 def _seconds(**kwargs) -> float:
     """Wall time of the whole study, as the runner measures it (reference, trials and summaries)."""
-    return run_study(StudyConfig.from_dict(CONFIG), progress=False, **kwargs).seconds
+    return run_study(StudyConfig.from_dict(CONFIG, package=PACKAGE), progress=False, **kwargs).seconds
 
 
 def run() -> list[Row]:

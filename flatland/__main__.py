@@ -1,4 +1,4 @@
-"""``python -m flatland demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.core.cli`).
+"""``python -m flatland demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.app.cli`).
 
 ``demo`` also prints the textbook table (:mod:`flatland.textbook_report`): every
 estimator on every textbook integral next to its closed form.
@@ -10,8 +10,13 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from flatland.core.cli import Package
-from flatland.core.cli import main as _main
+from flatland.app.cli import Package
+from flatland.app.cli import main as _main
+from flatland.integrals import INTEGRALS as _INTEGRALS
+from flatland.render import GRADIENT_METHODS, irradiance, render, render_gradient
+from flatland.scene import list_scenes, load_scene, parameter_names
+from flatland.textbook import METHODS as _ESTIMATORS
+from flatland.textbook import estimate as _estimate
 
 __all__ = ["PACKAGE", "STUDIES", "main"]
 
@@ -62,13 +67,23 @@ points of the error-versus-time figure."""
 
 PACKAGE = Package(
     "flatland",
+    load_scene=load_scene,
+    list_scenes=list_scenes,
+    parameter_names=parameter_names,
+    render=render,
+    render_gradient=render_gradient,
+    irradiance=irradiance,
+    methods=GRADIENT_METHODS,
     demo_scene="shadow",
     demo_param="occluder.translate.x",
     demo_spp=256,
     demo_sections=(_textbook_section,),
     studies=STUDIES,
+    integrals=_INTEGRALS,
+    estimate=_estimate,
+    estimators=_ESTIMATORS,
 )
-"""What the shared command line needs to know about flatland."""
+"""What the command line and the study runner (:mod:`flatland.app`) need to know about flatland."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -9,13 +9,13 @@ curves below, where the spike naive differentiation misses at a moving shadow ed
 is plain to see. Study figures: RMSE against wall time per estimate (log-log, a biased
 method's floor next to the 1/√t fall of the unbiased ones), bias ± CI and
 standard deviation against κ, and equal-time efficiency bars (unbiased cells
-only). The drawing code is shared with sphere3d (:mod:`flatland.core.plotting`),
+only). The drawing code is shared with sphere3d (:mod:`flatland.app.plotting`),
 which draws its 2D films as images.
 """
 
 from __future__ import annotations
 
-from flatland.core.plotting import (
+from flatland.app.plotting import (
     plot_efficiency,
     plot_error_time,
     plot_gradient,

@@ -19,7 +19,7 @@ A *series* is given as an array, as a ``(values, stderr)`` tuple, or as a result
 object: a :class:`~flatland.core.image.GradientImage` stands for its derivative and
 its standard error, an :class:`~flatland.core.image.Image` for its value and standard
 error. Derivatives use the diverging map ``RdBu_r`` centred on zero, radiance the
-grey map, as in the packages' file-writing figures (:mod:`flatland.core.plotting`).
+grey map, as in the packages' file-writing figures (:mod:`flatland.app.plotting`).
 """
 
 from __future__ import annotations

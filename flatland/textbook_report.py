@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from flatland.app.table import format_table, method_label
 from flatland.core.stats import normal_quantile
-from flatland.core.table import format_table, method_label
 from flatland.core.validate import check_int, check_seed
 from flatland.integrals import INTEGRALS
 from flatland.textbook import estimate

@@ -1,4 +1,4 @@
-"""``python -m sphere3d demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.core.cli`).
+"""``python -m sphere3d demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.app.cli`).
 
 The same verbs, options and error behaviour as ``python -m flatland``. The demo's
 reference is a finite-difference image (step h = 0.05: less variance than the
@@ -11,8 +11,13 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from flatland.core.cli import Package
-from flatland.core.cli import main as _main
+from flatland.app.cli import Package
+from flatland.app.cli import main as _main
+from flatland.integrals import INTEGRALS as _INTEGRALS
+from flatland.textbook import METHODS as _ESTIMATORS
+from flatland.textbook import estimate as _estimate
+from sphere3d.render import GRADIENT_METHODS, irradiance, render, render_gradient
+from sphere3d.scene import list_scenes, load_scene, parameter_names
 
 __all__ = ["PACKAGE", "STUDIES", "main"]
 
@@ -38,14 +43,24 @@ sample counts, the points of the error-versus-time figure."""
 
 PACKAGE = Package(
     "sphere3d",
+    load_scene=load_scene,
+    list_scenes=list_scenes,
+    parameter_names=parameter_names,
+    render=render,
+    render_gradient=render_gradient,
+    irradiance=irradiance,
+    methods=GRADIENT_METHODS,
     demo_scene="shadow",
     demo_param="occluder.translate.x",
     demo_spp=32,
     reference_factor=8,
     reference_options=(("h", 0.05),),
     studies=STUDIES,
+    integrals=_INTEGRALS,  # study problems {"integral": ...}: flatland's textbook, as before
+    estimate=_estimate,
+    estimators=_ESTIMATORS,
 )
-"""What the shared command line needs to know about sphere3d."""
+"""What the command line and the study runner (:mod:`flatland.app`) need to know about sphere3d."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:

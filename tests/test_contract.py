@@ -12,6 +12,7 @@ a small film.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import importlib.util
 import json
@@ -22,9 +23,9 @@ import sys
 import numpy as np
 import pytest
 
+from flatland.app.study import load_config
 from flatland.core.contract import MethodTable, Option
 from flatland.core.image import GradientImage, Image
-from flatland.core.study import load_config
 from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_positive
 
 PACKAGES = [
@@ -225,13 +226,14 @@ def test06_real_commands_fail_with_one_line_and_status_2(error_runs, case, fragm
 def test07_deep_json_is_one_error_from_every_load_function(package, tmp_path):
     """Scene and study loaders, from a file and from a dict: a ValidationError, not a RecursionError."""
     load_scene = importlib.import_module(f"{package}.scene").load_scene
+    description = importlib.import_module(f"{package}.__main__").PACKAGE
     deep = tmp_path / "deep.json"
     deep.write_text(_deep_text())
     loads = {
         "scene file": lambda: load_scene(deep),
         "scene dict": lambda: load_scene(_deep_value()),
-        "config file": lambda: load_config(deep, package=package),
-        "config dict": lambda: load_config(_deep_value(), package=package),
+        "config file": lambda: load_config(deep, package=description),
+        "config dict": lambda: load_config(_deep_value(), package=description),
     }
     for source, load in loads.items():
         with pytest.raises(ValidationError) as info:
@@ -257,21 +259,23 @@ def test08_deep_json_on_the_command_line_is_one_line_and_status_2(package, verb,
 
 @pytest.mark.parametrize(
     ("verb", "target"),
-    [("render", "render.render"), ("gradient", "render.render_gradient"), ("study", "study.run_study")],
+    [("render", "render"), ("gradient", "render_gradient"), ("study", "study.run_study")],
 )
 @pytest.mark.parametrize("error", [ValueError("operands could not be broadcast"), IndexError("index 7")])
 def test09_an_internal_error_is_a_traceback_and_status_1_not_a_usage_error(
     package, verb, target, error, tmp_path, capsys, monkeypatch
 ):
     """A ValueError or IndexError from deep inside (a bug) is never reported as the user's mistake."""
-    main = importlib.import_module(f"{package}.__main__").main
-    module, name = target.split(".")
-    owner = importlib.import_module(f"flatland.core.{module}" if module == "study" else f"{package}.{module}")
+    entry = importlib.import_module(f"{package}.__main__")
 
     def broken(*args, **kwargs):
         raise error
 
-    monkeypatch.setattr(owner, name, broken)
+    if target.startswith("study."):  # the study runner of the application layer
+        monkeypatch.setattr(importlib.import_module("flatland.app.study"), "run_study", broken)
+    else:  # the package's function, as its description hands it to the command line
+        monkeypatch.setattr(entry, "PACKAGE", dataclasses.replace(entry.PACKAGE, **{target: broken}))
+    main = entry.main
     argv = {
         "render": ["render", "shadow", "--spp", "1"],
         "gradient": ["gradient", "shadow", "--param", PARAM, "--spp", "1"],
@@ -289,13 +293,13 @@ def test10_a_validation_error_from_the_same_place_is_one_line_and_status_2(
     package, tmp_path, capsys, monkeypatch
 ):
     """The counterpart of test09: the class decides, not where it is raised."""
-    main = importlib.import_module(f"{package}.__main__").main
-    render = importlib.import_module(f"{package}.render")
+    entry = importlib.import_module(f"{package}.__main__")
 
     def refuses(*args, **kwargs):
         raise ValidationError("spp", "must be an integer >= 1, got 0")
 
-    monkeypatch.setattr(render, "render", refuses)
+    monkeypatch.setattr(entry, "PACKAGE", dataclasses.replace(entry.PACKAGE, render=refuses))
+    main = entry.main
     assert main(["render", "shadow", "--out", str(tmp_path)]) == 2
     assert capsys.readouterr().err == "error: spp: must be an integer >= 1, got 0\n"
 

@@ -1,4 +1,4 @@
-"""Dimension-free core shared by flatland and sphere3d.
+"""Dimension-free numeric kernel shared by flatland and sphere3d (numpy and scipy only).
 
 Forward-mode AD (:class:`Dual`, :func:`detach`), named results (:class:`Estimate`,
 :class:`Image`, :class:`GradientImage`), the estimator contract

@@ -13,12 +13,13 @@ import json
 import pickle
 import subprocess
 import sys
+from functools import partial
 
 import numpy as np
 import pytest
 
-from flatland.__main__ import main
-from flatland.core.study import load_config, read_csv
+from flatland.__main__ import PACKAGE, main
+from flatland.app.study import load_config, read_csv
 from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_depth
 from flatland.scene import load_scene, parameter_names, parse_parameter
 
@@ -199,7 +200,7 @@ def _bad_json_files(folder):
 def test10_every_bad_json_file_is_one_validation_error_naming_the_file(tmp_path):
     """A binary file or a 5000-digit integer raised UnicodeDecodeError/ValueError: now a user error."""
     for path, message in _bad_json_files(tmp_path / "bad").items():
-        for load, what in ((load_scene, "scene"), (load_config, "config")):
+        for load, what in ((load_scene, "scene"), (partial(load_config, package=PACKAGE), "config")):
             with pytest.raises(ValidationError) as info:
                 load(path)
             assert info.value.field == f"{what} file {str(path)!r}"

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from flatland import plot
-from flatland.core import plotting
+from flatland.__main__ import PACKAGE
+from flatland.app import plotting
+from flatland.app.study import StudyConfig, run_study
 from flatland.core.image import GradientImage, Image
-from flatland.core.study import StudyConfig, run_study
 
 W = 48
 
@@ -115,7 +116,8 @@ def test05_study_figures_kappa_and_efficiency(tmp_path):
             ],
             "n": 2000,
             "trials": 4,
-        }
+        },
+        package=PACKAGE,
     )
     result = run_study(config, progress=False)
     paths = plot.plot_study(result, tmp_path)
@@ -126,7 +128,7 @@ def test05_study_figures_kappa_and_efficiency(tmp_path):
         assert p.stat().st_size > 20_000 and min(rgb.shape[:2]) > 300 and _not_blank(rgb) > ink
     flat = {"name": "flat", "problem": {"integral": "step"}, "n": 500, "trials": 3}
     flat["methods"] = [{"method": "naive"}, {"method": "reparam"}]
-    no_sweep = run_study(StudyConfig.from_dict(flat), progress=False)
+    no_sweep = run_study(StudyConfig.from_dict(flat, package=PACKAGE), progress=False)
     assert [p.name for p in plot.plot_study(no_sweep, tmp_path)] == [
         "flat_error_time.png",
         "flat_efficiency.png",
@@ -142,7 +144,8 @@ def test06_error_time_figure_is_log_log_with_one_line_per_method(tmp_path, monke
             "problem": {"integral": "step"},
             "methods": [{"method": "naive", "n": [500, 2000]}, {"method": "reparam", "n": [500, 2000, 8000]}],
             "trials": 3,
-        }
+        },
+        package=PACKAGE,
     )
     result = run_study(config, progress=False)
     seen = {}

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from flatland.core import study
+from flatland.__main__ import PACKAGE
+from flatland.app import study
+from flatland.app.study import StudyConfig, load_config, read_csv, run_study, trial_seed
 from flatland.core.stats import normal_quantile
-from flatland.core.study import StudyConfig, load_config, read_csv, run_study, trial_seed
 from flatland.core.validate import ValidationError
 from flatland.integrals import get_integral
 
@@ -29,7 +30,7 @@ def _config(**overrides):
         "seed": 7,
     }
     data.update(overrides)
-    return StudyConfig.from_dict(data)
+    return StudyConfig.from_dict(data, package=PACKAGE)
 
 
 def test01_grid_expands_swept_options_in_order():
@@ -42,7 +43,8 @@ def test01_grid_expands_swept_options_in_order():
             ],
             "n": 50,
             "trials": 3,
-        }
+        },
+        package=PACKAGE,
     )
     cells = config.cells
     assert [c.index for c in cells] == list(range(9))
@@ -132,7 +134,8 @@ def test06_boundary_has_zero_variance_up_to_rounding():
     """The boundary estimator of two_steps adds the exact jump term to a zero interior term: its
     spread over trials is floating-point noise, reported as zero variance and an unbiased interval."""
     config = StudyConfig.from_dict(
-        {"problem": {"integral": "two_steps"}, "methods": [{"method": "boundary"}], "n": 1000, "trials": 5}
+        {"problem": {"integral": "two_steps"}, "methods": [{"method": "boundary"}], "n": 1000, "trials": 5},
+        package=PACKAGE,
     )
     row = run_study(config, progress=False).rows[0]
     assert row.variance_per_sample == 0.0 and math.isinf(row.efficiency)
@@ -182,14 +185,14 @@ def test09_load_config_reads_json_and_applies_overrides(tmp_path):
     data = {"problem": {"integral": "arc"}, "methods": [{"method": "reparam", "n": [10, 20]}]}
     data.update(n=5, trials=2)
     path.write_text(json.dumps(data))
-    config = load_config(path)
+    config = load_config(path, package=PACKAGE)
     assert config.name == "my_study" and [c.n for c in config.cells] == [10, 20]
-    replaced = load_config(path, seed=11, samples=64)
+    replaced = load_config(path, package=PACKAGE, seed=11, samples=64)
     assert replaced.seed == 11 and [c.n for c in replaced.cells] == [64]
     bad = tmp_path / "bad.json"
     bad.write_text('{"problem": {"integral": "arc"},}')
     with pytest.raises(ValidationError, match=r"bad\.json': invalid JSON: .*line 1"):
-        load_config(bad)
+        load_config(bad, package=PACKAGE)
 
 
 def test10_trial_k_of_cell_c_is_the_estimate_with_trial_seed_of_seed_c_k():
@@ -224,7 +227,7 @@ def test11_scene_cells_study_the_film_sum_or_one_pixel_of_the_gradient_image(tmp
         problem["pixel"] = pixel
     config = StudyConfig.from_dict(
         {"problem": problem, "methods": [{"method": "reparam", "kappa": 1000}], "spp": 4, "trials": 3,
-         "seed": 5, "reference": {"spp": 32, "seed": 9}}
+         "seed": 5, "reference": {"spp": 32, "seed": 9}}, package=PACKAGE
     )  # fmt: skip
     result = run_study(config, progress=False)
     row = result.rows[0]
@@ -251,13 +254,13 @@ def test11_scene_cells_study_the_film_sum_or_one_pixel_of_the_gradient_image(tmp
 
 
 def test12_labels_show_the_options_set_true_ones_by_name_floats_by_g():
-    from flatland.core.table import method_label
+    from flatland.app.table import method_label
 
     options = [("kappa", 100.0), ("probes", 4), ("paired", True), ("h", None), ("antithetic", False)]
     assert method_label("reparam", options) == "reparam kappa=100 probes=4 paired"
     config = StudyConfig.from_dict(
         {"problem": {"integral": "two_steps"}, "methods": [{"method": "reparam", "kappa": 0.5}], "n": 10,
-         "reference": {"method": "reparam", "kappa": 2000, "paired": True, "n": 20}}
+         "reference": {"method": "reparam", "kappa": 2000, "paired": True, "n": 20}}, package=PACKAGE
     )  # fmt: skip
     assert config.cells[0].label == "reparam kappa=0.5"  # the defaults filled in are not shown
     source = study.resolve_reference(config).source
@@ -274,7 +277,7 @@ def _shadow_study(**overrides):
         "reference": {"spp": 512, "seed": 9},
     }
     data.update(overrides)
-    return StudyConfig.from_dict(data)
+    return StudyConfig.from_dict(data, package=PACKAGE)
 
 
 def test13_naive_on_the_shadow_is_flagged_has_no_efficiency_and_never_ranks_first():

@@ -21,7 +21,7 @@ import sys
 import pytest
 from scipy import stats
 
-from flatland.core.study import read_csv
+from flatland.app.study import read_csv
 
 KAPPAS = (1, 10, 100, 1000, 10000)
 CONFIG = {

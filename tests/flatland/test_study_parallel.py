@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import pytest
 
-from flatland.core.study import CSV_COLUMNS, StudyConfig, run_study
+from flatland.__main__ import PACKAGE
+from flatland.app.study import CSV_COLUMNS, StudyConfig, run_study
 
 TIMED = {
     "seconds_per_sample",
@@ -36,11 +37,13 @@ def _numbers(result):
 
 @pytest.fixture(scope="module")
 def serial():
-    return run_study(StudyConfig.from_dict(CONFIG), workers=1, progress=False)
+    return run_study(StudyConfig.from_dict(CONFIG, package=PACKAGE), workers=1, progress=False)
 
 
 def test01_two_worker_processes_give_identical_numbers(serial):
-    config = StudyConfig.from_dict({**CONFIG, "workers": 2})  # the config's setting, not overridden
+    config = StudyConfig.from_dict(
+        {**CONFIG, "workers": 2}, package=PACKAGE
+    )  # the config's setting, not overridden
     assert config.workers == 2
     pooled = run_study(config, progress=False)
     assert _numbers(pooled) == _numbers(serial)
@@ -53,6 +56,8 @@ def test02_a_local_dask_cluster_gives_identical_numbers(serial):
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
         on_cluster = run_study(
-            StudyConfig.from_dict(CONFIG), scheduler=cluster.scheduler_address, progress=False
+            StudyConfig.from_dict(CONFIG, package=PACKAGE),
+            scheduler=cluster.scheduler_address,
+            progress=False,
         )
     assert _numbers(on_cluster) == _numbers(serial)

@@ -15,26 +15,25 @@ A configuration is a JSON object (or the same dict)::
      "reference": {"method": "boundary", "spp": 4096, "seed": 7, ...options}}
 
 Lists expand to the Cartesian product, one :class:`Cell` per combination, numbered in
-order. Every method name and option is checked against the package's method table
-(the textbook estimators for integrals, ``<package>.render.GRADIENT_METHODS`` for
-scenes); a bad value raises one :class:`~flatland.core.validate.ValidationError`
+order. Every method name and option is checked against the method table of the
+package's description (:class:`~flatland.app.cli.Package`: ``estimators`` for
+integrals, ``methods`` for scenes); a bad value raises one :class:`~flatland.core.validate.ValidationError`
 naming its path, e.g. ``methods[1].kappa: must be > 0, got -2``.
 """
 
 from __future__ import annotations
 
 import copy
-import importlib
 import itertools
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from flatland.core.table import method_label
+from flatland.app.table import method_label
 from flatland.core.validate import (
     ValidationError,
     check_choice,
@@ -45,6 +44,9 @@ from flatland.core.validate import (
     check_seed,
     read_json,
 )
+
+if TYPE_CHECKING:
+    from flatland.app.cli import Package
 
 __all__ = ["Cell", "Problem", "ReferenceSpec", "StudyConfig", "load_config", "trial_seed"]
 
@@ -62,7 +64,7 @@ class Problem:
     index of the pixel studied.
     """
 
-    package: str
+    package: str  # the package's name (Package.name)
     integral: str | None = None
     theta: float | None = None
     scene: str | None = None
@@ -124,9 +126,14 @@ class ReferenceSpec:
 
 @dataclass(frozen=True)
 class StudyConfig:
-    """A validated study: problem, grid of cells, trials, seed and execution settings."""
+    """A validated study: problem, grid of cells, trials, seed and execution settings.
+
+    ``package`` is the description of the package that runs it (its scene, render and
+    method API).
+    """
 
     name: str
+    package: Package = field(repr=False)
     problem: Problem
     cells: tuple[Cell, ...]
     trials: int
@@ -142,13 +149,15 @@ class StudyConfig:
         cls,
         data: Any,
         *,
-        package: str = "flatland",
+        package: Package,
         base_dir: str | os.PathLike | None = None,
         name: str = "study",
     ) -> StudyConfig:
         """Validate a configuration dict (the JSON file's content); errors name the field.
 
-        Scene paths are resolved relative to ``base_dir`` (the config file's folder).
+        ``package`` describes the package that runs the study (its method tables and
+        textbook integrals check the configuration). Scene paths are resolved relative
+        to ``base_dir`` (the config file's folder).
         """
         if not isinstance(data, Mapping):
             raise ValidationError("config", f"must be a JSON object, got {type(data).__name__}")
@@ -160,7 +169,7 @@ class StudyConfig:
         count = problem.count_name
         _reject_other_count("", data, problem)
         default_n = check_int(count, data[count]) if count in data else None
-        cells = _expand_cells(data.get("methods"), problem, default_n)
+        cells = _expand_cells(data.get("methods"), package, problem, default_n)
         trials = check_int("trials", data.get("trials", 10), minimum=2)
         seed = check_seed("seed", data.get("seed", 0))
         workers = check_int("workers", data.get("workers", 1))
@@ -171,22 +180,26 @@ class StudyConfig:
         if not 0.0 < level < 1.0:
             raise ValidationError("level", f"must lie in (0, 1), got {level!r}")
         time_budget = check_positive("time_budget", data.get("time_budget", 1.0))
-        reference = _parse_reference(data.get("reference"), problem, cells)
-        return cls(name, problem, cells, trials, seed, workers, scheduler, level, time_budget, reference)
+        reference = _parse_reference(data.get("reference"), package, problem, cells)
+        return cls(
+            name, package, problem, cells, trials, seed, workers, scheduler, level, time_budget, reference
+        )
 
 
 def load_config(
     source: str | os.PathLike | Mapping[str, Any],
     *,
-    package: str = "flatland",
+    package: Package,
     seed: int | None = None,
     samples: int | None = None,
     name: str | None = None,
 ) -> StudyConfig:
     """Read and validate a study configuration: a JSON file (its stem is the default name) or a dict.
 
-    ``seed`` replaces the configuration's seed; ``samples`` replaces every sample
-    count of the grid (``n`` or ``spp``, swept or not) with one value.
+    ``package`` describes the package that runs the study (``PACKAGE`` of
+    ``flatland.__main__`` or ``sphere3d.__main__``); ``seed`` replaces the configuration's
+    seed; ``samples`` replaces every sample count of the grid (``n`` or ``spp``, swept or
+    not) with one value.
     """
     if isinstance(source, Mapping):
         data: Any = copy.deepcopy(dict(check_depth("config", source)))  # deepcopy recurses: depth first
@@ -228,21 +241,20 @@ def _reject_other_count(prefix: str, data: Mapping[str, Any], problem: Problem) 
         raise ValidationError(where, f"{kind} problems take {count!r} (samples per trial), not {other!r}")
 
 
-def _parse_problem(data: Any, package: str, base_dir: Any) -> Problem:
+def _parse_problem(data: Any, package: Package, base_dir: Any) -> Problem:
     if not isinstance(data, Mapping):
         raise ValidationError("problem", f"must be an object with 'integral' or 'scene', got {data!r}")
     _reject_unknown("problem", data, _PROBLEM_KEYS)
     if ("integral" in data) == ("scene" in data):
         raise ValidationError("problem", "must name exactly one of 'integral' and 'scene'")
     if "integral" in data:
-        from flatland.integrals import INTEGRALS
-
+        integrals = _integrals(package)
         for key in ("param", "functional", "pixel"):
             if key in data:
                 raise ValidationError(f"problem.{key}", "applies to scene problems only")
-        integral = INTEGRALS[check_choice("problem.integral", data["integral"], INTEGRALS)]
+        integral = integrals[check_choice("problem.integral", data["integral"], integrals)]
         theta = integral.check_theta(data.get("theta", integral.default_theta), "problem.theta")
-        return Problem(package, integral=integral.name, theta=theta)
+        return Problem(package.name, integral=integral.name, theta=theta)
     if "theta" in data:
         raise ValidationError("problem.theta", "applies to integral problems only (scenes take 'param')")
     scene = data["scene"]
@@ -262,15 +274,17 @@ def _parse_problem(data: Any, package: str, base_dir: Any) -> Problem:
         if not raw:
             raise ValidationError("problem.pixel", "must be an index or a list of indices")
         pixel = tuple(check_int(f"problem.pixel[{i}]", v, minimum=0) for i, v in enumerate(raw))
-    return Problem(package, scene=scene, param=param, pixel=pixel)
+    return Problem(package.name, scene=scene, param=param, pixel=pixel)
 
 
-def _method_table(problem: Problem) -> Any:
-    if not problem.is_scene:
-        from flatland.textbook import METHODS
+def _integrals(package: Package) -> Mapping[str, Any]:
+    if package.integrals is None or package.estimate is None or package.estimators is None:
+        raise ValidationError("problem.integral", f"{package.name} has no textbook integrals; give 'scene'")
+    return package.integrals
 
-        return METHODS
-    return importlib.import_module(f"{problem.package}.render").GRADIENT_METHODS
+
+def _method_table(package: Package, problem: Problem) -> Any:
+    return package.methods if problem.is_scene else package.estimators
 
 
 def _resolve(table: Any, where: str, method: Any, options: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
@@ -283,12 +297,12 @@ def _resolve(table: Any, where: str, method: Any, options: Mapping[str, Any]) ->
         raise ValidationError(f"{where}.{e.field}" if e.field else where, message) from None
 
 
-def _expand_cells(data: Any, problem: Problem, default_n: int | None) -> tuple[Cell, ...]:
+def _expand_cells(data: Any, package: Package, problem: Problem, default_n: int | None) -> tuple[Cell, ...]:
     if not isinstance(data, list | tuple) or not data:
         raise ValidationError(
             "methods", f"must be a non-empty list of {{'method': ...}} objects, got {data!r}"
         )
-    table = _method_table(problem)
+    table = _method_table(package, problem)
     count = problem.count_name
     cells: list[Cell] = []
     for i, entry in enumerate(data):
@@ -319,14 +333,16 @@ def _expand_cells(data: Any, problem: Problem, default_n: int | None) -> tuple[C
     return tuple(cells)
 
 
-def _parse_reference(data: Any, problem: Problem, cells: Sequence[Cell]) -> ReferenceSpec | None:
+def _parse_reference(
+    data: Any, package: Package, problem: Problem, cells: Sequence[Cell]
+) -> ReferenceSpec | None:
     if data is None:
         if not problem.is_scene:
             return None  # closed form
         data = {}
     if not isinstance(data, Mapping):
         raise ValidationError("reference", f"must be an object like {{'method': 'boundary'}}, got {data!r}")
-    table = _method_table(problem)
+    table = _method_table(package, problem)
     count = problem.count_name
     options = {k: v for k, v in data.items() if k not in _REFERENCE_KEYS}
     default_method = "boundary" if "boundary" in table.names else "finite_difference"

@@ -8,11 +8,13 @@ comparisons of the methods.
 Problems
 --------
 ``{"integral": "two_steps", "theta": 1.0}``
-    A textbook integral of :mod:`flatland.integrals`, run through
-    :func:`flatland.estimate`; the reference is its closed-form derivative.
+    A textbook integral (flatland's :mod:`flatland.integrals`), run through the
+    package's ``estimate`` (:func:`flatland.estimate`); the reference is its
+    closed-form derivative.
 ``{"scene": "shadow", "param": "occluder.translate.x"}``
-    A scene of the package (``flatland`` or ``sphere3d``), run through its
-    ``render_gradient``. The scalar studied is a linear functional of the gradient
+    A scene of the package (``flatland`` or ``sphere3d``), run through the
+    ``render_gradient`` of its description (:class:`~flatland.app.cli.Package`). The
+    scalar studied is a linear functional of the gradient
     image: by default (``"functional": "sum"``) the sum over all pixels, i.e. the
     derivative of the image's total brightness d/dθ Σ_j I_j; with
     ``"pixel": j`` (flatland) or ``"pixel": [row, col]`` (sphere3d) the derivative
@@ -83,8 +85,10 @@ the trials and recomputes the reference at (stderr / target)² × its sample cou
 (× 1.25), or raises with that count (``grow_reference=False``); the table's footer
 states the reference's method, sample count, stderr and the ratio.
 
-Configurations are parsed and validated in :mod:`flatland.core.study_config`
-(re-exported here). Example (JSON)::
+Configurations are parsed and validated in :mod:`flatland.app.study_config`
+(re-exported here) against the package's description (:class:`~flatland.app.cli.Package`,
+``load_config(source, package=PACKAGE)`` with the ``PACKAGE`` of ``flatland.__main__`` or
+``sphere3d.__main__``). Example (JSON)::
 
     {"name": "kappa", "problem": {"integral": "two_steps", "theta": 1.0},
      "methods": [{"method": "boundary"},
@@ -96,7 +100,6 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import importlib
 import json
 import math
 import os
@@ -107,17 +110,20 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import stats
 
+from flatland.app.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
+from flatland.app.table import format_table, method_label, own_method_note
 from flatland.core.bias import REFERENCE_RATIO, Z_FLAG, PixelTest, pixel_test, reference_spp_needed
 from flatland.core.image import relative_error
 from flatland.core.stats import ROUNDING, rounding_floor, spread, z_score
-from flatland.core.study_config import Cell, Problem, ReferenceSpec, StudyConfig, load_config, trial_seed
-from flatland.core.table import format_table, method_label, own_method_note
 from flatland.core.validate import ValidationError, check_int
+
+if TYPE_CHECKING:
+    from flatland.app.cli import Package
 
 __all__ = [
     "CSV_COLUMNS",
@@ -188,9 +194,10 @@ def _functional_stderr(problem: Problem, stderr: np.ndarray) -> float:
 
 
 @lru_cache(maxsize=1)
-def _code_digest(package: str) -> str:
-    """Hash of the Python sources a computation depends on (the package and flatland's core)."""
-    roots = {Path(importlib.import_module(package).__file__).parent, Path(__file__).parent}
+def _code_digest(root: Path) -> str:
+    """Hash of the Python sources a computation depends on (the package's folder ``root``, flatland's
+    core and this application layer)."""
+    roots = {root, Path(__file__).parent, Path(__file__).parent.parent / "core"}
     h = hashlib.sha256()
     for root in sorted(roots):
         for path in sorted(root.rglob("*.py")):
@@ -199,9 +206,15 @@ def _code_digest(package: str) -> str:
     return h.hexdigest()
 
 
-def _scene_fingerprint(problem: Problem) -> Any:
+def _package_root(package: Package) -> Path:
+    """The folder of the package whose ``render_gradient`` the description holds."""
+    top = package.render_gradient.__module__.partition(".")[0]
+    return Path(sys.modules[top].__file__).parent
+
+
+def _scene_fingerprint(package: Package, problem: Problem) -> Any:
     """The scene's content: its ``to_dict()`` if it has one, else the file's bytes' hash, else its name."""
-    scene = _load_scene(problem.package, problem.scene)
+    scene = _load_scene(package.load_scene, problem.scene)
     if hasattr(scene, "to_dict"):
         return scene.to_dict()
     if Path(problem.scene).is_file():
@@ -209,14 +222,14 @@ def _scene_fingerprint(problem: Problem) -> Any:
     return problem.scene
 
 
-def _cache_key(problem: Problem, spec: ReferenceSpec) -> str:
+def _cache_key(package: Package, problem: Problem, spec: ReferenceSpec) -> str:
     payload = {
         "version": CACHE_VERSION,
-        "code": _code_digest(problem.package),
+        "code": _code_digest(_package_root(package)),
         "package": problem.package,
         "integral": problem.integral,
         "theta": problem.theta,
-        "scene": _scene_fingerprint(problem) if problem.is_scene else None,
+        "scene": _scene_fingerprint(package, problem) if problem.is_scene else None,
         "param": problem.param,
         "method": spec.method,
         "options": [[k, v] for k, v in spec.options],
@@ -226,10 +239,10 @@ def _cache_key(problem: Problem, spec: ReferenceSpec) -> str:
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()[:32]
 
 
-def _compute_reference(problem: Problem, spec: ReferenceSpec) -> tuple[np.ndarray, np.ndarray]:
+def _compute_reference(calls: _Calls, problem: Problem, spec: ReferenceSpec) -> tuple[np.ndarray, np.ndarray]:
     """(derivative, derivative_stderr) arrays of one high-sample run."""
     cell = Cell(-1, spec.method, spec.options, spec.n)
-    run = _run_one(problem, cell, spec.seed)
+    run = _run_one(calls, problem, cell, spec.seed)
     return np.asarray(run.derivative_image), np.asarray(run.stderr_image)
 
 
@@ -242,17 +255,20 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
     """
     problem, spec = config.problem, config.reference
     if spec is None:
-        from flatland.integrals import get_integral
-
-        return Reference(float(get_integral(problem.integral).derivative(problem.theta)), 0.0, "closed form")
+        integral = config.package.integrals[problem.integral]
+        return Reference(float(integral.derivative(problem.theta)), 0.0, "closed form")
     label = f"{method_label(spec.method, spec.options)} {problem.count_name}={spec.n} seed={spec.seed}"
-    path = Path(cache_dir) / f"{_cache_key(problem, spec)}.npz" if cache_dir is not None else None
+    path = (
+        Path(cache_dir) / f"{_cache_key(config.package, problem, spec)}.npz"
+        if cache_dir is not None
+        else None
+    )
     if path is not None and path.is_file():
         with np.load(path) as data:
             derivative, stderr = data["derivative"], data["stderr"]
         label += " (cached)"
     else:
-        derivative, stderr = _compute_reference(problem, spec)
+        derivative, stderr = _compute_reference(_Calls.of(config.package), problem, spec)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
@@ -273,7 +289,22 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
 
 # ---------------------------------------------------------------------------------------------- trials
 @dataclass(frozen=True)
+class _Calls:
+    """The package functions a trial calls: module-level functions, so a task pickles to worker
+    processes and Dask by reference (the whole description need not)."""
+
+    load_scene: Callable[[Any], Any]
+    render_gradient: Callable[..., Any]
+    estimate: Callable[..., Any] | None
+
+    @classmethod
+    def of(cls, package: Package) -> _Calls:
+        return cls(package.load_scene, package.render_gradient, package.estimate)
+
+
+@dataclass(frozen=True)
 class _Task:
+    calls: _Calls
     problem: Problem
     cell: Cell
     trial: int
@@ -291,24 +322,23 @@ class _Run:
 
 
 @lru_cache(maxsize=4)
-def _load_scene(package: str, source: str) -> Any:
-    return importlib.import_module(f"{package}.scene").load_scene(source)
+def _load_scene(load_scene: Callable[[Any], Any], source: str) -> Any:
+    return load_scene(source)
 
 
-def _run_one(problem: Problem, cell: Cell, seed: int) -> _Run:
+def _run_one(calls: _Calls, problem: Problem, cell: Cell, seed: int) -> _Run:
     """One estimate of the problem by one cell's method, timed (scene loading excluded)."""
     options = cell.options_dict
     if not problem.is_scene:
-        from flatland.textbook import estimate
-
         start = time.perf_counter()
-        e = estimate(problem.integral, problem.theta, method=cell.method, n=cell.n, seed=seed, **options)
+        e = calls.estimate(
+            problem.integral, problem.theta, method=cell.method, n=cell.n, seed=seed, **options
+        )
         seconds = time.perf_counter() - start
         return _Run(e.value, e.derivative, e.n, seconds, e.derivative, e.derivative_stderr)
-    scene = _load_scene(problem.package, problem.scene)
-    render = importlib.import_module(f"{problem.package}.render")
+    scene = _load_scene(calls.load_scene, problem.scene)
     start = time.perf_counter()
-    g = render.render_gradient(scene, problem.param, method=cell.method, spp=cell.n, seed=seed, **options)
+    g = calls.render_gradient(scene, problem.param, method=cell.method, spp=cell.n, seed=seed, **options)
     seconds = time.perf_counter() - start
     value = _functional(problem, np.asarray(g.value))
     derivative = _functional(problem, np.asarray(g.derivative))
@@ -320,7 +350,7 @@ def _run_one(problem: Problem, cell: Cell, seed: int) -> _Run:
 def _run_task(task: _Task) -> _Run:
     """Worker entry point (module level, so processes and Dask can import it)."""
     try:
-        return _run_one(task.problem, task.cell, task.seed)
+        return _run_one(task.calls, task.problem, task.cell, task.seed)
     except ValidationError as e:  # named by its cell; pickles back from a worker (ValidationError.__reduce__)
         raise ValidationError(f"methods cell {task.cell.index} ({task.cell.label})", str(e)) from None
 
@@ -715,8 +745,9 @@ def run_study(
     reference = resolve_reference(config, cache_dir)
     if on_reference is not None:
         on_reference(reference)
+    calls = _Calls.of(config.package)
     tasks = [
-        _Task(config.problem, cell, k, trial_seed(config.seed, cell.index, k))
+        _Task(calls, config.problem, cell, k, trial_seed(config.seed, cell.index, k))
         for cell in config.cells
         for k in range(config.trials)
     ]
@@ -764,8 +795,9 @@ def _reference_needed(config: StudyConfig, reference: Reference, rows: Sequence[
 
 def _preflight(config: StudyConfig) -> None:
     """Run every cell once with 2 samples (per pixel), so a bad combination fails here, named."""
+    calls = _Calls.of(config.package)
     for cell in config.cells:
         try:
-            _run_one(config.problem, replace(cell, n=min(cell.n, 2)), config.seed)
+            _run_one(calls, config.problem, replace(cell, n=min(cell.n, 2)), config.seed)
         except ValidationError as e:
             raise ValidationError(f"methods cell {cell.index} ({cell.label})", str(e)) from None

@@ -14,7 +14,7 @@ Verbs (the same in both packages):
     ``value``, ``value_stderr``, ``derivative``, ``derivative_stderr``). Without
     ``--param`` it names the scene's parameters.
 ``study CONFIG``
-    A study (:mod:`flatland.core.study`): CSV and figures in ``--out``.
+    A study (:mod:`flatland.app.study`): CSV and figures in ``--out``.
 
 ``SCENE`` is a built-in scene name (listed by ``render --help``) or a JSON file;
 ``--method`` offers the methods of the package's method table.
@@ -32,7 +32,6 @@ Two kinds of failure, told apart by the exit status:
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import os
 import sys
@@ -41,13 +40,13 @@ import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import ModuleType
 from typing import Any, NoReturn
 
 import numpy as np
 
+from flatland.app.table import error_table, method_label
+from flatland.core.contract import MethodTable
 from flatland.core.stats import z_score
-from flatland.core.table import error_table, method_label
 from flatland.core.validate import ValidationError, check_int, check_positive, check_seed
 
 __all__ = ["EXIT_INTERNAL", "EXIT_USAGE", "Package", "main"]
@@ -64,14 +63,25 @@ PANEL_TITLES = {"finite_difference": "finite differences"}
 
 @dataclass(frozen=True)
 class Package:
-    """What the shared CLI needs to know about a package.
+    """Everything the application layer (CLI and study runner) knows about a package.
+
+    Each package's ``__main__`` builds one and passes it to :func:`main`; nothing is
+    imported by name.
 
     Attributes
     ----------
     name : str
-        Import name; ``<name>.scene``, ``<name>.render`` and ``<name>.plot`` provide
-        the shared API (``load_scene``, ``list_scenes``, ``parameter_names``,
-        ``render``, ``render_gradient``, ``GRADIENT_METHODS``, ``plot_*``).
+        The package's name, shown in messages and ``--help``, and part of a study's
+        cache key.
+    load_scene, list_scenes, parameter_names : callable
+        The package's scene API: a scene from a name, dict or JSON file (every bad
+        source a :class:`ValidationError`); the built-in scene names; a scene's
+        parameter names.
+    render, render_gradient, irradiance : callable
+        The package's rendering API (``render(scene, spp=, seed=, batches=)``,
+        ``render_gradient(scene, param, method=, spp=, seed=, batches=, **options)``).
+    methods : MethodTable
+        The gradient methods of ``render_gradient`` and their options.
     demo_scene, demo_param : str
         The embedded default scene of ``demo`` and the parameter it differentiates.
     demo_spp : int
@@ -87,9 +97,25 @@ class Package:
     studies : mapping
         Built-in study configurations by name: ``study NAME`` runs one when no file
         ``NAME`` exists.
+    integrals, estimate, estimators : optional
+        Textbook integrals by name (objects with ``name``, ``default_theta``,
+        ``check_theta`` and ``derivative``), their estimator ``estimate(integral, theta,
+        method=, n=, seed=, **options)`` and its :class:`MethodTable`, for study
+        problems ``{"integral": ...}``; None where the package offers none.
+    plot_image, plot_gradient, plot_panel, plot_study : callable, optional
+        Figure writers; None (the default) draws with the shared
+        :mod:`flatland.app.plotting`, imported (with matplotlib) only when there is a
+        figure to draw.
     """
 
     name: str
+    load_scene: Callable[[Any], Any]
+    list_scenes: Callable[[], Sequence[str]]
+    parameter_names: Callable[[Any], Sequence[str]]
+    render: Callable[..., Any]
+    render_gradient: Callable[..., Any]
+    irradiance: Callable[..., Any]
+    methods: MethodTable
     demo_scene: str
     demo_param: str
     demo_spp: int = 64
@@ -97,10 +123,22 @@ class Package:
     reference_options: tuple[tuple[str, Any], ...] = ()
     demo_sections: tuple[Callable[[argparse.Namespace], str], ...] = ()
     studies: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    integrals: Mapping[str, Any] | None = None
+    estimate: Callable[..., Any] | None = None
+    estimators: MethodTable | None = None
+    plot_image: Callable[..., Path] | None = None
+    plot_gradient: Callable[..., Path] | None = None
+    plot_panel: Callable[..., Path] | None = None
+    plot_study: Callable[..., list[Path]] | None = None
 
-    def module(self, part: str) -> ModuleType:
-        """``<name>.<part>``, imported on first use (matplotlib only once there is a figure to draw)."""
-        return importlib.import_module(f"{self.name}.{part}")
+    def plot(self, kind: str) -> Callable[..., Any]:
+        """The figure writer ``plot_<kind>``: the package's own, else the shared one (imported now)."""
+        own = getattr(self, f"plot_{kind}")
+        if own is not None:
+            return own
+        from flatland.app import plotting  # matplotlib only once there is a figure to draw
+
+        return getattr(plotting, f"plot_{kind}")
 
 
 class _UsageError(Exception):
@@ -124,7 +162,7 @@ def _check_counts(args: argparse.Namespace) -> None:
 
 def _load_scene(pkg: Package, source: str) -> Any:
     """The scene ``source`` (name or JSON file); every bad source is a ValidationError."""
-    return pkg.module("scene").load_scene(source)
+    return pkg.load_scene(source)
 
 
 def _stem(source: str) -> str:
@@ -195,37 +233,36 @@ def _film_sum(g: Any) -> str:
 
 # ------------------------------------------------------------------------------------------------ verbs
 def _demo(pkg: Package, args: argparse.Namespace) -> int:
-    render = pkg.module("render")
     spp = args.spp or pkg.demo_spp
     seed = args.seed
     scene = _load_scene(pkg, pkg.demo_scene)
-    table = render.GRADIENT_METHODS
+    table = pkg.methods
     methods = [m for m in DEMO_METHODS if m in table.names]
     reference_method = "boundary" if "boundary" in table.names else "finite_difference"
     out = Path(args.out)
 
     start = time.perf_counter()
-    primal = render.render(scene, spp=spp, seed=seed)
+    primal = pkg.render(scene, spp=spp, seed=seed)
     gradients, seconds = {}, {}
     for method in methods:
         t0 = time.perf_counter()
-        gradients[method] = render.render_gradient(scene, pkg.demo_param, method=method, spp=spp, seed=seed)
+        gradients[method] = pkg.render_gradient(scene, pkg.demo_param, method=method, spp=spp, seed=seed)
         seconds[method] = time.perf_counter() - t0
     ref_spp = pkg.reference_factor * spp
     ref_options = dict(pkg.reference_options)
     ref_label = method_label(reference_method, ref_options.items())
-    reference = render.render_gradient(
+    reference = pkg.render_gradient(
         scene, pkg.demo_param, method=reference_method, spp=ref_spp, seed=seed + 1, **ref_options
     )
     needed = _reference_needed(gradients, reference, ref_spp)
     if needed is not None:  # the reference must be 4 × more precise than the methods it judges
         ref_spp = min(needed, 4 * ref_spp)  # at most 4 × (the ratio is printed: the cap shows there)
-        reference = render.render_gradient(
+        reference = pkg.render_gradient(
             scene, pkg.demo_param, method=reference_method, spp=ref_spp, seed=seed + 1, **ref_options
         )
     columns = {PANEL_TITLES.get(m, m): g for m, g in gradients.items()}
     title = f"{pkg.demo_scene}: d/d {pkg.demo_param}, {spp} spp"
-    panel = pkg.module("plot").plot_panel(primal, columns, out / "demo_panel.png", title=title)
+    panel = pkg.plot("panel")(primal, columns, out / "demo_panel.png", title=title)
     title = (
         f"{pkg.name} demo: scene {pkg.demo_scene!r}, parameter {pkg.demo_param!r}, {spp} spp, seed {seed}\n"
         f"reference: {ref_label} at {ref_spp} spp, seed {seed + 1}: Σ dI/dθ = {_film_sum(reference)}"
@@ -241,31 +278,29 @@ def _demo(pkg: Package, args: argparse.Namespace) -> int:
 
 
 def _render(pkg: Package, args: argparse.Namespace) -> int:
-    render = pkg.module("render")
     scene = _load_scene(pkg, args.scene)
-    image = render.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
+    image = pkg.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
     name = _stem(args.scene)
     out = Path(args.out)
-    png = pkg.module("plot").plot_image(image, out / f"{name}.png", title=f"{name}, {args.spp} spp")
+    png = pkg.plot("image")(image, out / f"{name}.png", title=f"{name}, {args.spp} spp")
     npy = _save_fields(out / f"{name}.npy", value=image.value, stderr=image.stderr)
     print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
     return 0
 
 
 def _gradient(pkg: Package, args: argparse.Namespace) -> int:
-    render = pkg.module("render")
     scene = _load_scene(pkg, args.scene)
     if args.param is None:
-        names = ", ".join(pkg.module("scene").parameter_names(scene))
+        names = ", ".join(pkg.parameter_names(scene))
         raise _UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
-    g = render.render_gradient(
+    g = pkg.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
         **_options(args),
     )  # fmt: skip
     name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
     out = Path(args.out)
     title = f"{_stem(args.scene)}: d/d {args.param}, {args.method}, {args.spp} spp"
-    png = pkg.module("plot").plot_gradient(g, out / f"{name}.png", title=title)
+    png = pkg.plot("gradient")(g, out / f"{name}.png", title=title)
     npy = _save_fields(
         out / f"{name}.npy",
         value=g.value,
@@ -279,7 +314,7 @@ def _gradient(pkg: Package, args: argparse.Namespace) -> int:
 
 
 def _study(pkg: Package, args: argparse.Namespace) -> int:
-    from flatland.core.study import load_config, run_study
+    from flatland.app.study import load_config, run_study
 
     source: Any = args.config
     if not Path(source).exists():
@@ -290,7 +325,7 @@ def _study(pkg: Package, args: argparse.Namespace) -> int:
                 + ", ".join(pkg.studies),
             )
         source = pkg.studies[args.config]
-    config = load_config(source, package=pkg.name, seed=args.seed, samples=args.spp, name=_stem(args.config))
+    config = load_config(source, package=pkg, seed=args.seed, samples=args.spp, name=_stem(args.config))
     out = Path(args.out)
     cache = Path(args.cache_dir) if args.cache_dir else out / ".cache" / "reparam-lab"
     result = run_study(
@@ -301,7 +336,7 @@ def _study(pkg: Package, args: argparse.Namespace) -> int:
         progress=False if args.quiet else None,
     )
     csv_path = result.to_csv(out / f"{config.name}.csv")
-    figures = pkg.module("plot").plot_study(result, out)
+    figures = pkg.plot("study")(result, out)
     print(result.table())
     print(f"\nwrote {csv_path}" + "".join(f", {f}" for f in figures) + f"  ({result.seconds:.1f} s)")
     return 0
@@ -325,7 +360,7 @@ def _parser(pkg: Package) -> _Parser:
         p.add_argument("--out", default="out", help="output folder (default ./out)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    scenes = ", ".join(pkg.module("scene").list_scenes())
+    scenes = ", ".join(pkg.list_scenes())
 
     def scene_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument("scene", metavar="SCENE", help=f"a JSON scene file or a built-in scene: {scenes}")
@@ -345,7 +380,7 @@ def _parser(pkg: Package) -> _Parser:
     gradient.add_argument(
         "--param", default=None, help="scene parameter, e.g. occluder.translate.x (omit it to list them)"
     )
-    methods = pkg.module("render").GRADIENT_METHODS.names
+    methods = pkg.methods.names
     gradient.add_argument(
         "--method", default="reparam", choices=methods, help="gradient method (default reparam)"
     )
