@@ -318,7 +318,7 @@ def test15_a_grown_reference_keeps_sixteen_equal_batches():
 
 def test16_a_method_judged_by_its_own_kind_of_reference_is_noted():
     """Finite differences against a finite-difference reference share its O(h²) bias: the footer says so."""
-    from flatland.core.table import own_method_note
+    from flatland.app.table import own_method_note
 
     note = own_method_note(["naive", "finite_difference"], "finite_difference")
     assert note.startswith("finite_difference is the reference's own method") and "O(h²)" in note
