@@ -11,7 +11,8 @@ import time
 
 from benchmarks import Row
 from flatland.__main__ import PACKAGE
-from flatland.app.study import StudyConfig, run_study
+from flatland.app.study import run_study
+from flatland.app.study_config import StudyConfig
 
 CONFIG = {
     "problem": {"integral": "two_steps", "theta": 1.0},

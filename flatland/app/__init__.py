@@ -3,7 +3,9 @@
 Built on the numeric kernel :mod:`flatland.core` and told about a package only
 through its :class:`~flatland.app.cli.Package` description (built by the package's
 ``__main__``): :mod:`flatland.app.cli` (``python -m flatland``, ``python -m sphere3d``),
-:mod:`flatland.app.study` and :mod:`flatland.app.study_config` (method × option ×
-trial grids against a reference), :mod:`flatland.app.table` (text tables) and
+:mod:`flatland.app.study` (method × option × trial grids against a reference: the
+runner, with :mod:`~flatland.app.study_config`, :mod:`~flatland.app.study_trials`,
+:mod:`~flatland.app.study_reference` and :mod:`~flatland.app.study_result`),
+:mod:`flatland.app.table` (text tables) and
 :mod:`flatland.app.plotting` (matplotlib figures, imported when a figure is drawn).
 """

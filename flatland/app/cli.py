@@ -314,7 +314,8 @@ def _gradient(pkg: Package, args: argparse.Namespace) -> int:
 
 
 def _study(pkg: Package, args: argparse.Namespace) -> int:
-    from flatland.app.study import load_config, run_study
+    from flatland.app.study import run_study
+    from flatland.app.study_config import load_config
 
     source: Any = args.config
     if not Path(source).exists():

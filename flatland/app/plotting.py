@@ -4,7 +4,7 @@ Gradient images use a diverging colormap centred on zero with one symmetric colo
 scale shared by every method in a figure, so equal colours mean equal derivatives.
 A 1D film is drawn as a strip (one row of pixels stretched vertically) and, in the
 panel, also as curves with ±2 standard-error bands; a 2D film is drawn as an image.
-Study figures read :class:`~flatland.app.study.StudyResult` rows as they are.
+Study figures read :class:`~flatland.app.study_result.StudyResult` rows as they are.
 
 Every function writes one PNG and returns its path; figures are closed after saving.
 """

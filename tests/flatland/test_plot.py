@@ -9,7 +9,8 @@ import pytest
 from flatland import plot
 from flatland.__main__ import PACKAGE
 from flatland.app import plotting
-from flatland.app.study import StudyConfig, run_study
+from flatland.app.study import run_study
+from flatland.app.study_config import StudyConfig
 from flatland.core.image import GradientImage, Image
 
 W = 48

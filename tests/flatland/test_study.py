@@ -14,8 +14,9 @@ import pytest
 from scipy import stats
 
 from flatland.__main__ import PACKAGE
-from flatland.app import study
-from flatland.app.study import StudyConfig, load_config, read_csv, run_study, trial_seed
+from flatland.app import study, study_reference
+from flatland.app.study import load_config, read_csv, run_study
+from flatland.app.study_config import StudyConfig, trial_seed
 from flatland.core.stats import normal_quantile
 from flatland.core.validate import ValidationError
 from flatland.integrals import get_integral
@@ -157,7 +158,7 @@ def test07_csv_round_trips_every_number_exactly(tmp_path):
 
 def test08_monte_carlo_reference_is_cached_by_its_inputs(tmp_path, monkeypatch):
     config = _config(reference={"method": "finite_difference", "h": 0.01, "n": 20000, "seed": 3}, trials=2)
-    first = study.resolve_reference(config, tmp_path)
+    first = study_reference.resolve_reference(config, tmp_path)
     files = list(tmp_path.glob("*.npz"))
     assert len(files) == 1 and first.source.startswith("finite_difference h=0.01 n=20000")
     assert "cached" not in first.source
@@ -165,8 +166,8 @@ def test08_monte_carlo_reference_is_cached_by_its_inputs(tmp_path, monkeypatch):
     def fail(*args):
         raise AssertionError("the cached reference should have been used")
 
-    monkeypatch.setattr(study, "_compute_reference", fail)
-    second = study.resolve_reference(config, tmp_path)
+    monkeypatch.setattr(study_reference, "_compute_reference", fail)
+    second = study_reference.resolve_reference(config, tmp_path)
     assert second.source.endswith("(cached)") and second.derivative == first.derivative
     assert second.stderr == first.stderr > 0.0
     # the reference estimate itself: within z(0.999) standard errors of the closed form (h² bias ~4e-6)
@@ -176,7 +177,7 @@ def test08_monte_carlo_reference_is_cached_by_its_inputs(tmp_path, monkeypatch):
 
     monkeypatch.undo()
     other = _config(reference={"method": "finite_difference", "h": 0.01, "n": 20000, "seed": 4}, trials=2)
-    study.resolve_reference(other, tmp_path)
+    study_reference.resolve_reference(other, tmp_path)
     assert len(list(tmp_path.glob("*.npz"))) == 2
 
 
@@ -263,7 +264,7 @@ def test12_labels_show_the_options_set_true_ones_by_name_floats_by_g():
          "reference": {"method": "reparam", "kappa": 2000, "paired": True, "n": 20}}, package=PACKAGE
     )  # fmt: skip
     assert config.cells[0].label == "reparam kappa=0.5"  # the defaults filled in are not shown
-    source = study.resolve_reference(config).source
+    source = study_reference.resolve_reference(config).source
     assert source.startswith("reparam kappa=2000 ") and source.endswith(" paired n=20 seed=2147483647")
 
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 import pytest
 
 from flatland.__main__ import PACKAGE
-from flatland.app.study import CSV_COLUMNS, StudyConfig, run_study
+from flatland.app.study import CSV_COLUMNS, run_study
+from flatland.app.study_config import StudyConfig
 
 TIMED = {
     "seconds_per_sample",
