@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks import Row, best_seconds
-from flatland.geometry import cast, direction
+from flatland.tracing import cast, direction
 from flatland.render import render, render_gradient
-from flatland.scene import bind, load_scene
+from flatland.scene import load_scene
+from flatland.state import build_state
 
 RAYS = 1 << 20
 PIXELS, SPP = 512, 64
@@ -26,13 +27,13 @@ METHODS = [
 
 
 def run() -> list[Row]:
-    """Rays per second of :func:`flatland.geometry.cast`, and seconds per image per method."""
+    """Rays per second of :func:`flatland.tracing.cast`, and seconds per image per method."""
     rows = []
     rng = np.random.default_rng(0)
     origins = rng.uniform(-2.0, 2.0, (RAYS, 2))
     dirs = direction(rng.uniform(-np.pi, np.pi, RAYS))
     for name in ("shadow", "silhouette", "polygon"):
-        geom = bind(load_scene(name))
+        geom = build_state(load_scene(name))
         prims = geom.n_seg + geom.n_circ
         seconds = best_seconds(lambda g=geom: cast(g, origins, dirs))
         rows.append(

@@ -30,7 +30,7 @@ from flatland.sampling import (
     sample_circle_direction,
     sample_segment_direction,
 )
-from flatland.scene import Geometry
+from flatland.state import SceneState
 
 __all__ = ["Lights"]
 
@@ -39,13 +39,13 @@ __all__ = ["Lights"]
 class Lights:
     """The emitters of a geometry (at θ0) and their selection probabilities."""
 
-    geom: Geometry  # detached
+    geom: SceneState  # detached
     prims: np.ndarray  # emitter primitive indices
     probs: np.ndarray  # P(e)
     cdf: np.ndarray  # cumulative P(e), last entry 1
 
     @classmethod
-    def of(cls, geom: Geometry) -> Lights:
+    def of(cls, geom: SceneState) -> Lights:
         """Emitters of ``geom`` (values only)."""
         g = geom.detached()
         prims = g.emitters()

@@ -34,47 +34,54 @@ from __future__ import annotations
 
 from typing import Any
 
-import flatland.integrator as integrator
-import flatland.methods  # noqa: F401  (registers the gradient methods)
+from flatland import tasks
 from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.validate import ValidationError, check_int, check_seed
-from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
-from flatland.scene import Scene, check_direction, check_point, load_scene, parse_parameter
+from flatland.methods import GRADIENT_METHODS
+from flatland.scene import Scene, check_direction, check_point, load_scene
+from flatland.state import parse_parameter
+from flatland.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
 
-def _job(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **target: Any) -> Job:
+def _task(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **point: Any) -> ImageTask | PointTask:
+    """An :class:`~flatland.tasks.ImageTask`, or given ``point`` and ``normal`` a
+    :class:`~flatland.tasks.PointTask`."""
     scene = load_scene(scene)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     p = None if param is None else parse_parameter(scene, param)
-    return Job(scene, p, spp, seed, resolve_batches(spp, batches), **target)
+    if point:
+        return PointTask(scene, p, point["point"], point["normal"], spp, seed, resolve_batches(spp, batches))
+    return ImageTask(scene, p, spp, seed, resolve_batches(spp, batches))
 
 
-def _check_budget(job: Job, options: dict[str, Any]) -> None:
+def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
     """Refuse a request too large for memory or time (:mod:`flatland.core.budget`) before it starts."""
-    target = job.point is None
+    image = isinstance(task, ImageTask)
     check_request(
         Request(
-            pixels=job.pixels,
-            spp=job.spp,
-            batches=job.batches,
+            pixels=task.pixels,
+            spp=task.spp if image else task.n,
+            batches=task.batches,
             rays=rays_per_sample(options),
-            chunk=integrator.CHUNK,
+            chunk=tasks.CHUNK,
             pixels_field="camera.pixels",
-            spp_field="spp" if target else "n",
+            spp_field="spp" if image else "n",
         )
     )
 
 
-def _gradient(job: Job, method: Any, options: dict[str, Any]) -> tuple[BatchResult, dict[str, Any]]:
+def _gradient(
+    task: ImageTask | PointTask, method: Any, options: dict[str, Any]
+) -> tuple[Tally, dict[str, Any]]:
     spec = GRADIENT_METHODS.get(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
-    _check_budget(job, resolved)
-    return spec.func(job, **resolved), resolved
+    _check_budget(task, resolved)
+    return spec.func(task, **resolved), resolved
 
 
 def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int | None = None) -> Image:
@@ -85,10 +92,10 @@ def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int
     ValidationError
         Naming the field and value (bad scene field, spp < 1, batches not dividing spp, ...).
     """
-    job = _job(scene, None, spp, seed, batches)
-    _check_budget(job, {})
-    result = run(job, job.geometry(0.0), Hooks())
-    return Image.from_batches(result.value, spp=job.spp, seed=job.seed, scene=job.scene.name)
+    task = _task(scene, None, spp, seed, batches)
+    _check_budget(task, {})
+    result = task.evaluate(0.0)
+    return Image.from_batches(result.value, spp=task.spp, seed=task.seed, scene=task.scene.name)
 
 
 def render_gradient(
@@ -130,17 +137,17 @@ def render_gradient(
     """
     if param is None:
         raise ValidationError("param", "is required (a parameter name like 'occluder.translate.x')")
-    job = _job(scene, param, spp, seed, batches)
-    result, resolved = _gradient(job, method, options)
+    task = _task(scene, param, spp, seed, batches)
+    result, resolved = _gradient(task, method, options)
     return GradientImage.from_batches(
         result.value,
         result.derivative,
-        param=job.param.name,
+        param=task.param.name,
         method=method,
-        spp=job.spp,
-        seed=job.seed,
+        spp=task.spp,
+        seed=task.seed,
         options=resolved,
-        scene=job.scene.name,
+        scene=task.scene.name,
     )
 
 
@@ -164,12 +171,12 @@ def irradiance(
     estimated (derivative 0).
     """
     point, normal = check_point("point", point), check_direction("normal", normal)
-    job = _job(scene, param, n, seed, batches, point=point, normal=normal)
+    task = _task(scene, param, n, seed, batches, point=point, normal=normal)
     if param is None:
-        _check_budget(job, {})
-        result, resolved = run(job, job.geometry(0.0), Hooks()), {}
+        _check_budget(task, {})
+        result, resolved = task.evaluate(0.0), {}
     else:
-        result, resolved = _gradient(job, method, options)
+        result, resolved = _gradient(task, method, options)
     return Estimate.from_batches(
-        result.value[:, 0], result.derivative[:, 0], job.spp, method if param is not None else "", resolved
+        result.value[:, 0], result.derivative[:, 0], task.n, method if param is not None else "", resolved
     )

@@ -7,6 +7,10 @@ matching ``sample_x`` produces; a chi-square test per pair checks that claim.
 
 Angles on the circle are in radians; circle densities are with respect to arc
 length (they integrate to 1 over any interval of length 2π).
+
+The pixel filters of the 1D film come last, with the names sphere3d uses for its 2D
+film: :func:`filter_value` (k_j, Dual-aware), :func:`sample_filter` /
+:func:`pdf_filter`, and the 2D-only :func:`filter_blurred` (k_j ⊛ N(0, σ²)).
 """
 
 from __future__ import annotations
@@ -16,13 +20,17 @@ from typing import Any
 import numpy as np
 from scipy import special, stats
 
+from flatland.core.dual import detach
 from flatland.core.validate import ValidationError, check_positive
 
 __all__ = [
+    "filter_blurred",
+    "filter_value",
     "log_pdf_gaussian",
     "log_pdf_von_mises",
     "pdf_circle_direction",
     "pdf_cosine_half_circle",
+    "pdf_filter",
     "pdf_gaussian",
     "pdf_segment_direction",
     "pdf_tabulated",
@@ -32,6 +40,7 @@ __all__ = [
     "pdf_von_mises",
     "sample_circle_direction",
     "sample_cosine_half_circle",
+    "sample_filter",
     "sample_gaussian",
     "sample_segment_direction",
     "sample_tabulated",
@@ -268,3 +277,53 @@ def pdf_circle_direction(phi: np.ndarray, x: np.ndarray, c: np.ndarray, r: np.nd
     base, beta = _circle_cone(x, c, r)
     inside = np.abs(wrap_angle(phi - base)) <= beta
     return np.where(inside, 0.5 / np.where(beta > 0.0, beta, 1.0), 0.0)
+
+
+# ------------------------------------------------------------------ pixel filters (the film line)
+def filter_value(kind: str, t: Any, center: Any, width: float) -> Any:
+    """Pixel filter k_j(t) for pixel centres ``center`` and pixel width Δt (``t`` may be a Dual)."""
+    x = t - center
+    if kind == "box":
+        return np.where(np.abs(detach(x)) <= 0.5 * width, 1.0 / width, 0.0)
+    if kind == "tent":
+        return np.maximum(1.0 - np.abs(x) / width, 0.0) / width
+    sigma = 0.5 * width
+    return np.exp(-0.5 * (x / sigma) * (x / sigma)) / (sigma * np.sqrt(2.0 * np.pi))
+
+
+def filter_blurred(kind: str, y: np.ndarray, width: float, sigma: float) -> np.ndarray:
+    """Density of t + σ z (t ~ pixel filter centred at 0, z ~ N(0, 1)) at offsets ``y``: k ⊛ N(0, σ²).
+
+    Tent of radius w: (R(y + w) - 2 R(y) + R(y - w)) / w² with R(y) = y Φ(y/σ) + σ φ(y/σ)
+    (the tent is a sum of ramps, and R is a ramp blurred by the Gaussian); Gaussian
+    filter: N(0, (w/2)² + σ²).
+    """
+    y = np.asarray(y, dtype=np.float64)
+    if kind == "gaussian":
+        s2 = 0.25 * width * width + sigma * sigma
+        return np.exp(-0.5 * y * y / s2) / np.sqrt(2.0 * np.pi * s2)
+    if kind != "tent":
+        raise ValueError(f"filter_blurred: no closed form for the {kind!r} filter")
+
+    def ramp(z: np.ndarray) -> np.ndarray:
+        return z * special.ndtr(z / sigma) + sigma * np.exp(-0.5 * (z / sigma) ** 2) / np.sqrt(2.0 * np.pi)
+
+    return (ramp(y + width) - 2.0 * ramp(y) + ramp(y - width)) / (width * width)
+
+
+def sample_filter(kind: str, u: np.ndarray, center: np.ndarray, width: float) -> np.ndarray:
+    """Film samples t ~ k_j from uniforms ``u`` (box: one pixel; tent: radius Δt; gaussian: σ = Δt/2)."""
+    if kind == "box":
+        return sample_uniform(u, center - 0.5 * width, center + 0.5 * width)
+    if kind == "tent":
+        return sample_tent(u, center, width)
+    return sample_gaussian(u, center, 0.5 * width)
+
+
+def pdf_filter(kind: str, t: np.ndarray, center: np.ndarray, width: float) -> np.ndarray:
+    """Density of :func:`sample_filter`'s samples ``t``: the filter k_j itself (plain floats).
+
+    Each pixel integral samples its own filter, so the density is :func:`filter_value`
+    at the (θ-free) samples; the pair is checked by a chi-square test like every other.
+    """
+    return filter_value(kind, np.asarray(t, dtype=np.float64), center, width)

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 RENDERER = (
     "flatland.render",
     "flatland.integrator",
-    "flatland.geometry",
+    "flatland.tracing",
     "flatland.scene",
     "flatland.methods",
 )

@@ -76,10 +76,13 @@ def test03_huge_requests_are_refused_before_any_work(call, field, estimate):
 def test04_a_non_finite_estimate_is_an_internal_error_not_a_result(monkeypatch):
     # validation keeps inputs finite, so NaN from an estimator is a defect: raised, never returned
     import flatland.integrator as integrator
+    import flatland.tasks as tasks
     import sphere3d.integrator as s3_integrator
 
     real = integrator.shade
-    monkeypatch.setattr(integrator, "shade", lambda *a, **k: real(*a, **k) * float("nan"))
+    nan_shade = lambda *a, **k: real(*a, **k) * float("nan")  # noqa: E731
+    monkeypatch.setattr(integrator, "shade", nan_shade)  # under the pixel integral
+    monkeypatch.setattr(tasks, "shade", nan_shade)  # at a point (PointTask calls it directly)
     real3 = s3_integrator.irradiance_samples
     monkeypatch.setattr(s3_integrator, "irradiance_samples", lambda *a, **k: real3(*a, **k) * float("inf"))
     with np.errstate(all="ignore"):  # the injected NaN and inf propagate quietly, as a defect's would

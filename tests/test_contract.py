@@ -360,23 +360,24 @@ SMOOTH_PARAM = "light.translate.x"
 
 
 def _naive_scaled(package):
-    """A method defined here: the naive estimator through identity hooks/transforms written out, its
+    """A method defined here: the naive estimator through identity transforms written out, its
     derivative times the option ``scale`` (``scale=1`` is the naive method, by construction)."""
     from flatland.core.dual import variable
 
     if package == "flatland":
-        from flatland.integrator import BatchResult, Hooks, Members, run
+        from flatland.integrator import Identity, Members
+        from flatland.tasks import Tally
 
-        class PassThrough(Hooks):  # the identity, as a new method's hooks start out
-            def film(self, ctx, t, pixel, draws):
+        class PassThrough(Identity):  # the identity, as a new method's transforms start out
+            def camera(self, ctx, t, pixel, draws):
                 return Members(t[:, None])
 
             def directions(self, ctx, x, ignore, phi, draws):
                 return Members(phi[:, None])
 
-        def naive_scaled(job, scale):
-            result = run(job, job.geometry(variable(0.0)), PassThrough())
-            return BatchResult(result.value, scale * result.derivative)
+        def naive_scaled(task, scale):
+            result = task.evaluate(variable(0.0), PassThrough())
+            return Tally(result.value, scale * result.derivative)
 
         return naive_scaled
 
@@ -417,7 +418,7 @@ def test15_a_new_method_plugs_in_through_render_gradient_and_is_removed_after(pa
             {"scale": 1.0},
             {"scale": 2.0},
         )
-        # identity hooks/transforms at θ0 are the naive estimator, bit for bit
+        # identity transforms at θ0 are the naive estimator, bit for bit
         for field in ("value", "derivative", "value_stderr", "derivative_stderr"):
             assert np.array_equal(getattr(one, field), getattr(naive, field)), field
         # scaling by 2 is exact in binary floating point: the mean and its standard error double exactly

@@ -52,9 +52,9 @@ import flatland as fl
 from flatland import detach, tangent, variable
 from flatland import plot_tutorials as ptu
 from flatland.core.stats import sidak
-from flatland.geometry import cast, direction, film_coordinate, silhouette_angles
 from flatland.integrator import incident
-from flatland.scene import bind
+from flatland.state import build_state
+from flatland.tracing import cast, direction, film_coordinate, silhouette_angles
 
 SEED = 20191117
 PARAM = "occluder.translate.x"
@@ -73,7 +73,7 @@ scene = fl.load_scene(
         "parameters": [PARAM],
     }
 )  # fmt: skip
-geom = bind(scene, PARAM, variable(0.0))  # the scene as arrays; θ-dependent ones are Duals
+geom = build_state(scene, PARAM, variable(0.0))  # the scene as arrays; θ-dependent ones are Duals
 
 # %% [markdown]
 # ## 1. Where can the integrand jump?
@@ -270,7 +270,7 @@ for name in fl.list_scenes():
     s = fl.load_scene(name)
     vertices = sum(len(shape.points) for shape in s.shapes if shape.type != "circle")
     circles = sum(shape.type == "circle" for shape in s.shapes)
-    g = bind(s, s.parameters[0], variable(0.0))
+    g = build_state(s, s.parameters[0], variable(0.0))
     candidates = silhouette_angles(g, g.cam_o)[0].shape[1]
     seconds = {}
     for method in ("naive", "boundary"):

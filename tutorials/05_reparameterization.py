@@ -51,8 +51,7 @@ from flatland import plot_textbook as pt
 from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
-from flatland.integrator import filter_value
-from flatland.sampling import sample_tent
+from flatland.sampling import filter_value, sample_tent
 
 SEED = 20191117
 N = 200_000

@@ -42,9 +42,10 @@ import flatland as fl
 from flatland import detach, tangent, variable
 from flatland import plot_tutorials as ptu
 from flatland.core.stats import sidak
-from flatland.integrator import Job, filter_value, run
-from flatland.methods.reparam import ReparamHooks, default_kappa_film
-from flatland.scene import parse_parameter
+from flatland.methods.reparam import ReparamTransforms, default_kappa_film
+from flatland.sampling import filter_value
+from flatland.state import parse_parameter
+from flatland.tasks import ImageTask
 
 SEED = 20191117
 
@@ -93,9 +94,9 @@ print(refusal)
 assert refusal.startswith("camera.filter:") and "'box'" in refusal
 
 # %% [markdown]
-# To see why, we run the same reparameterization anyway, one level below `render_gradient`: a
-# `Job` (scene, parameter, samples, seed, batches) and the method's `ReparamHooks` with its
-# default options, passed to the integrator's `run`. It returns per-batch estimates, which we
+# To see why, we run the same reparameterization anyway, one level below `render_gradient`: an
+# `ImageTask` (scene, parameter, samples, seed, batches) evaluated under the method's
+# `ReparamTransforms` with its default options. It returns per-batch estimates, which we
 # average ourselves. The `boundary` method is fine with a box filter (the filter does not move in
 # $t$, so it adds no term), and it matches the closed form.
 
@@ -106,11 +107,11 @@ t_a, t_b = -0.3 / 2.0, 0.5 / 2.0
 closed = (filter_value("box", t_a, centres, width) - filter_value("box", t_b, centres, width)) / 2.0
 
 spp, batches = 1024, 16
-job = Job(box_scene, parse_parameter(box_scene, "bar.translate.x"), spp, SEED, batches)
-hooks = ReparamHooks(
+task = ImageTask(box_scene, parse_parameter(box_scene, "bar.translate.x"), spp, SEED, batches)
+transforms = ReparamTransforms(
     kappa=1000.0, kappa_film=default_kappa_film(width), probes=4, spread=3.0, refine=2, paired=False
 )
-per_batch = run(job, job.geometry(variable(0.0)), hooks).derivative  # shape (batches, pixels)
+per_batch = task.evaluate(variable(0.0), transforms).derivative  # shape (batches, pixels)
 box_reparam = per_batch.mean(axis=0)
 box_stderr = per_batch.std(axis=0, ddof=1) / np.sqrt(batches)
 box_boundary = fl.render_gradient(box_scene, "bar.translate.x", method="boundary", spp=spp, seed=SEED)

@@ -1,10 +1,11 @@
 """The boundary method: naive interior term plus the exact discontinuity terms (edge sampling in 2D).
 
-Where the integrator calls it: one :func:`~flatland.integrator.run` at θ =
-``variable(0.0)`` with :class:`BoundaryHooks`. ``film`` and ``directions`` stay the
-identity (the naive interior term); ``shading_extra`` adds the jump terms seen from
-each shading point inside :func:`~flatland.integrator.shade`, after its MIS estimate;
-``pixel_extra`` adds the camera's jump terms per batch and pixel after the sums.
+Where the integrator calls it: one ``task.evaluate(variable(0.0), BoundaryTransforms())``.
+``camera`` and ``directions`` stay the identity (the naive interior term); the
+2D-only extension points of :class:`~flatland.integrator.Transforms` carry the rest:
+``shading_extra`` adds the jump terms seen from each shading point inside
+:func:`~flatland.integrator.shade`, after its MIS estimate; ``pixel_extra`` adds the
+camera's jump terms per batch and pixel after the sums (images only).
 
 Loubet et al. 2019 compare against edge sampling (Li et al. 2018); in flatland the
 discontinuities of every integrand are points that can be enumerated, so the
@@ -19,22 +20,15 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent, variable
 from flatland.core.rng import Draws, stream
-from flatland.geometry import cast, direction, film_coordinate, silhouette_angles
-from flatland.integrator import (
-    GRADIENT_METHODS,
-    BatchResult,
-    Context,
-    Hooks,
-    Job,
-    filter_value,
-    incident,
-    radiance_along_film,
-    run,
-)
+from flatland.integrator import Context, Identity, incident, radiance_along_film
 from flatland.lights import Lights
-from flatland.scene import Geometry
+from flatland.methods._common import GRADIENT_METHODS
+from flatland.sampling import filter_value
+from flatland.state import SceneState
+from flatland.tasks import ImageTask, PointTask, Tally
+from flatland.tracing import cast, direction, film_coordinate, silhouette_angles
 
-__all__ = ["BoundaryHooks", "boundary"]
+__all__ = ["BoundaryTransforms", "boundary"]
 
 EPS_ANGLE = 1e-7
 """Angular offset (radians) of the two rays traced beside a candidate discontinuity."""
@@ -46,7 +40,7 @@ EPS_FILM = 1e-7
 """Film-coordinate offset (relative to 1 + |t|) of the two camera rays beside a candidate."""
 
 
-class BoundaryHooks(Hooks):
+class BoundaryTransforms(Identity):
     """Identity transforms plus the jump terms at the shading points and at the pixels."""
 
     def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray:
@@ -88,7 +82,7 @@ class BoundaryHooks(Hooks):
         term = (sides[0] - sides[1]) * cos_c[rows, cols] * tangent(phi_c)[rows, cols]
         return np.bincount(rows, weights=term, minlength=n)
 
-    def pixel_extra(self, job: Job, geom: Geometry) -> np.ndarray | None:
+    def pixel_extra(self, task: ImageTask, geom: SceneState) -> np.ndarray | None:
         """Σ_c k_j(t_c) [L(t_c⁻) - L(t_c⁺)] t_c'(θ) per batch and pixel (the camera's silhouettes).
 
         Candidates are the film coordinates t_c(θ) of every vertex and circle tangent
@@ -98,9 +92,7 @@ class BoundaryHooks(Hooks):
         same samples on both sides (common random numbers), so a candidate hidden
         behind something else contributes exactly zero.
         """
-        if job.point is not None:  # the point target has no pixel integral
-            return None
-        out = np.zeros((job.batches, job.pixels))
+        out = np.zeros((task.batches, task.pixels))
         phi_c, exists = silhouette_angles(geom, geom.cam_o)
         if phi_c.shape[1] == 0:
             return out
@@ -109,7 +101,7 @@ class BoundaryHooks(Hooks):
         f0 = detach(geom.cam_f)
         ahead = exists[0] & (v0 @ f0 > 1e-9)
         t_c = film_coordinate(geom, v[ahead])
-        cam = job.scene.camera
+        cam = task.scene.camera
         t0 = detach(t_c)
         weights = filter_value(cam.filter, t0[:, None], cam.pixel_centers()[None, :], cam.pixel_width)
         keep = np.any(weights > 0.0, axis=1)
@@ -117,15 +109,15 @@ class BoundaryHooks(Hooks):
             return out
         t0, weights, speed = t0[keep], weights[keep], tangent(t_c)[keep]
         geom0 = geom.detached()
-        m, n_s = t0.size, job.per_batch
+        m, n_s = t0.size, task.per_batch
         eps = EPS_FILM * (1.0 + np.abs(t0))
         t_eval = np.concatenate([np.repeat(t0 - eps, n_s), np.repeat(t0 + eps, n_s)])
         lights = Lights.of(geom0)
-        ctx = Context(geom0, geom0, lights, Hooks())
-        for b in range(job.batches):
-            u = stream(job.seed, "boundary", b).random((m * n_s, 3))
-            # identity hooks draw nothing; the rows are keyed on the edge sample, the same on both sides
-            draws = Draws.of(job.seed, np.arange(m * n_s)).tile(2)
+        ctx = Context(geom0, geom0, lights, Identity())
+        for b in range(task.batches):
+            u = stream(task.seed, "boundary", b).random((m * n_s, 3))
+            # identity transforms draw nothing; the rows are keyed on the edge sample, the same on both sides
+            draws = Draws.of(task.seed, np.arange(m * n_s)).tile(2)
             radiance = radiance_along_film(
                 ctx, t_eval, np.concatenate([u, u]), draws
             )  # same samples both sides
@@ -136,7 +128,7 @@ class BoundaryHooks(Hooks):
 
 
 @GRADIENT_METHODS.register("boundary")
-def boundary(job: Job) -> BatchResult:
+def boundary(task: ImageTask | PointTask) -> Tally:
     """Naive interior term plus every discontinuity term, computed explicitly (DESIGN 2.10).
 
     For the pixel integral ``I_j = ∫ k_j(t) L(t) dt`` and for every shading integral
@@ -158,4 +150,4 @@ def boundary(job: Job) -> BatchResult:
     failure modes: two discontinuities within ``EPS_ANGLE`` of each other, and
     candidates seen exactly edge-on, both of measure zero.
     """
-    return run(job, job.geometry(variable(0.0)), BoundaryHooks())
+    return task.evaluate(variable(0.0), BoundaryTransforms())

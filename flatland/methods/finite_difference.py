@@ -1,8 +1,8 @@
 """Central finite differences of whole images, with common random numbers.
 
-Where the integrator calls it: three :func:`~flatland.integrator.run` calls with
-the identity :class:`~flatland.integrator.Hooks` on plain-float geometry bound at
-θ = 0, +h and -h; no hook is involved, the method combines the three results (the
+Where the integrator calls it: three ``task.evaluate`` calls with
+:class:`~flatland.integrator.Identity` at the plain-float offsets θ = 0, +h and -h;
+no transform is involved, the method combines the three results (the
 value from θ = 0, the derivative as the central difference per batch).
 
 Not part of the paper: the reference the other methods are checked against.
@@ -13,13 +13,15 @@ from __future__ import annotations
 from flatland.core.contract import Option
 from flatland.core.translation import central_difference
 from flatland.core.validate import ValidationError, check_positive
-from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
+from flatland.integrator import Identity
+from flatland.methods._common import GRADIENT_METHODS
+from flatland.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["finite_difference"]
 
 
 @GRADIENT_METHODS.register("finite_difference", Option("h", 1e-3, check_positive))
-def finite_difference(job: Job, h: float) -> BatchResult:
+def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     """``[Î(θ0 + h) - Î(θ0 - h)] / 2h`` per pixel and batch, every estimate from the same samples.
 
     The three renders (at θ0 for the value, θ0 ± h for the difference) draw the same
@@ -37,13 +39,13 @@ def finite_difference(job: Job, h: float) -> BatchResult:
     For a ``*.scale`` parameter (scale by 1 + θ) h must be < 1: at θ0 - h the shape
     would be scaled by 1 - h <= 0, a point or a mirrored shape (a circle of radius <= 0).
     """
-    if job.param is not None and job.param.kind == "scale" and h >= 1.0:
+    if task.param is not None and task.param.kind == "scale" and h >= 1.0:
         raise ValidationError(
             "h",
             f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r} "
-            f"for {job.param.name!r}",
+            f"for {task.param.name!r}",
         )
-    base = run(job, job.geometry(0.0), Hooks())
+    base = task.evaluate(0.0, Identity())
     # per-batch central difference: common random numbers cancel everything that did not move
-    derivative = central_difference(lambda theta: run(job, job.geometry(theta), Hooks()).value, 0.0, h)
-    return BatchResult(base.value, derivative)
+    derivative = central_difference(lambda theta: task.evaluate(theta, Identity()).value, 0.0, h)
+    return Tally(base.value, derivative)

@@ -1,9 +1,8 @@
 """The naive image gradient: forward-mode AD of the renderer's estimator as it stands.
 
-Where the integrator calls it: one :func:`~flatland.integrator.run` on the geometry
-bound at θ = ``variable(0.0)``, with the identity :class:`~flatland.integrator.Hooks`:
-no hook changes anything, so every step (film samples, radiance, shading by MIS,
-per-pixel sums) is differentiated as it stands.
+Where the integrator calls it: one ``task.evaluate(variable(0.0), Identity())``:
+the :class:`~flatland.integrator.Identity` transforms change nothing, so every step
+(film samples, radiance, shading by MIS, per-pixel sums) is differentiated as it stands.
 
 Loubet et al. 2019, Sec. 3.1-3.2. The baseline that is wrong wherever visibility
 makes an integrand jump at a point that moves with θ.
@@ -12,13 +11,15 @@ makes an integrand jump at a point that moves with θ.
 from __future__ import annotations
 
 from flatland.core.dual import variable
-from flatland.integrator import GRADIENT_METHODS, BatchResult, Hooks, Job, run
+from flatland.integrator import Identity
+from flatland.methods._common import GRADIENT_METHODS
+from flatland.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["naive"]
 
 
 @GRADIENT_METHODS.register("naive")
-def naive(job: Job) -> BatchResult:
+def naive(task: ImageTask | PointTask) -> Tally:
     """Differentiate every pixel and shading estimate with θ a forward-mode Dual.
 
     The film samples t ~ k_j and the direction samples φ (cosine and emitter
@@ -37,4 +38,4 @@ def naive(job: Job) -> BatchResult:
     (DESIGN 2.1, 2.4); the boundary method adds exactly these terms. The value
     estimate is unbiased and, for the same seed, identical to the other methods'.
     """
-    return run(job, job.geometry(variable(0.0)), Hooks())
+    return task.evaluate(variable(0.0), Identity())

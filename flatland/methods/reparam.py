@@ -1,17 +1,17 @@
 """Reparameterization of the pixel and shading integrals by translations chosen with probe rays.
 
-Where the integrator calls it: one :func:`~flatland.integrator.run` at θ =
-``variable(0.0)`` with :class:`ReparamHooks`. ``film`` gets each chunk's film samples
+Where the integrator calls it: one ``task.evaluate(variable(0.0), ReparamTransforms(...))``.
+``camera`` gets each chunk's film samples
 t ~ k_j before the camera rays are traced and returns the translated points T(t) with
 kernel weights; ``directions`` gets the cosine and emitter samples φ inside
 :func:`~flatland.integrator.shade`, before the shading rays are traced, and returns
-T(φ) likewise; both choose the translation with :mod:`flatland.methods.heuristic`.
-The extras stay ``None``.
+T(φ) likewise; both choose the translation with :mod:`flatland.probes`.
+The 2D-only extras stay ``None``.
 
 Loubet et al. 2019: Sec. 3.2 (change of variables), 4.1 (in 2D a rotation of
 directions is a translation of the angle, and the film is a line), 4.2 (convolution
 kernels), 4.3 (choosing the transform by ray tracing, DESIGN 2.8,
-:mod:`flatland.methods.heuristic`), and the paired samples of the authors'
+:mod:`flatland.probes`), and the paired samples of the authors'
 implementation (DESIGN 2.9).
 """
 
@@ -28,21 +28,14 @@ from flatland.core.dual import detach, variable
 from flatland.core.rng import Draws
 from flatland.core.translation import check_continuous_filter, translation_offset, unit_weight
 from flatland.core.validate import check_bool, check_int, check_positive
-from flatland.geometry import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction
-from flatland.integrator import (
-    GRADIENT_METHODS,
-    BatchResult,
-    Context,
-    Hooks,
-    Job,
-    Members,
-    filter_blurred,
-    run,
-)
-from flatland.methods.heuristic import Choice, choose_points
-from flatland.sampling import sample_von_mises
+from flatland.integrator import Context, Identity, Members
+from flatland.methods._common import GRADIENT_METHODS
+from flatland.probes import Choice, select_points
+from flatland.sampling import filter_blurred, sample_von_mises
+from flatland.tasks import ImageTask, PointTask, Tally
+from flatland.tracing import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction
 
-__all__ = ["ReparamHooks", "default_kappa_film", "reparam"]
+__all__ = ["ReparamTransforms", "default_kappa_film", "reparam"]
 
 
 def default_kappa_film(pixel_width: float) -> float:
@@ -54,7 +47,7 @@ def default_kappa_film(pixel_width: float) -> float:
     return 2.0 / (0.4 * pixel_width) ** 2
 
 
-class ReparamHooks(Hooks):
+class ReparamTransforms(Identity):
     """Film and angle translations following the point the probes choose, inside convolution kernels.
 
     Film: kernel g = N(0, 1/κ_film) on t. Directions: von Mises of concentration κ on
@@ -80,7 +73,7 @@ class ReparamHooks(Hooks):
     ) -> Choice:  # fmt: skip
         n, m = probes.shape
         prim, coord = trace(np.repeat(np.arange(n), m), probes.reshape(-1))
-        return choose_points(
+        return select_points(
             ctx.geom,
             origins,
             prim.reshape(n, m),
@@ -91,7 +84,7 @@ class ReparamHooks(Hooks):
             self.refine,
         )
 
-    def film(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
+    def camera(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
         n, sigma, geom = t.size, 1.0 / np.sqrt(self.kappa_film), ctx.geom
         center = t + sigma * draws.normals("kernel.film")
         density = None
@@ -160,8 +153,14 @@ class ReparamHooks(Hooks):
     Option("paired", False, check_bool),
 )
 def reparam(
-    job: Job, kappa: float, kappa_film: float | None, probes: int, spread: float, refine: int, paired: bool
-) -> BatchResult:
+    task: ImageTask | PointTask,
+    kappa: float,
+    kappa_film: float | None,
+    probes: int,
+    spread: float,
+    refine: int,
+    paired: bool,
+) -> Tally:
     """Differentiate after translating every pixel and shading integral so its discontinuities stay put.
 
     Options
@@ -181,7 +180,7 @@ def reparam(
         2 (1 - Φ(3)) = 0.3%.
     refine : int
         Bisection steps toward the discontinuity the probes bracket (default 2;
-        see :mod:`flatland.methods.heuristic`).
+        see :mod:`flatland.probes`).
     paired : bool
         Two evaluations share one transform and serve as each other's control
         variate (DESIGN 2.9), at twice the cost per level. The kernel is then used in
@@ -216,9 +215,9 @@ def reparam(
     log-derivative grows like 1 / distance near its support's end (a mildly heavy
     tail); the Gaussian filter's does not.
     """
-    if job.point is None:
-        check_continuous_filter(job.scene.camera.filter)
+    if isinstance(task, ImageTask):
+        check_continuous_filter(task.scene.camera.filter)
     if kappa_film is None:
-        kappa_film = default_kappa_film(job.scene.camera.pixel_width)
-    hooks = ReparamHooks(kappa, kappa_film, probes, spread, refine, paired)
-    return run(job, job.geometry(variable(0.0)), hooks)
+        kappa_film = default_kappa_film(task.scene.camera.pixel_width)
+    transforms = ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired)
+    return task.evaluate(variable(0.0), transforms)

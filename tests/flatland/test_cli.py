@@ -21,7 +21,8 @@ import pytest
 from flatland.__main__ import PACKAGE, main
 from flatland.app.study import load_config, read_csv
 from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_depth
-from flatland.scene import load_scene, parameter_names, parse_parameter
+from flatland.scene import load_scene, parameter_names
+from flatland.state import parse_parameter
 
 
 def run(*args, cwd=None):

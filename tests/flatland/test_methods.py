@@ -33,13 +33,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import flatland.integrator as integrator
 import flatland.methods.boundary as boundary
+import flatland.tasks as tasks
 from flatland.core.dual import detach, tangent, variable
 from flatland.core.stats import normal_quantile, sidak
-from flatland.methods.heuristic import choose_points
+from flatland.probes import select_points
 from flatland.render import render_gradient
-from flatland.scene import bind, list_scenes, load_scene
+from flatland.scene import list_scenes, load_scene
+from flatland.state import build_state
 
 ALPHA = 1e-3
 EPS = np.finfo(np.float64).eps
@@ -188,7 +189,7 @@ def test02b_reparam_bias_is_seen_per_pixel_and_bounded(name, param, record_prope
     The penumbra scene is the worst: its emitter is unfaded, and where a blocker's
     tangent line happens to separate the emitter from the floor point the heuristic
     follows the blocker while the emitter's edge stays put (see
-    :mod:`flatland.methods.heuristic`). In the others a probe pair straddles two
+    :mod:`flatland.probes`). In the others a probe pair straddles two
     edges that move differently (two occluders, a polygon's corner, the ball behind
     the occluder), and one translation follows only one of them. The bound on the
     relative error is a regression bound on a biased estimator (about 1.3x the
@@ -224,10 +225,10 @@ def test03_results_do_not_depend_on_memory_chunks_or_batches(monkeypatch, method
     param = "ball.translate.y"
     whole = render_gradient(scene, param, method=method, spp=64, seed=9, batches=8, **options)
     one = render_gradient(scene, param, method=method, spp=64, seed=9, batches=1, **options)
-    monkeypatch.setattr(integrator, "CHUNK", 100)
+    monkeypatch.setattr(tasks, "CHUNK", 100)
     monkeypatch.setattr(boundary, "MAX_CANDIDATES", 7)
     pieces = render_gradient(scene, param, method=method, spp=64, seed=9, batches=8, **options)
-    monkeypatch.setattr(integrator, "CHUNK", 7)
+    monkeypatch.setattr(tasks, "CHUNK", 7)
     tiny = render_gradient(scene, param, method=method, spp=64, seed=9, batches=8, **options)
     scale = 1e3 * max(np.max(np.abs(whole.value)), np.max(np.abs(whole.derivative)))
     others = (pieces, tiny) if method == "boundary" else (pieces, tiny, one)
@@ -275,8 +276,8 @@ def test04_probe_heuristic_one_configuration_per_rule():
     prim = np.array([c[0] for c in cases])
     coord = np.array([c[1] for c in cases], dtype=np.float64)
     n = prim.shape[0]
-    geom = bind(load_scene(HEURISTIC_SCENE), "right.translate.x", variable(0.0))
-    choice = choose_points(geom, np.zeros((n, 2)), prim, coord, np.tile([0.0, 1.0], (n, 1)))
+    geom = build_state(load_scene(HEURISTIC_SCENE), "right.translate.x", variable(0.0))
+    choice = select_points(geom, np.zeros((n, 2)), prim, coord, np.tile([0.0, 1.0], (n, 1)))
     assert choice.code.tolist() == [c[2] for c in cases]
     assert choice.ok.tolist() == [c[3] is not None for c in cases]
     for i, (_, _, _, point) in enumerate(cases):
@@ -293,12 +294,12 @@ def test05_a_chosen_point_on_the_shading_point_keeps_the_identity(monkeypatch):
     samples must fall back to the identity: the image is then the naive one.
     """
     import flatland.methods.reparam as reparam_module
-    from flatland.methods.heuristic import Choice
+    from flatland.probes import Choice
 
     def at_origin(geom, origins, *args, **kwargs):
         return Choice(np.array(origins, dtype=float), np.zeros(len(origins), dtype=int))
 
-    monkeypatch.setattr(reparam_module, "choose_points", at_origin)
+    monkeypatch.setattr(reparam_module, "select_points", at_origin)
     scene = load_scene("shadow").with_camera(pixels=8)
     g = render_gradient(scene, "occluder.translate.x", method="reparam", spp=16, seed=1, kappa_film=1e12)
     assert np.all(np.isfinite(g.derivative))

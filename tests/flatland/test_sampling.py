@@ -53,6 +53,17 @@ for _kappa in (1.0, 10.0, 100.0, 1e3, 1e4, 1e5):
         (0.3 - _w, 0.3 + _w),
     )
 
+# the film's pixel filters, appended last so the cases above keep their streams; the Gaussian
+# filter's mass beyond its 4 sigma (= 2 Δt) is pooled into one cell
+FILTER_WIDTH = 0.3
+"""A pixel width Δt."""
+for _kind, _support in (("box", 0.5), ("tent", 1.0), ("gaussian", 2.0)):
+    CASES[f"filter_{_kind}"] = (
+        lambda u, k=_kind: s.sample_filter(k, u, 0.1, FILTER_WIDTH),
+        lambda x, k=_kind: s.pdf_filter(k, x, 0.1, FILTER_WIDTH),
+        (0.1 - _support * FILTER_WIDTH, 0.1 + _support * FILTER_WIDTH),
+    )
+
 LEVEL = sidak(ALPHA, len(CASES))
 
 
@@ -61,10 +72,12 @@ def test01_pdf_integrates_to_one(name):
     _, pdf, (lo, hi) = CASES[name]
     if name.startswith("von_mises"):
         lo, hi = 0.3 - np.pi, 0.3 + np.pi  # the whole circle
-    elif name == "gaussian":
+    elif name in ("gaussian", "filter_gaussian"):
         lo, hi = -np.inf, np.inf
     breaks = [
-        b for b in (*EDGES, 0.4 - np.pi / 2, 0.4 + np.pi / 2, 1.0, 0.3) if lo < b < hi and np.isfinite(lo)
+        b
+        for b in (*EDGES, 0.4 - np.pi / 2, 0.4 + np.pi / 2, 1.0, 0.3, 0.1)
+        if lo < b < hi and np.isfinite(lo)
     ]
     total, _ = integrate.quad(lambda x: float(pdf(np.array(x))), lo, hi, points=breaks or None, limit=400)
     assert total == pytest.approx(1.0, abs=1e-7)
@@ -120,3 +133,21 @@ def test07_log_densities_accept_duals_and_match_the_densities():
     np.testing.assert_allclose(lv.tangent, -50.0 * np.sin(x - 0.3), rtol=1e-13)
     with pytest.raises(ValueError, match=r"^mu"):
         s.sample_von_mises(np.array([0.5]), np.nan, 1.0)
+
+
+@pytest.mark.parametrize("kind", ["box", "tent", "gaussian"])
+def test08_film_filter_is_its_own_sampling_density(kind):
+    """The integrator divides by pdf_filter where it evaluates the filter at a film sample: the two agree
+    on plain samples, and the chi-square check of the pair rejects a filter of another width."""
+    t = s.sample_filter(kind, stream(7, "filter_pdf").random(1001), 0.1, FILTER_WIDTH)
+    assert np.array_equal(
+        s.pdf_filter(kind, t, 0.1, FILTER_WIDTH), s.filter_value(kind, t, 0.1, FILTER_WIDTH)
+    )
+    x = s.sample_filter(
+        kind, stream(7, "filter_wrong", ["box", "tent", "gaussian"].index(kind)).random(N), 0.1, FILTER_WIDTH
+    )
+    wide = 1.1 * FILTER_WIDTH
+    result = chi2_gof(
+        x, lambda y: s.pdf_filter(kind, y, 0.1, wide), BINS, (0.1 - 2.0 * wide, 0.1 + 2.0 * wide)
+    )
+    assert result.p_value < 1e-10

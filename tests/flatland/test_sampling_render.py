@@ -1,4 +1,7 @@
-"""The renderer's samplers: pixel filters, plain and blurred; emitter directions; the light mixture.
+"""The renderer's samplers: blurred pixel filters, emitter directions, the light mixture.
+
+The plain pixel filters (:func:`~flatland.sampling.sample_filter` / :func:`~flatland.sampling.pdf_filter`)
+are checked with the other sample/pdf pairs in ``test_sampling.py``.
 
 Chi-square goodness of fit with 51 bins (odd) over 200 000 samples per case. The family
 of cases rejects a correct sampler with probability ALPHA = 1e-3 overall: each case is
@@ -18,9 +21,9 @@ from scipy import integrate
 from flatland import sampling as s
 from flatland.core.rng import stream
 from flatland.core.stats import chi2_gof, chi2_gof_counts, sidak
-from flatland.integrator import filter_blurred, filter_sample, filter_value
 from flatland.lights import Lights
-from flatland.scene import bind, load_scene
+from flatland.scene import load_scene
+from flatland.state import build_state
 
 N = 200_000
 BINS = 51
@@ -50,7 +53,7 @@ LIGHTS_SCENE = {
 
 
 def _lights_case():
-    lights = Lights.of(bind(load_scene(LIGHTS_SCENE)))
+    lights = Lights.of(build_state(load_scene(LIGHTS_SCENE)))
 
     def sample(u):
         v = stream(7, "lights").random((u.size, 2))
@@ -65,22 +68,13 @@ def _blurred_case(kind):
 
     def sample(u):
         z = stream(7, "blur", kind == "tent").standard_normal(u.size)
-        return filter_sample(kind, u, 0.0, width) + sigma * z
+        return s.sample_filter(kind, u, 0.0, width) + sigma * z
 
-    return sample, lambda y: filter_blurred(kind, y, width, sigma), (-0.6, 0.6)
-
-
-def _filter_case(kind):
-    w = 0.3  # the Gaussian's mass beyond its 4 sigma (= 2 w) is pooled into one cell
-    support = {"box": (-0.5 * w, 0.5 * w), "tent": (-w, w), "gaussian": (-2.0 * w, 2.0 * w)}
-    return lambda u: filter_sample(kind, u, 0.0, w), lambda t: filter_value(kind, t, 0.0, w), support[kind]
+    return sample, lambda y: s.filter_blurred(kind, y, width, sigma), (-0.6, 0.6)
 
 
 CASES = {
     # histogram ranges are the densities' supports, so no bin straddles a jump
-    "filter_box": _filter_case("box"),
-    "filter_tent": _filter_case("tent"),
-    "filter_gaussian": _filter_case("gaussian"),
     "segment_direction": (
         lambda u: s.sample_segment_direction(u, X, A, B),
         lambda phi: s.pdf_segment_direction(phi, X, A, B),
@@ -107,7 +101,7 @@ def test01_pdf_integrates_to_one(name):
     _, pdf, (lo, hi) = CASES[name]
     x = (
         np.linspace(lo - 1.0, hi + 1.0, 400_001)
-        if name.startswith(("blurred", "filter"))
+        if name.startswith("blurred")
         else np.linspace(-np.pi, np.pi, 400_001)
     )
     total = integrate.trapezoid(pdf(x), x)

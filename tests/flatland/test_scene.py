@@ -10,7 +10,8 @@ import pytest
 
 from flatland.core.dual import Dual, detach, tangent, variable
 from flatland.core.validate import ValidationError
-from flatland.scene import Scene, bind, list_scenes, load_scene, parse_parameter
+from flatland.scene import Scene, list_scenes, load_scene
+from flatland.state import build_state, parse_parameter
 
 BUILTINS = ("penumbra", "polygon", "shadow", "silhouette", "two_occluders")
 
@@ -148,7 +149,7 @@ def test05_unknown_parameters_are_rejected(name):
 
 
 def _moved(scene: Scene, param: str, theta: float):
-    g = bind(scene, param, theta)
+    g = build_state(scene, param, theta)
     return {
         k: np.asarray(detach(getattr(g, k)))
         for k in ("seg_a", "seg_b", "circ_c", "circ_r", "emission", "albedo", "cam_o", "cam_f")
@@ -205,12 +206,12 @@ def test06_each_parameter_kind_moves_what_it_names():
 )
 def test07_dual_binding_tangents_equal_central_differences(param):
     scene = load_scene(_base())
-    g = bind(scene, param, variable(0.0))
+    g = build_state(scene, param, variable(0.0))
     h = 1e-6
     plus, minus = _moved(scene, param, h), _moved(scene, param, -h)
     for key in plus:
         arr = getattr(g, key)
         fd = (plus[key] - minus[key]) / (2 * h)
         assert np.allclose(tangent(arr), fd, atol=1e-8), key
-    assert g.differentiable and not bind(scene).differentiable
+    assert g.differentiable and not build_state(scene).differentiable
     assert isinstance(g.detached().seg_a, np.ndarray) and not isinstance(g.detached().seg_a, Dual)

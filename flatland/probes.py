@@ -1,7 +1,7 @@
 """Choosing the point a reparameterization follows, from probe rays (Loubet et al. 2019, Sec. 4.3).
 
-Where the integrator calls it: not directly. :class:`~flatland.methods.reparam.ReparamHooks`
-calls :func:`choose_points` from its ``film`` and ``directions`` hooks, once per chunk
+Where the integrator calls it: not directly. :class:`~flatland.methods.reparam.ReparamTransforms`
+calls :func:`select_points` from its ``camera`` and ``directions`` transforms, once per chunk
 of samples, after tracing the probes and before forming the evaluation points.
 
 The 2D form of DESIGN 2.8. Per sample, a few probe rays are traced inside the
@@ -36,7 +36,7 @@ Three refinements, each measured to matter in flatland and each keeping the choi
   halved by tracing its midpoint, moving the followed point toward the
   discontinuity; each step costs one ray per sample that has a bracket.
 
-The chosen point is *attached* (:func:`flatland.geometry.attached_points`): it moves
+The chosen point is *attached* (:func:`flatland.tracing.attached_points`): it moves
 with its shape, and the intersection of two tangent lines is recomputed from the
 attached points and normals, so its derivative is the corner's.
 
@@ -54,10 +54,10 @@ from typing import Any
 
 import numpy as np
 
-from flatland.geometry import attached_points, zeros
-from flatland.scene import Geometry
+from flatland.state import SceneState
+from flatland.tracing import attached_points, zeros
 
-__all__ = ["PARALLEL", "Choice", "choose_points"]
+__all__ = ["PARALLEL", "Choice", "select_points"]
 
 PARALLEL = 0.99
 """|n0·n1| above which two tangent lines count as parallel (DESIGN 2.8)."""
@@ -106,8 +106,8 @@ def _nearest_switch(shape: np.ndarray, chosen: np.ndarray) -> tuple[np.ndarray, 
 Tracer = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def choose_points(
-    geom: Geometry,
+def select_points(
+    geom: SceneState,
     origins: np.ndarray,
     prim: np.ndarray,
     coord: np.ndarray,

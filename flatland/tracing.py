@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach
-from flatland.scene import Geometry
+from flatland.state import SceneState
 
 __all__ = [
     "Attached",
@@ -67,13 +67,13 @@ def angle_of(v: Any) -> Any:
     return np.arctan2(v[..., 1], v[..., 0])
 
 
-def film_direction(geom: Geometry, t: Any) -> Any:
+def film_direction(geom: SceneState, t: Any) -> Any:
     """Unit ray direction normalize(forward + t · right) for film coordinates ``t`` (DESIGN 3)."""
     d = geom.cam_f + t[..., None] * geom.cam_r
     return d / np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])[..., None]
 
 
-def film_coordinate(geom: Geometry, v: Any) -> Any:
+def film_coordinate(geom: SceneState, v: Any) -> Any:
     """Film coordinate t = (v · right) / (v · forward) of direction vectors ``v`` from the camera."""
     return (v[..., 0] * geom.cam_r[0] + v[..., 1] * geom.cam_r[1]) / (
         v[..., 0] * geom.cam_f[0] + v[..., 1] * geom.cam_f[1]
@@ -105,12 +105,12 @@ class Hits:
         return self.prim >= 0
 
 
-def cast(geom: Geometry, origins: np.ndarray, dirs: np.ndarray, ignore: np.ndarray | None = None) -> Hits:
+def cast(geom: SceneState, origins: np.ndarray, dirs: np.ndarray, ignore: np.ndarray | None = None) -> Hits:
     """Closest hit of every ray ``origins + s dirs`` (s > 0) against every primitive.
 
     Parameters
     ----------
-    geom : Geometry
+    geom : SceneState
         Only values are used (Duals are detached).
     origins : ndarray, shape (n, 2) or (2,)
         Ray origins.
@@ -208,7 +208,7 @@ def _segment_normal(e: Any) -> Any:
     return np.stack([e[..., 1] / length, -e[..., 0] / length], axis=-1)
 
 
-def attach(geom: Geometry, hits: Hits, rows: np.ndarray, origins: Any, dirs: Any) -> Attached:
+def attach(geom: SceneState, hits: Hits, rows: np.ndarray, origins: Any, dirs: Any) -> Attached:
     """Re-attach the hits ``rows`` (which must all hit) to the θ-dependent geometry and rays.
 
     ``origins`` (shape (2,) or (len(rows), 2)) and ``dirs`` (len(rows), 2) may be
@@ -251,7 +251,7 @@ def attach(geom: Geometry, hits: Hits, rows: np.ndarray, origins: Any, dirs: Any
     return Attached(point, normal, u_out)
 
 
-def attached_points(geom: Geometry, prim: np.ndarray, coord: np.ndarray) -> tuple[Any, Any]:
+def attached_points(geom: SceneState, prim: np.ndarray, coord: np.ndarray) -> tuple[Any, Any]:
     """Points that follow the shape, and their normals, for hits ``(prim, coord)`` (all hits).
 
     Segment: a(θ) + u (b(θ) - a(θ)) with the barycentric u detached; circle:
@@ -279,7 +279,7 @@ def attached_points(geom: Geometry, prim: np.ndarray, coord: np.ndarray) -> tupl
 
 
 # ------------------------------------------------------------------ discontinuities
-def silhouette_angles(geom: Geometry, origins: Any) -> tuple[Any, np.ndarray]:
+def silhouette_angles(geom: SceneState, origins: Any) -> tuple[Any, np.ndarray]:
     """Angles of every candidate discontinuity seen from each origin (DESIGN 2.10).
 
     The candidates are the shapes' vertices and the two tangent points of every

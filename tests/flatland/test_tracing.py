@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import flatland.geometry as geometry
+import flatland.tracing as tracing
 from flatland.core.dual import detach, tangent, variable
-from flatland.geometry import (
+from flatland.scene import load_scene
+from flatland.state import build_state
+from flatland.tracing import (
     attach,
     attached_points,
     cast,
@@ -16,7 +18,6 @@ from flatland.geometry import (
     film_direction,
     silhouette_angles,
 )
-from flatland.scene import bind, load_scene
 
 SCENE = {
     "name": "g",
@@ -57,7 +58,7 @@ def _random_rays(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test01_cast_matches_a_brute_force_reference():
-    geom = bind(load_scene(SCENE))
+    geom = build_state(load_scene(SCENE))
     origins, dirs = _random_rays(1, 300)
     hits = cast(geom, origins, dirs)
     for i in range(300):
@@ -69,7 +70,7 @@ def test01_cast_matches_a_brute_force_reference():
 
 
 def test02_hit_coordinates_locate_the_hit_point():
-    geom = bind(load_scene(SCENE))
+    geom = build_state(load_scene(SCENE))
     origins, dirs = _random_rays(2, 500)
     hits = cast(geom, origins, dirs)
     rows = np.flatnonzero(hits.hit)
@@ -81,10 +82,10 @@ def test02_hit_coordinates_locate_the_hit_point():
 
 
 def test03_chunking_and_ignore(monkeypatch):
-    geom = bind(load_scene(SCENE))
+    geom = build_state(load_scene(SCENE))
     origins, dirs = _random_rays(3, 400)
     whole = cast(geom, origins, dirs)
-    monkeypatch.setattr(geometry, "MAX_PAIRS", 13)  # two rays per chunk
+    monkeypatch.setattr(tracing, "MAX_PAIRS", 13)  # two rays per chunk
     chunked = cast(geom, origins, dirs)
     assert np.array_equal(whole.prim, chunked.prim) and np.array_equal(whole.dist, chunked.dist)
     ignored = cast(geom, origins, dirs, ignore=whole.prim)
@@ -101,7 +102,7 @@ def test04_attach_gives_the_hit_and_its_derivative():
     origins = np.tile([0.1, -2.5], (200, 1))
     dirs = direction(rng.uniform(0.9, 2.2, 200))
     for param in ("a.rotate", "b.vertex.2.x", "c.translate.y", "c.scale", "d.translate.x"):
-        geom = bind(scene, param, variable(0.0))
+        geom = build_state(scene, param, variable(0.0))
         hits = cast(geom, origins, dirs)
         rows = np.flatnonzero(hits.hit)
         att = attach(geom, hits, rows, origins[rows], dirs[rows])
@@ -109,7 +110,7 @@ def test04_attach_gives_the_hit_and_its_derivative():
         h = 1e-6
         moved = []
         for sign in (1, -1):
-            g = bind(scene, param, sign * h)
+            g = build_state(scene, param, sign * h)
             hh = cast(g, origins[rows], dirs[rows])
             same = hh.prim == hits.prim[rows]
             moved.append((origins[rows] + hh.dist[:, None] * dirs[rows], same))
@@ -123,11 +124,11 @@ def test05_attached_points_move_with_the_shape():
     prim = np.array([0, 1, 2, 4, 5])
     coord = np.array([0.3, 0.8, 0.5, 0.7, -2.0])
     for param in ("a.translate.x", "b.rotate", "c.scale", "d.translate.y"):
-        p, n = attached_points(bind(scene, param, variable(0.0)), prim, coord)
+        p, n = attached_points(build_state(scene, param, variable(0.0)), prim, coord)
         h = 1e-6
         fd = (
-            attached_points(bind(scene, param, h), prim, coord)[0]
-            - attached_points(bind(scene, param, -h), prim, coord)[0]
+            attached_points(build_state(scene, param, h), prim, coord)[0]
+            - attached_points(build_state(scene, param, -h), prim, coord)[0]
         ) / (2 * h)
         assert np.allclose(tangent(p), fd, atol=1e-6), param
         assert np.allclose(np.linalg.norm(detach(n), axis=1), 1.0)
@@ -135,7 +136,7 @@ def test05_attached_points_move_with_the_shape():
 
 def test06_silhouette_angles_point_at_vertices_and_circle_tangents():
     scene = load_scene(SCENE)
-    geom = bind(scene, "c.translate.x", variable(0.0))
+    geom = build_state(scene, "c.translate.x", variable(0.0))
     o = np.array([[0.0, -3.0], [2.5, 3.0], [1.5, 1.0]])  # the last one is inside circle c
     phi, exists = silhouette_angles(geom, o)
     v = detach(geom.vertices)
@@ -158,15 +159,15 @@ def test06_silhouette_angles_point_at_vertices_and_circle_tangents():
     # circle c moves with θ: its tangent angles do, by the derivative of base ± arcsin(r / |c - o|)
     h = 1e-6
     fd = (
-        silhouette_angles(bind(scene, "c.translate.x", h), o)[0]
-        - silhouette_angles(bind(scene, "c.translate.x", -h), o)[0]
+        silhouette_angles(build_state(scene, "c.translate.x", h), o)[0]
+        - silhouette_angles(build_state(scene, "c.translate.x", -h), o)[0]
     ) / (2 * h)
     assert np.allclose(tangent(phi)[exists], fd[exists], atol=1e-6)
 
 
 @pytest.mark.parametrize("param", ["camera.rotate", "camera.translate.x"])
 def test07_film_coordinate_inverts_film_direction(param):
-    geom = bind(load_scene(SCENE), param, variable(0.0))
+    geom = build_state(load_scene(SCENE), param, variable(0.0))
     t = np.linspace(-0.6, 0.6, 7)
     d = film_direction(geom, t)
     back = film_coordinate(geom, d)

@@ -1,0 +1,152 @@
+"""What a method estimates: the pixels of an image, or the irradiance at one point, in independent batches.
+
+A task fixes the scene, the parameter, the sample count, the seed and the batches;
+``task.evaluate(theta, transforms)`` binds the scene at θ (a float, or a Dual for
+the gradient, :func:`~flatland.state.build_state`), runs the integrator
+(:mod:`flatland.integrator`) once under the method's
+:class:`~flatland.integrator.Transforms`, and returns a :class:`Tally` of per-batch,
+per-pixel means. Methods (:mod:`flatland.methods`) differ only in the ``theta`` and
+the transforms they pass, so they share every primary sample: sample j of pixel p
+has the global index ``p * spp + j`` (batch ``j // (spp / batches)``), and every
+number drawn for it is keyed on that index (:class:`flatland.core.rng.Draws`), so
+results do not depend on :data:`CHUNK`. The same names as :mod:`sphere3d.tasks`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach, tangent
+from flatland.core.rng import Draws
+from flatland.integrator import PRIMARY_UNIFORMS, Context, Identity, Transforms, pixel_samples, shade
+from flatland.lights import Lights
+from flatland.scene import Scene
+from flatland.state import Parameter, SceneState, build_state
+
+__all__ = ["CHUNK", "ImageTask", "PointTask", "Tally"]
+
+CHUNK = 1 << 15
+"""Primary samples processed together (bounds memory; results do not depend on it, up to the
+rounding of the per-pixel sums, which add the same numbers in another grouping)."""
+
+
+@dataclass(frozen=True)
+class Tally:
+    """Per-batch, per-pixel estimates of the value and the derivative, shape (batches, pixels)."""
+
+    value: np.ndarray
+    derivative: np.ndarray
+
+
+@dataclass(frozen=True)
+class ImageTask:
+    """Every pixel of the scene's camera: ``spp`` samples per pixel in ``batches`` batches of
+    ``spp // batches``, which give the standard errors."""
+
+    scene: Scene
+    param: Parameter | None
+    spp: int
+    seed: int
+    batches: int
+
+    @property
+    def pixels(self) -> int:
+        return self.scene.camera.pixels
+
+    @property
+    def per_batch(self) -> int:
+        return self.spp // self.batches
+
+    def state(self, theta: Any) -> SceneState:
+        """The scene bound at parameter offset ``theta`` (float or Dual)."""
+        return build_state(self.scene, self.param, theta)
+
+    def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
+        """Estimate every pixel in every batch at offset ``theta`` under ``transforms`` (default: identity).
+
+        After the sums, ``transforms.pixel_extra`` may add a derivative-only term per
+        batch and pixel (2D only, the boundary method).
+        """
+        state = self.state(theta)
+        transforms = transforms or Identity()
+        value, deriv = _sums(self.spp, self.pixels, self.batches, self.seed, state, transforms, pixel_samples)
+        extra = transforms.pixel_extra(self, state)
+        if extra is not None:
+            deriv = deriv + extra
+        return Tally(value, deriv)
+
+
+@dataclass(frozen=True)
+class PointTask:
+    """The irradiance E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ at a fixed ``point`` with unit
+    ``normal``: ``n`` samples in ``batches`` batches (one "pixel")."""
+
+    scene: Scene
+    param: Parameter | None
+    point: tuple[float, float]
+    normal: tuple[float, float]
+    n: int
+    seed: int
+    batches: int
+
+    pixels = 1
+
+    @property
+    def per_batch(self) -> int:
+        return self.n // self.batches
+
+    def state(self, theta: Any) -> SceneState:
+        """The scene bound at parameter offset ``theta`` (float or Dual)."""
+        return build_state(self.scene, self.param, theta)
+
+    def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
+        """Estimate E at the point in every batch at offset ``theta`` under ``transforms``."""
+
+        def estimate(ctx: Context, pixel: np.ndarray, u: np.ndarray, draws: Draws) -> Any:
+            n = pixel.size
+            x = np.tile(np.array(self.point, dtype=np.float64), (n, 1))
+            normal = np.tile(np.array(self.normal, dtype=np.float64), (n, 1))
+            return shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws)
+
+        value, deriv = _sums(self.n, 1, self.batches, self.seed, self.state(theta), transforms, estimate)
+        return Tally(value, deriv)
+
+
+def _chunks(total: int) -> Iterator[np.ndarray]:
+    """Global sample indices ``pixel * spp + j`` in consecutive ranges of at most :data:`CHUNK`."""
+    for lo in range(0, total, CHUNK):
+        yield np.arange(lo, min(lo + CHUNK, total), dtype=np.int64)
+
+
+def _sums(
+    spp: int,
+    pixels: int,
+    batches: int,
+    seed: int,
+    state: SceneState,
+    transforms: Transforms | None,
+    estimate: Any,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-batch, per-pixel means of ``estimate(ctx, pixel, u, draws)`` (values and tangents)."""
+    state0 = state.detached()
+    ctx = Context(state, state0, Lights.of(state0), transforms or Identity())
+    per_batch = spp // batches
+    size = batches * pixels
+    sums_v = np.zeros(size)
+    sums_t = np.zeros(size)
+    for index in _chunks(pixels * spp):
+        pixel, j = np.divmod(index, spp)
+        batch = j // per_batch
+        draws = Draws.of(seed, index)
+        u = draws.uniforms("samples", PRIMARY_UNIFORMS)  # the primary sample, the same for every method
+        est = estimate(ctx, pixel, u, draws)
+        key = batch * pixels + pixel
+        sums_v += np.bincount(key, weights=detach(est), minlength=size)
+        sums_t += np.bincount(key, weights=tangent(est), minlength=size)
+    value = (sums_v / per_batch).reshape(batches, pixels)
+    deriv = (sums_t / per_batch).reshape(batches, pixels)
+    return value, deriv
