@@ -17,8 +17,8 @@ Then:
   heuristic has an extra rule, the identity when every probe sees one primitive,
   which makes its single probe the identity everywhere);
 - only one of the pair hits: its hit point, moved to the silhouette between the
-  two probes by bisection (:data:`REFINE` rays; a refinement argued in
-  :func:`select_points`);
+  two probes by bisection (``refine`` rays, default :data:`REFINE`, the option
+  ``refine`` of the ``reparam`` method; a refinement argued in :func:`select_points`);
 - both hit: the tangent plane (p_k, n_k) of one *occludes* the other when it
   separates that point from the ray origin o,
   ``(n0·(p1 - p0)) (n0·(o - p0)) < 0``; if exactly one occludes the other, the point
@@ -67,7 +67,8 @@ PARALLEL = 0.99
 DEGENERATE = 1e-6
 """|det| of the plane system below which the intersection is ill-conditioned."""
 REFINE = 3
-"""Bisection rays that move a single probe's hit towards the silhouette next to it (1/8 of the gap)."""
+"""Default bisection rays that move a single probe's hit towards the silhouette next to it (3: to
+1/8 of the gap); the default of the ``reparam`` option ``refine``."""
 
 
 def vmf_spread_angle(kappa: float, spread: float) -> float:
@@ -140,10 +141,11 @@ def _bisect(
     outside: np.ndarray,
     hits: Hits,
     normal: np.ndarray | None,
+    refine: int,
 ) -> Hits:
-    """Move ``hits`` towards their shape's silhouette: :data:`REFINE` bisections between a direction
+    """Move ``hits`` towards their shape's silhouette: ``refine`` bisections between a direction
     that hits the shape (``inside``, with ``hits``) and one that does not (``outside``)."""
-    for _ in range(REFINE):
+    for _ in range(refine):
         mid = inside + outside
         mid = mid / norm(mid)[:, None]
         h = state.tracer.intersect(trace_origin, mid)
@@ -163,6 +165,7 @@ def select_points(
     directions: np.ndarray,
     hits: Hits,
     normal: np.ndarray | None = None,
+    refine: int = REFINE,
 ) -> tuple[Any, np.ndarray]:
     """The point to follow per row of probes, and whether there is one (see the module docstring).
 
@@ -180,6 +183,9 @@ def select_points(
         Their first hits; probes below a shading point's horizon must count as misses.
     normal : ndarray, shape (m, 3), optional
         The shading normal: bisection rays below the horizon count as misses too.
+    refine : int, optional
+        Bisection rays toward the silhouette per single-probe point (default
+        :data:`REFINE`; 0: the probe's own hit).
 
     Returns
     -------
@@ -192,7 +198,7 @@ def select_points(
 
     - When the point comes from one probe of a pair whose other probe sees something
       else, that probe's hit is first moved towards the silhouette between the two
-      by :data:`REFINE` bisection rays (:func:`_bisect`). A rotation that follows a
+      by ``refine`` bisection rays (:func:`_bisect`). A rotation that follows a
       point on a moving object matches the silhouette's motion only to first order
       in their distance, and the apparent motion of a translating object changes by
       about its own size per radian: following a ring probe's hit, up to 3 σ inside
@@ -239,18 +245,18 @@ def select_points(
     use_p1 = (hit1 & ~hit0) | (both & occ1 & ~occ0)
     use_p0 = hit0 & ~use_p1 & ~use_cross
     # a single probe's point with a partner that sees something else: move it to the silhouette
-    refine = np.flatnonzero((use_p0 | use_p1) & (j != 0))
-    if refine.size and REFINE:
-        first = use_p0[refine]
-        inside = np.where(first[:, None], d0[refine], d1[refine])
-        outside = np.where(first[:, None], d1[refine], d0[refine])
-        start = h0.take(refine).where(first, h1.take(refine))
-        tro = np.broadcast_to(trace_origin, (m, 3))[refine]
-        nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[refine]
-        edge = _bisect(state, tro, inside, outside, start, nrm)
+    single = np.flatnonzero((use_p0 | use_p1) & (j != 0))
+    if single.size and refine:
+        first = use_p0[single]
+        inside = np.where(first[:, None], d0[single], d1[single])
+        outside = np.where(first[:, None], d1[single], d0[single])
+        start = h0.take(single).where(first, h1.take(single))
+        tro = np.broadcast_to(trace_origin, (m, 3))[single]
+        nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
+        edge = _bisect(state, tro, inside, outside, start, nrm, refine)
         moved = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
-        p0[refine] = np.where(first[:, None], moved, p0[refine])
-        p1[refine] = np.where(first[:, None], p1[refine], moved)
+        p0[single] = np.where(first[:, None], moved, p0[single])
+        p1[single] = np.where(first[:, None], p1[single], moved)
     point = np.where(use_cross[:, None], crossing, np.where(use_p1[:, None], p1, p0))
     return point, hit0 | hit1
 
@@ -262,9 +268,10 @@ def follow_probes(
     directions: np.ndarray,
     hits: Hits,
     normal: np.ndarray | None = None,
+    refine: int = REFINE,
 ) -> Rotation:
     """The rotation following the point chosen by :func:`select_points` (identity where none)."""
-    point, found = select_points(state, origin, trace_origin, directions, hits, normal)
+    point, found = select_points(state, origin, trace_origin, directions, hits, normal, refine)
     to, found = _towards(point, origin, found)
     return Rotation.following(to, found)
 

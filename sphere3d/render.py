@@ -90,7 +90,9 @@ def render_gradient(
     spp, seed, batches
         As in :func:`render`.
     **options
-        ``h`` (finite_difference); ``kappa``, ``probes``, ``paired`` (reparam).
+        ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
+        ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
+        see :func:`sphere3d.methods.reparam.reparam`).
 
     Returns
     -------

@@ -1,19 +1,29 @@
-"""Layering: the numeric kernel flatland.core, the application layer flatland.app, the renderers.
+"""Layering: the numeric kernel flatland.core, the application layer flatland.app, the renderers;
+and the one vocabulary the two renderers share.
 
-Each check imports in a fresh interpreter and inspects ``sys.modules``, the only place
-an import that should not happen shows. ``import sphere3d`` loads flatland's kernel
+Each layering check imports in a fresh interpreter and inspects ``sys.modules``, the only
+place an import that should not happen shows. ``import sphere3d`` loads flatland's kernel
 (Dual, rng, stats, validation) but not its 2D renderer, its command line or matplotlib;
 ``import flatland`` imports a public name's module on first use (PEP 562).
+
+The vocabulary checks (test07 on) compare explicit lists: the modules both renderers have
+(docs/theory/architecture.md), the public names each pair of modules exposes, and the
+options of the gradient methods both packages have, with the documented finite-difference
+steps pinned.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib
+import inspect
 import json
 import pkgutil
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 import flatland
 import flatland.core
@@ -22,7 +32,10 @@ ROOT = Path(__file__).resolve().parent.parent
 RENDERER = (
     "flatland.render",
     "flatland.integrator",
+    "flatland.tasks",
     "flatland.tracing",
+    "flatland.probes",
+    "flatland.state",
     "flatland.scene",
     "flatland.methods",
 )
@@ -109,3 +122,101 @@ def test06_an_unknown_name_is_an_attribute_error():
         assert "no_such_name" in str(e)
     else:
         raise AssertionError("flatland.no_such_name resolved")
+
+
+# ------------------------------------------------------------------ the vocabulary both renderers share
+PACKAGES = ("flatland", "sphere3d")
+SHARED_MODULES = {
+    "scene", "state", "tracing", "probes", "integrator", "tasks", "sampling", "render",
+    "methods", "methods._common", "methods.naive", "methods.finite_difference", "methods.reparam",
+}  # fmt: skip
+"""Modules both renderers have, with the same role (the table of docs/theory/architecture.md)."""
+RETIRED = {"flatland": {"geometry", "methods.heuristic"}, "sphere3d": set()}
+"""Former module names, gone without compatibility shims."""
+SHARED_NAMES = {
+    "scene": {"Scene", "load_scene", "list_scenes", "parameter_names"},
+    "state": {"SceneState", "build_state"},
+    "tracing": {"Hits", "attached_points"},
+    "probes": {"PARALLEL", "select_points"},
+    "integrator": {"PRIMARY_UNIFORMS", "Transforms", "Identity"},
+    "tasks": {"CHUNK", "ImageTask", "PointTask", "Tally"},
+    "sampling": {"filter_value", "sample_filter", "pdf_filter"},
+    "render": {"GRADIENT_METHODS", "render", "render_gradient", "irradiance"},
+    "methods": {"GRADIENT_METHODS"},
+    "methods._common": {"GRADIENT_METHODS"},
+}
+"""Public names (in ``__all__``) each pair of shared modules exposes, for the same role."""
+PACKAGE_NAMES = {"GRADIENT_METHODS", "render", "render_gradient", "irradiance", "load_scene", "list_scenes"}
+"""Public names of both packages themselves."""
+SHARED_OPTIONS = {
+    "naive": (),
+    "finite_difference": ("h",),
+    "reparam": ("kappa", "probes", "spread", "refine", "paired"),
+}
+"""Gradient methods both packages have, and their options in order (2D-only options aside)."""
+ONLY_2D_OPTIONS = {"reparam": ("kappa_film",)}
+"""Options flatland's methods have beyond the shared ones (the film kernel of a 1D film)."""
+FD_STEP = {"flatland": 1e-3, "sphere3d": 1e-2}
+"""Default finite-difference steps h, documented (with the reason) in each method's docstring."""
+
+
+def _modules(package: str) -> set[str]:
+    """Every module of ``package``, by its name relative to the package."""
+    root = importlib.import_module(package)
+    return {m.name[len(package) + 1 :] for m in pkgutil.walk_packages(root.__path__, package + ".")}
+
+
+def test07_both_renderers_have_the_shared_modules_and_no_retired_ones():
+    for package in PACKAGES:
+        modules = _modules(package)
+        assert "core.dual" in modules or package == "sphere3d"  # the walk sees subpackages
+        assert SHARED_MODULES - modules == set(), package
+        assert RETIRED[package] & modules == set(), package
+
+
+@pytest.mark.parametrize("module", sorted(SHARED_NAMES))
+def test08_each_pair_of_shared_modules_exposes_the_same_public_names(module):
+    pair = [importlib.import_module(f"{package}.{module}") for package in PACKAGES]
+    for mod in pair:
+        assert SHARED_NAMES[module] - set(mod.__all__) == set(), mod.__name__
+        assert all(getattr(mod, name) is not None for name in SHARED_NAMES[module])
+    for name in SHARED_NAMES[module]:  # the same kind of thing: both classes, both functions, ...
+        kinds = {(inspect.isclass(getattr(m, name)), callable(getattr(m, name))) for m in pair}
+        assert len(kinds) == 1, f"{module}.{name}: {kinds}"
+
+
+def test09_the_shared_names_are_defined_where_the_vocabulary_says():
+    for package in PACKAGES:
+        table = importlib.import_module(f"{package}.methods._common").GRADIENT_METHODS
+        for where in ("methods", "render", ""):
+            mod = importlib.import_module(f"{package}.{where}" if where else package)
+            assert mod.GRADIENT_METHODS is table, (package, where)
+        for module, names in SHARED_NAMES.items():
+            mod = importlib.import_module(f"{package}.{module}")
+            for name in names:
+                obj = getattr(mod, name)
+                if inspect.isclass(obj) or inspect.isfunction(obj):
+                    assert obj.__module__ == mod.__name__, f"{package}.{module}.{name} is {obj.__module__}'s"
+        assert PACKAGE_NAMES - set(importlib.import_module(package).__all__) == set(), package
+        integrator = importlib.import_module(f"{package}.integrator")
+        protocol = {n for n, v in vars(integrator.Transforms).items() if inspect.isfunction(v)}
+        assert protocol and protocol <= set(dir(integrator.Identity)), package  # Identity implements it all
+
+
+def test10_methods_of_both_packages_have_the_same_option_names():
+    tables = {p: importlib.import_module(f"{p}.methods").GRADIENT_METHODS for p in PACKAGES}
+    assert set(tables["flatland"].names) & set(tables["sphere3d"].names) == set(SHARED_OPTIONS)
+    for name, shared in SHARED_OPTIONS.items():
+        assert tuple(tables["sphere3d"].get(name).options) == shared, name
+        flat = tuple(
+            o for o in tables["flatland"].get(name).options if o not in ONLY_2D_OPTIONS.get(name, ())
+        )
+        assert flat == shared, name
+
+
+def test11_finite_difference_steps_are_the_documented_ones():
+    """The steps differ on purpose (the docstrings say why); a change of either must be deliberate."""
+    for package, h in FD_STEP.items():
+        method = importlib.import_module(f"{package}.methods").GRADIENT_METHODS.get("finite_difference")
+        assert method.options["h"].default == h, package
+        assert f"default h = {h:.0e}".replace("e-0", "e-") in inspect.getdoc(method.func), package

@@ -5,7 +5,7 @@ per package, both called ``richardson``: the central differences of the package'
 ``finite_difference`` method at steps h and h/2, combined so that their h² error
 cancels. Each is registered in a method table of its own, so importing this module
 leaves the packages' tables unchanged; a real new method registers in
-``flatland.integrator.GRADIENT_METHODS`` (a module of ``flatland/methods/``) or in
+``flatland.methods.GRADIENT_METHODS`` (a module of ``flatland/methods/``) or in
 ``sphere3d.methods.GRADIENT_METHODS`` (a module of ``sphere3d/methods/``) instead.
 ``tests/test_docs.py`` plugs both into the real tables for the duration of a test
 (:meth:`flatland.core.contract.MethodTable.registered`) and renders with them.
@@ -13,10 +13,10 @@ leaves the packages' tables unchanged; a real new method registers in
 
 from __future__ import annotations
 
-from flatland import integrator as flatland_integrator
+from flatland import methods as flatland_methods
+from flatland import tasks as flatland_tasks
 from flatland.core.contract import MethodTable, Option
 from flatland.core.validate import check_positive
-from flatland.integrator import BatchResult, Job
 from sphere3d import methods as sphere3d_methods
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
@@ -28,14 +28,16 @@ __all__ = [
 ]
 
 FLATLAND_EXAMPLE_METHODS = MethodTable("example gradient method")
-"""The guide's own flatland table (a new flatland method uses ``flatland.integrator.GRADIENT_METHODS``)."""
+"""The guide's own flatland table (a new flatland method uses ``flatland.methods.GRADIENT_METHODS``)."""
 
 SPHERE3D_EXAMPLE_METHODS = MethodTable("example gradient method")
 """The guide's own sphere3d table (a new sphere3d method uses ``sphere3d.methods.GRADIENT_METHODS``)."""
 
 
 @FLATLAND_EXAMPLE_METHODS.register("richardson", Option("h", 1e-3, check_positive))
-def richardson_flatland(job: Job, h: float) -> BatchResult:
+def richardson_flatland(
+    task: flatland_tasks.ImageTask | flatland_tasks.PointTask, h: float
+) -> flatland_tasks.Tally:
     """``[4 D(h/2) - D(h)] / 3`` per pixel and batch, D(s) the central difference with step s.
 
     Richardson extrapolation of the ``finite_difference`` method (not part of the
@@ -51,10 +53,10 @@ def richardson_flatland(job: Job, h: float) -> BatchResult:
     The value is the naive value, bit for bit. ``h`` must be < 1 for a ``*.scale``
     parameter (checked by ``finite_difference``, the error names ``h``).
     """
-    central = flatland_integrator.GRADIENT_METHODS.get("finite_difference").func
-    wide, narrow = central(job, h), central(job, 0.5 * h)
+    central = flatland_methods.GRADIENT_METHODS.get("finite_difference").func
+    wide, narrow = central(task, h), central(task, 0.5 * h)
     # E[D(s)] = I' + s² I'''/6 + O(s⁴): (4 D(h/2) - D(h)) / 3 = I' + O(h⁴)   (Richardson, per batch)
-    return BatchResult(narrow.value, (4.0 * narrow.derivative - wide.derivative) / 3.0)
+    return flatland_tasks.Tally(narrow.value, (4.0 * narrow.derivative - wide.derivative) / 3.0)
 
 
 @SPHERE3D_EXAMPLE_METHODS.register("richardson", Option("h", 1e-2, check_positive))

@@ -15,7 +15,7 @@ module's docstring says which of these it changes; the guide
                           option ``h``
 ``reparam``               rotations chosen by probe rays, vMF convolution;
                           options ``kappa``, ``probes``, ``spread``,
-                          ``paired``
+                          ``refine``, ``paired``
 ========================  =====================================================
 
 There is no ``boundary`` method on the sphere: sampling silhouette curves on S²

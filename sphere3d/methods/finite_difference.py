@@ -27,6 +27,17 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     the truncation error ``h² I'''/6 + O(h⁴)`` (per pixel), with a variance that grows
     like 1/h at edges. Not part of the paper: the reference the other methods are
     checked against. For ``*.scale`` parameters (scale by 1 + θ) h must be < 1.
+
+    The default h = 1e-2 is ten times flatland's: the step trades the truncation bias
+    (O(1) in pixels whose I(θ) has a kink within h) against a variance that grows
+    like 1 / h, and the ``shadow`` image has 4096 pixels here and 64 in flatland, at
+    about the same cost per sample, so each pixel gets far fewer samples for the same
+    time and the noise term dominates. Measured on ``shadow`` (``occluder.translate.x``, 256 samples per
+    pixel): the per-pixel standard error was 0.040 at h = 1e-2 and 0.126 at h = 1e-3
+    (the predicted factor √10), while the bias at 1e-2 stayed below the noise (the
+    image's summed derivative -6.4 ± 0.6 at h = 0.1, -6.2 ± 2.6 at h = 1e-2).
+    Embree's float32 tracing is not what limits h: it places an edge to about 1e-7
+    of the scene's size, far inside the band ``h |c'|`` that even h = 1e-3 sees.
     """
     if (task.param or "").endswith(".scale") and h >= 1.0:
         raise ValidationError(

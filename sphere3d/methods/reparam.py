@@ -29,6 +29,7 @@ from flatland.core.validate import ValidationError, check_bool, check_int, check
 from sphere3d.integrator import Shading
 from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.probes import (
+    REFINE,
     follow_probes,
     mean_point_direction,
     ring_directions,
@@ -73,6 +74,9 @@ class ReparamTransforms:
         deviations (:mod:`sphere3d.probes`), >= 0: any value has a ring, whose angle
         grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film it is
         capped at the filter's radius.
+    refine : int
+        Bisection rays that move a single probe's hit toward the silhouette next to
+        it, >= 0 (:func:`~sphere3d.probes.select_points`).
     paired : bool
         Two kernel samples per outer sample share one rotation (DESIGN 2.9).
     """
@@ -80,6 +84,7 @@ class ReparamTransforms:
     kappa: float | None
     probes: int
     spread: float
+    refine: int
     paired: bool
 
     def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
@@ -93,7 +98,7 @@ class ReparamTransforms:
         s = ring_offsets(radius, self.probes, u)
         d = cam.directions(cols[:, None] + 0.5 + s[..., 0], rows[:, None] + 0.5 + s[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
-        return follow_probes(state, cam.origin, detach(cam.origin), d, hits)
+        return follow_probes(state, cam.origin, detach(cam.origin), d, hits, refine=self.refine)
 
     def emitter(self, shading: Shading) -> Rotation:
         """Emitter sampling: one rotation per shading point from ``probes`` shadow rays (Sec. 4.3).
@@ -153,7 +158,7 @@ class ReparamTransforms:
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
         normal = detach(shading.n)
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
-        return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal)
+        return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal, self.refine)
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
         """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (DESIGN 2.7)."""
@@ -224,10 +229,11 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("kappa", 1000.0, _check_kappa),
     Option("probes", 4, check_int),  # an integer >= 1; one probe has no pair and stands alone
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
+    Option("refine", REFINE, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
 )
 def reparam(
-    task: ImageTask | PointTask, kappa: float | None, probes: int, spread: float, paired: bool
+    task: ImageTask | PointTask, kappa: float | None, probes: int, spread: float, refine: int, paired: bool
 ) -> Tally:
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
@@ -259,6 +265,12 @@ def reparam(
       an edge grows like √κ. ``kappa=None``: no kernel, probes from the cosine
       density (one rotation for the whole hemisphere: strongly biased, for study).
 
+    ``refine`` (an integer >= 0, default :data:`~sphere3d.probes.REFINE` = 3): where the
+    followed point is one probe's hit and its partner sees something else (camera and
+    cosine-sampling rotations), ``refine`` bisection rays first move that hit toward
+    the silhouette between the two probes (:func:`~sphere3d.probes.select_points`);
+    0 follows the probe's own hit. flatland's option of the same name defaults to 2.
+
     Samples whose integrand is 0 with a zero derivative whatever the rotation (a
     shadow ray blocked, a cosine ray hitting a dark surface) get no probes. The
     primal is bit-identical to ``naive``'s for the same seed, except with
@@ -272,4 +284,4 @@ def reparam(
         check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
-    return task.evaluate(variable(0.0), ReparamTransforms(kappa, probes, spread, paired))
+    return task.evaluate(variable(0.0), ReparamTransforms(kappa, probes, spread, refine, paired))
