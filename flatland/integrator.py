@@ -26,9 +26,10 @@ Random numbers. Sample j of pixel p has the global index ``p * spp + j`` (batch
 (stream ``"samples"``) as much as a method's kernel or probe draws, is keyed on that
 index (:class:`flatland.core.rng.Draws`). Every method therefore sees the same
 primary samples for a seed, and an image does not depend on
-:data:`~flatland.tasks.CHUNK` (how
-samples are grouped for vectorization, which bounds memory) nor, sample for
-sample, on the number of batches.
+:data:`~flatland.tasks.CHUNK` (how samples are grouped for vectorization, which
+bounds memory) nor, sample for sample, on the number of batches. The loop over
+samples and batches is :meth:`flatland.tasks.ImageTask.evaluate` (and
+:class:`~flatland.tasks.PointTask` for E at one point), as in sphere3d.
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ def test01_api_exports_and_methods():
     assert image.batches == 4 and image.spp == 4 and image.scene == "shadow"
     g = s3.render_gradient(_small("shadow"), "occluder.translate.x", spp=8, seed=3, kappa=300.0)
     assert isinstance(g, s3.GradientImage) and g.derivative.shape == (12, 12)
-    assert dict(g.options) == {"kappa": 300.0, "probes": 4, "spread": 3.0, "paired": False}
+    assert dict(g.options) == {"kappa": 300.0, "probes": 4, "spread": 3.0, "refine": 3, "paired": False}
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
 
@@ -189,3 +189,19 @@ def test10_results_do_not_depend_on_memory_chunks(monkeypatch, method, options):
         scale = 1e3 * max(abs(point.value), abs(point.derivative))
         assert abs(again.value - point.value) <= 64 * np.finfo(float).eps * scale
         assert abs(again.derivative - point.derivative) <= 64 * np.finfo(float).eps * scale
+
+
+def test11_reparam_refine_is_a_checked_option_that_moves_only_the_derivative():
+    """``refine`` (bisection rays toward a silhouette) is validated like flatland's; any value keeps
+    the naive primal bit for bit, and it changes which point the rotations follow, so the derivative
+    at refine=0 (the probe's own hit) differs from the default's (the comparison can fail)."""
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValidationError, match=r"^refine: must be an integer >= 0"):
+            s3.render_gradient(_small("shadow", 4), "occluder.translate.x", spp=4, refine=bad)
+    d = _small("shadow", 8)
+    default = s3.render_gradient(d, "occluder.translate.x", spp=16, seed=4)
+    none = s3.render_gradient(d, "occluder.translate.x", spp=16, seed=4, refine=0)
+    naive = s3.render_gradient(d, "occluder.translate.x", method="naive", spp=16, seed=4)
+    assert default.options["refine"] == 3 and none.options["refine"] == 0
+    assert np.array_equal(default.value, naive.value) and np.array_equal(none.value, naive.value)
+    assert not np.array_equal(default.derivative, none.derivative)
