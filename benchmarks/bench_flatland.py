@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks import Row, best_seconds
-from flatland.tracing import cast, direction
 from flatland.render import render, render_gradient
 from flatland.scene import load_scene
 from flatland.state import build_state
+from flatland.tracing import cast, direction
 
 RAYS = 1 << 20
 PIXELS, SPP = 512, 64
