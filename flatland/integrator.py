@@ -47,8 +47,8 @@ from flatland.sampling import filter_value, pdf_filter, sample_filter
 from flatland.state import SceneState
 from flatland.tracing import Attached, Hits, attach, cast, direction, film_direction, zeros
 
-if TYPE_CHECKING:
-    from flatland.tasks import ImageTask
+if TYPE_CHECKING:  # tasks.py builds on this module; the qualified name keeps the docs unambiguous
+    import flatland.tasks
 
 __all__ = [
     "PRIMARY_UNIFORMS",
@@ -130,7 +130,9 @@ class Transforms(Protocol):
         """2D only: a derivative-only term added to E at each shading point (None: nothing)."""
         ...
 
-    def pixel_extra(self, task: ImageTask, state: SceneState) -> np.ndarray | None:
+    def pixel_extra(
+        self, task: flatland.tasks.ImageTask, state: flatland.state.SceneState
+    ) -> np.ndarray | None:
         """2D only: a derivative-only term per batch and pixel, shape (batches, pixels) (None: nothing)."""
         ...
 
@@ -147,7 +149,9 @@ class Identity:
     def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray | None:
         return None
 
-    def pixel_extra(self, task: ImageTask, state: SceneState) -> np.ndarray | None:
+    def pixel_extra(
+        self, task: flatland.tasks.ImageTask, state: flatland.state.SceneState
+    ) -> np.ndarray | None:
         return None
 
 

@@ -67,7 +67,6 @@ from flatland.core.validate import (
     check_int,
     read_json,
 )
-from flatland.state import parse_parameter
 
 __all__ = [
     "FILTERS",
@@ -335,6 +334,8 @@ def _from_dict(d: Any) -> Scene:
     raw_params = d.get("parameters", [])
     if isinstance(raw_params, str | bytes | Mapping) or not hasattr(raw_params, "__len__"):
         raise ValidationError("parameters", f"must be a list of parameter names, got {raw_params!r}")
+    from flatland.state import parse_parameter  # state.py builds on this module: imported on use
+
     params = tuple(parse_parameter(scene, p, field=f"parameters[{k}]").name for k, p in enumerate(raw_params))
     return replace(scene, parameters=params)
 

@@ -13,15 +13,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from flatland.core.dual import Dual, detach
 from flatland.core.validate import ValidationError
-
-if TYPE_CHECKING:
-    from flatland.scene import Camera, Scene, Shape
+from flatland.scene import Camera, Scene, Shape
 
 __all__ = ["Parameter", "SceneState", "build_state", "parse_parameter"]
 
