@@ -425,7 +425,7 @@ def plot_kappa_tradeoff(
 ) -> Figure:
     """Two panels over the kernel concentration κ: bias ± interval, and standard deviation.
 
-    The convolution kernel's trade-off (Loubet et al. 2019, Sec. 4.2; DESIGN 2.7):
+    The convolution kernel's trade-off (Loubet et al. 2019, Sec. 4.2):
     small κ (a wide kernel) reaches discontinuities one transform cannot follow, so
     the bias is large; large κ makes the derivative of log k large, so the standard
     deviation grows (like √κ).

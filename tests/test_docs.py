@@ -9,7 +9,7 @@
    docs/_ext/project_docs.py). Every block is well-formed and every name in it imports
    and is a function or class.
 3. Every DESIGN section cited anywhere — docs pages, tutorials, the packages' source —
-   has at least one ``implements`` block, so a reader who meets "(DESIGN 2.5)" in a
+   has at least one ``implements`` block, so a reader who meets "(Loubet et al. 2019, Sec. 3.2)" in a
    comment finds its theory and its code.
 4. Every explicit cross-reference to a ``flatland``/``sphere3d`` name in the hand-written
    pages (``{func}`~flatland.x.y```) names an importable object.

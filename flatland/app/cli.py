@@ -390,7 +390,9 @@ def _parser(pkg: Package) -> _Parser:
     )
     gradient.add_argument("--probes", type=int, default=None, help="reparam: probe rays")
     gradient.add_argument(
-        "--paired", action="store_true", help="reparam: paired samples sharing one transform (DESIGN 2.9)"
+        "--paired",
+        action="store_true",
+        help="reparam: paired samples sharing one transform (see docs/theory/kernels.md)",
     )
     gradient.add_argument("--h", type=float, default=None, help="finite_difference: step")
     common(gradient, "samples per pixel (default 64)", 64)

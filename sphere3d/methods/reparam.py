@@ -11,7 +11,7 @@ samples), calling back ``Shading.trace`` and ``Shading.evaluate_bsdf``. A
 Loubet et al. 2019, Sec. 3.2 (change of variables), 4.1 (one rotation per integral),
 4.2 (convolution kernels for integrands of large support), 4.3 (choosing the
 rotation by ray tracing), and the paired-sample control variate of the authors'
-implementation (DESIGN 2.6–2.9).
+implementation (theory/kernels).
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ class ReparamTransforms:
         grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film it is
         capped at the filter's radius.
     paired : bool
-        Two kernel samples per outer sample share one rotation (DESIGN 2.9).
+        Two kernel samples per outer sample share one rotation (theory/kernels).
     """
 
     kappa: float | None
@@ -156,7 +156,7 @@ class ReparamTransforms:
         return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal)
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
-        """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (DESIGN 2.7)."""
+        """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (Loubet et al. 2019, Sec. 4.2)."""
         return unit_weight(self.kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
@@ -181,7 +181,7 @@ class ReparamTransforms:
         return scatter(len(mu), live, est, shading.state.dual)
 
     def _paired(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (DESIGN 2.9)."""
+        """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (theory/kernels)."""
         rotation = self._probe_rotation(shading, mu)
         u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
         e, w = [], []
@@ -196,7 +196,7 @@ class ReparamTransforms:
             mass = np.where(detach(mass) > 0.0, mass, 1.0)  # C = 0 only far below the horizon, where f = 0
             e.append(shading.evaluate_bsdf(member, rotated, shading.trace(member)) * weight / (pdf * mass))
         # each weight's derivative has zero mean given ω and is independent of the other member:
-        # a control variate scaled by the other member's estimate                      (DESIGN 2.9)
+        # a control variate scaled by the other member's estimate   (paired samples, theory/kernels)
         return paired_combine(e[0], e[1], w[0], w[1])
 
 
@@ -232,7 +232,7 @@ def reparam(
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
     Each integral's samples ω are evaluated at R(θ)·ω, R the identity at θ0 that moves
-    like one chosen occluder point (Sec. 4.1, DESIGN 2.6), |det J| = 1:
+    like one chosen occluder point (Loubet et al. 2019, Sec. 4.1), |det J| = 1:
 
     - **pixel integral** (support: the filter footprint): one rotation per pixel and
       batch from ``probes`` camera rays on a ring over the footprint and the
@@ -240,13 +240,13 @@ def reparam(
       derivative of k·J under the rotation, with a zero-mean control variate
       (:class:`~sphere3d.tasks.ImageTask`); it needs a continuous filter (tent,
       gaussian): with ``box`` the footprint's edge would move and bias the gradient
-      (DESIGN 2.11), so a box filter is refused, as in flatland.
+      (theory/pixel_filters), so a box filter is refused, as in flatland.
     - **emitter sampling**: one rotation per shading point following the mean of the
       attached hits of the occluded ones among ``probes`` shadow rays (the authors'
       implementation), else the mean attached probe point on the emitters. Exact
       when one rigid occluder shadows a small emitter; biased when occluders moving
       differently share the emitter's solid angle, and at an emitter's own border
-      unless its radiance fades there (``fade``, DESIGN 2.8): a 0.6 × 0.4 light moving
+      unless its radiance fades there (``fade``, theory/probes): a 0.6 × 0.4 light moving
       sideways 1.5 above a point got 73 % of its derivative lost without a fade, none
       with it (tests/sphere3d/test_closed_forms.py).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
@@ -263,9 +263,9 @@ def reparam(
     shadow ray blocked, a cosine ray hitting a dark surface) get no probes. The
     primal is bit-identical to ``naive``'s for the same seed, except with
     ``paired=True`` (needs ``kappa``): then the outer sample is the cosine sample, two
-    kernel samples around it share the rotation, and the control variate of DESIGN
-    2.9 reduces the variance of the kernel weights; the kernel mass below the
-    horizon is restored by :func:`~sphere3d.sampling.vmf_hemisphere_fraction` (a
+    kernel samples around it share the rotation, and the control variate of the
+    authors' implementation (theory/kernels) reduces the variance of the kernel weights; the
+    kernel mass below the horizon is restored by :func:`~sphere3d.sampling.vmf_hemisphere_fraction` (a
     different, still unbiased primal, at twice the rays per sample).
     """
     if isinstance(task, ImageTask):
