@@ -161,7 +161,7 @@ def log_pdf_von_mises(phi: Any, mu: Any, kappa: float) -> Any:
 
 
 def pdf_von_mises(phi: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
-    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (Sec. 4.2)."""
+    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (theory/kernels)."""
     return np.exp(log_pdf_von_mises(np.asarray(phi, dtype=np.float64), mu, kappa))
 
 

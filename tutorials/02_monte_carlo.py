@@ -19,7 +19,7 @@
 #
 # Renderers estimate integrals by Monte Carlo, and every gradient estimator in this project is a
 # Monte Carlo estimator too; its variance decides how many samples a trustworthy answer costs.
-# This notebook measures the three facts of DESIGN 2.2:
+# This notebook measures the three facts of `docs/theory/monte_carlo.md`:
 #
 # 1. the plain estimator $\hat I = \frac1N \sum_i f(x_i)/p(x_i)$, $x_i \sim p$, is unbiased with
 #    variance $\operatorname{Var}_p[f/p]/N$;
@@ -303,6 +303,6 @@ pt.plot_estimates(
 # The same two tools reappear in the gradient estimators. Reparameterization (tutorial 5) is
 # importance sampling with a proposal that moves with $\theta$: the samples
 # $x_i(\theta) = y_i + \theta - \theta_0$ follow the discontinuity. The authors' paired samples
-# (DESIGN 2.9, tutorial 6) are a control variate: the derivative of a kernel weight
+# (`docs/theory/kernels.md`, tutorial 6) are a control variate: the derivative of a kernel weight
 # $w = k/\operatorname{detach}(k)$ has zero mean, so subtracting a multiple of it changes the
 # variance and not the expectation.
