@@ -45,6 +45,7 @@ __all__ = [
     "neutral_cycle",
     "new_axes",
     "radiance_norm",
+    "same_length",
     "series_styles",
     "symmetric_limit",
     "symmetric_norm",
