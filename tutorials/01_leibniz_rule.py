@@ -44,8 +44,8 @@ import numpy as np
 from scipy import integrate
 
 from flatland import INTEGRALS, detach, estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
 from flatland.integrals import Circle
+from flatland.plotting import textbook as pt
 
 SEED = 20191117
 

@@ -37,9 +37,9 @@ import numpy as np
 from scipy import integrate, special, stats
 
 from flatland import detach, estimate, get_integral
-from flatland import plot_textbook as pt
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
 from flatland.sampling import pdf_gaussian, pdf_tabulated, sample_gaussian, sample_tabulated
 
 SEED = 20191117
@@ -212,7 +212,7 @@ pt.plot_curves(
     xs,
     {"f / I (ideal)": detach(step.f(xs, theta)) / exact}
     | {name: pdf(xs) for name, (_, pdf, _) in proposals.items() if name != "ideal f / I"},
-    styles={"f / I (ideal)": {"color": "black", "linewidth": 2}},
+    styles={"f / I (ideal)": {"color": pt.REFERENCE_STYLE["color"], "linewidth": 2}},
     marks=[theta],
     xlabel="x",
     ylabel="density",

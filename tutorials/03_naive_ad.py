@@ -39,10 +39,10 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 
 SEED = 20191117
 step = get_integral("step")

@@ -50,10 +50,10 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, tangent, variable
-from flatland import plot_tutorials as ptu
 from flatland.core.stats import sidak
 from flatland.geometry import cast, direction, film_coordinate, silhouette_angles
 from flatland.integrator import incident
+from flatland.plotting import tutorials as ptu
 from flatland.scene import bind
 
 SEED = 20191117

@@ -47,11 +47,11 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
 from flatland.integrator import filter_value
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 from flatland.sampling import sample_tent
 
 SEED = 20191117

@@ -42,8 +42,8 @@ from IPython.display import display
 from scipy import integrate, special, stats
 
 from flatland import estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
 from flatland.textbook.reparam import follow_nearest
 
 SEED = 20191117
@@ -349,7 +349,7 @@ pt.plot_curves(
     styles={
         "unpaired": {"marker": "o"},
         "paired (authors' implementation)": {"marker": "s"},
-        "σ(κ) predicted, unpaired": {"linestyle": "--", "color": "black"},
+        "σ(κ) predicted, unpaired": pt.REFERENCE_STYLE,
     },
     xlabel="κ",
     ylabel="std of one sample's dI/dθ",

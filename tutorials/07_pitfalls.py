@@ -41,10 +41,10 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, tangent, variable
-from flatland import plot_tutorials as ptu
 from flatland.core.stats import sidak
 from flatland.integrator import Job, filter_value, run
 from flatland.methods.reparam import ReparamHooks, default_kappa_film
+from flatland.plotting import tutorials as ptu
 from flatland.scene import parse_parameter
 
 SEED = 20191117
@@ -160,7 +160,7 @@ ptu.plot_film(
         "boundary": box_boundary,
         "reparam with a box filter": (box_reparam, box_stderr),
     },
-    styles={"closed form": {"color": "black", "linestyle": "--"}},
+    styles={"closed form": ptu.REFERENCE_STYLE},
     title="black bar, box filter: d/d bar.translate.x",
 )
 

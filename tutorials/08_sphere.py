@@ -43,10 +43,10 @@ from scipy import special, stats
 import flatland as fl
 import sphere3d as s3
 from flatland import detach, tangent, variable
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 from flatland.sampling import sample_von_mises
 from sphere3d.rotation import Rotation, rotation_matrix
 from sphere3d.sampling import sample_vmf
