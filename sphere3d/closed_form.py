@@ -44,6 +44,7 @@ __all__ = [
     "PIXEL",
     "QUADRATURE_NODES",
     "TRIANGLE_SHAPE",
+    "ShareLost",
     "TriangleImage",
     "filter_cdf_1d",
     "filter_kinks",
@@ -55,6 +56,7 @@ __all__ = [
     "polygon_irradiance",
     "project",
     "projected_solid_angle",
+    "share_lost",
     "sky_triangle_scene",
     "triangle_image",
     "triangle_vertices",
@@ -529,3 +531,37 @@ def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:
             }
         ],
     }
+
+
+@dataclass(frozen=True)
+class ShareLost:
+    """The share of an exact derivative an estimator misses, from its independent batches.
+
+    ``mean`` = 1 - mean over batches of Σ sign(g) d_b / Σ |g| (g the exact derivative, d_b a batch's
+    estimate; for a scalar 1 - d_b / g); ``stderr`` its standard error; ``batches`` the count.
+    Positive: the estimate is short of the exact derivative, as a missed boundary term makes it.
+    """
+
+    mean: float
+    stderr: float
+    batches: int
+
+
+def share_lost(batch_estimates: Any, exact: Any) -> ShareLost:
+    """:class:`ShareLost` of per-batch derivative estimates (B, ...) against the exact derivative (...).
+
+    Summing over the film with the sign of the exact derivative weighs every pixel by the
+    silhouette term's own direction, so a sideways motion (whose film sum is about 0: the
+    triangle's area does not change) is measured like a motion in depth (whose derivative
+    has one sign everywhere, so the weighted sum is the film sum itself).
+    """
+    d = np.asarray(batch_estimates, dtype=np.float64)
+    g = np.asarray(exact, dtype=np.float64)
+    if d.ndim != g.ndim + 1 or d.shape[1:] != g.shape or len(d) < 2:
+        raise ValidationError("batch_estimates", f"must be (batches >= 2, *{g.shape}), got shape {d.shape}")
+    total = float(np.sum(np.abs(g)))
+    if total == 0.0:
+        raise ValidationError("exact", "is zero everywhere: no share of it can be lost")
+    kept = np.sum((np.sign(g) * d).reshape(len(d), -1), axis=1) / total
+    lost = 1.0 - kept
+    return ShareLost(float(lost.mean()), float(lost.std(ddof=1) / math.sqrt(len(d))), len(d))

@@ -1,0 +1,108 @@
+"""sphere3d ``reparam``: the share of an exact derivative it misses, against the closed forms.
+
+Two tables, both from :mod:`sphere3d.closed_form`, with ``reparam`` at its defaults
+(κ = 1000, 4 probes, spread 3) and 16 independent batches (the ± is one standard error):
+
+camera
+    A black triangle about 1, 2, 4, 8 and 20 px across against a sky
+    (:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian filter), moving
+    sideways (``tri.translate.x``) or in depth (``tri.translate.z``): the share of the
+    silhouette term lost, 1 - Σ sign(g) d / Σ |g| over the film (g the closed form,
+    :func:`~sphere3d.closed_form.share_lost`).
+shading
+    The irradiance at the origin (normal +z) under a sky with a black triangle above it
+    (:func:`~sphere3d.closed_form.occluded_sky_irradiance`, Lambert's formula): 1 - d / g for
+    translations, scale and rotations of the triangle, the triangle near the horizon, and
+    ``kappa=None``.
+
+``python -m benchmarks --only reparam_bias`` prints the table (about 4 minutes on 2 cores).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from benchmarks import Row
+from sphere3d import closed_form as cf
+from sphere3d.methods import GRADIENT_METHODS
+from sphere3d.scene import load_scene
+from sphere3d.tasks import ImageTask, PointTask
+
+BATCHES = 16
+SEED = 11
+MOTIONS = {"sideways": "tri.translate.x", "depth": "tri.translate.z"}
+CAMERA_CASES = [
+    # triangle size (px), image width (px), spp
+    (1, 8, 65536),
+    (2, 8, 65536),
+    (4, 8, 65536),
+    (8, 16, 16384),
+    (20, 32, 4096),
+]
+SKY_TRIANGLE = np.array([[-0.2, -0.5, 1.0], [0.9, 0.1, 1.1], [0.1, 0.6, 0.9]])
+"""The shading case's triangle above the origin: no symmetry, so every parameter changes Φ."""
+SHADING_N = 1 << 22
+
+
+def horizon_triangle(elevation: float) -> np.ndarray:
+    """A triangle 0.8 across at distance 2 towards ``elevation`` (radians) above +x, facing the origin.
+
+    Its lowest vertex stays above the horizon down to 7 degrees: 2 sin e > 0.24 cos e.
+    """
+    c = 2.0 * np.array([math.cos(elevation), 0.0, math.sin(elevation)])
+    u1 = np.array([-math.sin(elevation), 0.0, math.cos(elevation)])  # up along the sphere
+    u2 = np.array([0.0, 1.0, 0.0])
+    return c + 0.8 * np.array([-0.3 * u1 - 0.6 * u2, -0.3 * u1 + 0.5 * u2, 0.6 * u1 + 0.1 * u2])
+
+
+SHADING_CASES = [
+    # label, triangle, parameter, reparam options
+    ("z-translation", SKY_TRIANGLE, "tri.translate.z", {}),
+    ("x-translation", SKY_TRIANGLE, "tri.translate.x", {}),
+    ("scale", SKY_TRIANGLE, "tri.scale", {}),
+    ("rotation about x", SKY_TRIANGLE, "tri.rotate.x", {}),
+    ("rotation about y", SKY_TRIANGLE, "tri.rotate.y", {}),
+    ("z-translation, 30 deg elevation", horizon_triangle(math.radians(30.0)), "tri.translate.z", {}),
+    ("z-translation, 15 deg elevation", horizon_triangle(math.radians(15.0)), "tri.translate.z", {}),
+    ("z-translation, 8 deg elevation", horizon_triangle(math.radians(8.0)), "tri.translate.z", {}),
+    ("z-translation, kappa=None", SKY_TRIANGLE, "tri.translate.z", {"kappa": None}),
+    ("scale, kappa=None", SKY_TRIANGLE, "tri.scale", {"kappa": None}),
+]
+
+
+def camera_loss(size: float, motion: str, width: int, spp: int, seed: int = SEED, **options) -> cf.ShareLost:
+    """Share of the silhouette term ``reparam`` misses on the triangle of ``size`` px moving by ``motion``."""
+    scene = load_scene(cf.pinhole_triangle_scene(size, width))
+    param = MOTIONS[motion]
+    exact = cf.triangle_image(scene, param).derivative
+    tally = GRADIENT_METHODS.run("reparam", ImageTask(scene, param, spp, seed, BATCHES), **options)
+    return cf.share_lost(tally.derivative, exact)
+
+
+def shading_loss(triangle: np.ndarray, param: str, n: int, seed: int = SEED, **options) -> cf.ShareLost:
+    """Share of dE/dθ ``reparam`` misses at the origin (:func:`~sphere3d.closed_form.sky_triangle_scene`)."""
+    scene = load_scene(cf.sky_triangle_scene(triangle))
+    point, normal = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    _, exact = cf.occluded_sky_irradiance(scene, point, normal, param)
+    tally = GRADIENT_METHODS.run(
+        "reparam", PointTask(scene, param, point, normal, n, seed, BATCHES), **options
+    )
+    return cf.share_lost(tally.derivative, np.float64(exact))
+
+
+def run() -> list[Row]:
+    rows = []
+    for size, width, spp in CAMERA_CASES:
+        for motion in MOTIONS:
+            lost = camera_loss(size, motion, width, spp)
+            note = f"+- {100 * lost.stderr:.1f} %; {width}x{width}, {spp} spp"
+            rows.append(
+                Row("reparam bias", f"camera: {size} px triangle, {motion}", 100 * lost.mean, "% lost", note)
+            )
+    for label, triangle, param, options in SHADING_CASES:
+        lost = shading_loss(triangle, param, SHADING_N, **options)
+        note = f"+- {100 * lost.stderr:.1f} %; n = 2^22"
+        rows.append(Row("reparam bias", f"shading: {label}", 100 * lost.mean, "% lost", note))
+    return rows

@@ -1,0 +1,307 @@
+"""Per-pixel checks of sphere3d's estimators against the closed-form image of a triangle through the pinhole.
+
+:mod:`sphere3d.closed_form` gives the image of a black triangle against a sky, ``I(p) = L (1 - ∫_T k)``,
+and its θ-derivative exactly (to rounding). Tests 01–06 check the closed form itself: its 1D
+filter against the renderer's, the film integral against an independent 2D quadrature, the
+derivative against central differences of the value, symmetric cases and bad input. Tests
+07–10 check the estimators pixel by pixel, so that a bias confined to the silhouette cannot hide
+in an average over the image:
+
+- ``render`` (the primal): unbiased, every pixel within its Student-t interval;
+- ``finite_difference``: its expectation is the closed form's own central difference at the
+  same h (the estimator is the difference of two unbiased renders); its O(h²) truncation
+  error against the exact derivative is shown separately, on the closed form;
+- ``naive``: exactly 0 here (constant sky, black triangle: nothing moves but visibility), so its
+  bias is minus the whole silhouette term;
+- ``reparam``: its measured loss of the silhouette term for small triangles, tested as a bias
+  against the numbers documented in :mod:`sphere3d.methods.reparam` (``Bias``).
+
+Per-pixel tests: |estimate - exact| <= q · stderr for every pixel, q the two-sided Student-t
+quantile (batches - 1 degrees of freedom) at the Šidák-corrected level 1 - (1 - α)^(1/m) over
+the m pixels of the image, α = 1e-3 per image; a difference below 1e-12 is rounding. Seeds are fixed.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate, stats
+
+import sphere3d as s3
+from flatland.core.stats import sidak
+from flatland.core.validate import ValidationError
+from sphere3d import closed_form as cf
+from sphere3d.sampling import filter_value, pdf_filter
+from sphere3d.tasks import ImageTask
+
+ALPHA = 1e-3
+BATCHES = 16
+ROUNDING = 1e-12
+POLYGON = np.array([[0.3, -0.2], [1.4, 0.9], [-0.8, 0.6]])
+SIZES = [(1, 8), (2, 8), (4, 8), (8, 16), (20, 32)]  # triangle size and image width, in pixels
+MOTIONS = {"sideways": "tri.translate.x", "depth": "tri.translate.z"}
+
+
+def _weight_max(kind):
+    """The largest filter weight k / p a camera sample can carry (on a fine grid of offsets)."""
+    s = np.linspace(-1.5, 1.5, 30001)
+    s = np.stack([s, np.zeros_like(s)], axis=-1)
+    inside = pdf_filter(s, kind) > 0.0
+    return float(np.max(filter_value(s[inside], kind) / pdf_filter(s[inside], kind))) ** 2
+
+
+def _pixels_outside(estimate, stderr, exact, dof, samples=None, weight_max=None):
+    """Pixels whose estimate lies outside its Šidák-corrected Student-t interval around ``exact``.
+
+    A pixel whose samples all gave the same value has no spread to test against (stderr 0):
+    a part of its integrand that the sampler reaches with probability p is missed by all
+    ``samples`` samples with probability (1 - p)^n <= e^{-pn}, so at the Šidák level
+    p <= log(m / α) / n, and the estimate may miss at most ``weight_max`` · p of the value
+    (radiance <= 1 here). Without ``samples`` such a pixel must be exact to rounding.
+    """
+    m = exact.size
+    q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, m), dof)
+    unseen = 0.0 if samples is None else weight_max * math.log(m / ALPHA) / samples
+    diff = np.abs(estimate - exact)
+    allowed = np.where(stderr > 0.0, q * stderr, unseen)
+    return np.flatnonzero((diff > ROUNDING) & (diff > allowed))
+
+
+def _brute_force(kind, centre):
+    """∫_T k(x - c) dA over POLYGON by nested adaptive quadrature in y then x (no Green's theorem).
+
+    Breakpoints at the vertices' y and at the filter's kinks, where the integrand is not smooth.
+    """
+    kinks = np.array(cf.filter_kinks(kind))
+    ys = POLYGON[:, 1]
+
+    def span(y):  # the polygon's chord at height y
+        xs = []
+        for i in range(len(POLYGON)):
+            a, b = POLYGON[i], POLYGON[(i + 1) % len(POLYGON)]
+            if (a[1] - y) * (b[1] - y) <= 0.0 and a[1] != b[1]:
+                xs.append(a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]))
+        return min(xs), max(xs)
+
+    def k1(t):
+        return filter_value(np.array([[t, 0.0]]), kind)[0] / filter_value(np.zeros((1, 2)), kind)[0]
+
+    def row(y):
+        lo, hi = span(y)
+        points = [p for p in centre[0] + kinks if lo < p < hi] or None
+        inner = integrate.quad(lambda x: k1(x - centre[0]), lo, hi, points=points, epsabs=1e-14, limit=200)[0]
+        return inner * filter_value(np.array([[0.0, y - centre[1]]]), kind)[0]
+
+    cuts = sorted({*ys, *(p for p in centre[1] + kinks if ys.min() < p < ys.max())})
+    return sum(integrate.quad(row, a, b, epsabs=1e-14, limit=200)[0] for a, b in itertools.pairwise(cuts))
+
+
+# ------------------------------------------------------------ the closed form
+@pytest.mark.parametrize("kind", ["box", "tent", "gaussian"])
+def test01_filter_profile_and_cdf_are_the_renderers_filter(kind):
+    """k₁(x) k₁(y) is :func:`sphere3d.sampling.filter_value`; K' = k₁ (central differences off the kinks)."""
+    x = np.linspace(-2.0, 2.0, 8001)
+    y = np.linspace(-1.7, 1.9, 8001)
+    assert np.allclose(
+        cf.filter_profile_1d(x, kind) * cf.filter_profile_1d(y, kind),
+        filter_value(np.stack([x, y], axis=-1), kind),
+        rtol=1e-14,
+        atol=1e-15,
+    )
+    h = 1e-5
+    smooth = np.min(np.abs(x[:, None] - np.array(cf.filter_kinks(kind))), axis=1) > 2 * h
+    slope = (cf.filter_cdf_1d(x + h, kind) - cf.filter_cdf_1d(x - h, kind)) / (2 * h)
+    assert np.max(np.abs(slope - cf.filter_profile_1d(x, kind))[smooth]) < 1e-8
+    assert cf.filter_cdf_1d(np.array([-5.0]), kind)[0] == 0.0
+    assert cf.filter_cdf_1d(np.array([5.0]), kind)[0] == pytest.approx(1.0, abs=1e-15)
+
+
+@pytest.mark.parametrize("kind", ["box", "tent", "gaussian"])
+def test02_film_integral_matches_an_independent_2d_quadrature(kind):
+    """Green's theorem + Gauss–Legendre against nested adaptive quadrature over the triangle, two centres.
+
+    The nested quadrature is the less accurate of the two: its inner integrals carry ~1e-10 of
+    error into the outer one (measured differences 3e-10 for box, 8e-11 for tent, 1e-16 for the
+    smooth gaussian), hence 1e-9.
+    """
+    for centre in ([0.0, 0.0], [0.7, 0.3]):
+        closed = cf.polygon_filter_integral(POLYGON, [centre], kind)[0]
+        assert closed == pytest.approx(_brute_force(kind, np.array(centre)), abs=1e-9)
+
+
+def test03_gaussian_quadrature_has_converged_to_rounding():
+    """16 nodes per piece (the default) against 48, value and derivative, 400 centres: < 1e-14."""
+    centres = np.random.default_rng(3).uniform(-2.0, 2.5, (400, 2))
+    velocity = np.array([[1.0, 0.3], [0.2, -1.0], [0.5, 0.5]])
+    value = cf.polygon_filter_integral(POLYGON, centres, "gaussian")
+    slope = cf.polygon_filter_derivative(POLYGON, velocity, centres, "gaussian")
+    saved = cf.QUADRATURE_NODES["gaussian"]
+    try:
+        cf.QUADRATURE_NODES["gaussian"] = 48
+        fine = cf.polygon_filter_integral(POLYGON, centres, "gaussian")
+        fine_slope = cf.polygon_filter_derivative(POLYGON, velocity, centres, "gaussian")
+    finally:
+        cf.QUADRATURE_NODES["gaussian"] = saved
+    assert np.max(np.abs(value - fine)) < 1e-14
+    assert np.max(np.abs(slope - fine_slope)) < 1e-14
+
+
+@pytest.mark.parametrize("kind", ["box", "tent", "gaussian"])
+def test04_symmetric_cases_cover_all_or_nothing_and_ignore_orientation(kind):
+    big = np.array([[-10.0, -10.0], [30.0, -10.0], [-10.0, 30.0]])  # covers every support
+    assert cf.polygon_filter_integral(big, [[0.0, 0.0], [1.3, -2.2]], kind) == pytest.approx(1.0, abs=1e-14)
+    far = big + 100.0
+    assert np.all(cf.polygon_filter_integral(far, [[0.0, 0.0]], kind) == 0.0)
+    assert np.all(cf.polygon_filter_derivative(far, np.ones((3, 2)), [[0.0, 0.0]], kind) == 0.0)
+    # a covering triangle moving rigidly stays covering: derivative 0
+    assert cf.polygon_filter_derivative(big, np.ones((3, 2)), [[0.0, 0.0]], kind) == pytest.approx(
+        0.0, abs=1e-14
+    )
+    # either orientation, with its velocities in the same order
+    velocity = np.array([[1.0, 0.3], [0.2, -1.0], [0.5, 0.5]])
+    c = [[0.2, 0.4]]
+    assert cf.polygon_filter_integral(POLYGON[::-1], c, kind) == pytest.approx(
+        cf.polygon_filter_integral(POLYGON, c, kind), abs=1e-15
+    )
+    assert cf.polygon_filter_derivative(POLYGON[::-1], velocity[::-1], c, kind) == pytest.approx(
+        cf.polygon_filter_derivative(POLYGON, velocity, c, kind), abs=1e-15
+    )
+
+
+PARAMS = [
+    "tri.translate.x",
+    "tri.translate.y",
+    "tri.translate.z",
+    "tri.rotate.x",
+    "tri.rotate.z",
+    "tri.scale",
+]
+
+
+@pytest.mark.parametrize("kind", ["tent", "gaussian"])
+@pytest.mark.parametrize("param", PARAMS)
+def test05_image_derivative_is_the_central_difference_of_the_image(param, kind):
+    """Reynolds transport with Dual vertex velocities against [I(h) - I(-h)] / 2h of the closed form.
+
+    h = 1e-5 (1e-4 px sideways): truncation h² I'''/6 and rounding 1e-16 / h both stay below
+    1e-8 of max |dI/dθ| (measured at most 7e-9 for the translations; 6.6e-7 at h = 1e-4: O(h²)).
+    """
+    scene = cf.pinhole_triangle_scene(4, 8, kind)
+    h = 1e-5
+    exact = cf.triangle_image(scene, param).derivative
+    difference = (cf.triangle_image(scene, param, h).value - cf.triangle_image(scene, param, -h).value) / (
+        2 * h
+    )
+    assert np.max(np.abs(exact)) > 0.01
+    assert np.max(np.abs(exact - difference)) < 1e-7 * np.max(np.abs(exact))
+
+
+def test06_bad_input_is_refused():
+    scene = cf.pinhole_triangle_scene(4, 8)
+    behind = {**scene, "shapes": [{**scene["shapes"][0], "translate": [0.0, 0.0, -5.0]}]}
+    with pytest.raises(ValidationError, match="in front of the camera"):
+        cf.triangle_image(behind)
+    lit = {**scene, "shapes": [{**scene["shapes"][0], "albedo": 0.5}]}
+    with pytest.raises(ValidationError, match="black"):
+        cf.triangle_image(lit)
+    with pytest.raises(ValidationError, match="move the triangle"):
+        cf.triangle_image(scene, "camera.translate.x")
+    with pytest.raises(ValidationError, match="polygon"):
+        cf.polygon_filter_integral([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0]], "tent")
+
+
+# ------------------------------------------------------------ the estimators
+def _batches(scene, spp, seed):
+    """Per-batch pixel means (BATCHES, height, width) of the plain render (what ``s3.render`` averages)."""
+    return ImageTask(s3.load_scene(scene), None, spp, seed, BATCHES).evaluate(0.0).value
+
+
+@pytest.mark.parametrize("kind", ["gaussian", "tent", "box"])
+@pytest.mark.parametrize("size, width", SIZES, ids=[f"{s}px" for s, _ in SIZES])
+def test07_render_is_unbiased_in_every_pixel(size, width, kind):
+    """The primal against L (1 - ∫_T k), pixel by pixel, with the sky's own noise taken out.
+
+    The gaussian and tent filters are sampled by a density p ≠ k, so even a pixel of pure sky
+    averages the weights k / p, whose distribution has a long low tail: the batch standard
+    error underestimates the spread exactly when a pixel's samples missed the tail (measured:
+    a pure-sky pixel of the 20 px image at z = 10.5, its 256 weights' std 0.033 against 0.077).
+    So the test takes the same render with the triangle moved out of view (same seed: the same
+    weights), whose expectation is L exactly, and checks the difference, ``-L · (weights of the
+    samples that hit the triangle)``, against ``-L ∫_T k`` per pixel; the pure-sky render itself
+    is checked on the film mean (many samples, normal), where the tail is averaged.
+    """
+    if kind != "gaussian" and size not in (2, 8):
+        pytest.skip("tent and box: two sizes are enough")
+    scene = cf.pinhole_triangle_scene(size, width, kind)
+    away = {**scene, "shapes": [{**scene["shapes"][0], "translate": [100.0, 0.0, 0.0]}]}
+    spp, seed = 256, 7
+    image, sky = _batches(scene, spp, seed), _batches(away, spp, seed)
+    exact = cf.triangle_image(scene)
+    assert exact.coverage.max() > 0.1  # the triangle is in the picture
+    diff = image - sky
+    stderr = diff.std(axis=0, ddof=1) / math.sqrt(BATCHES)
+    outside = _pixels_outside(
+        diff.mean(axis=0), stderr, exact.value - 1.0, BATCHES - 1, spp, _weight_max(kind)
+    )
+    assert outside.size == 0
+    film = sky.mean(axis=(1, 2))  # the film mean of the pure-sky render, per batch
+    q = stats.t.ppf(1.0 - 0.5 * ALPHA, BATCHES - 1)
+    assert abs(film.mean() - 1.0) <= max(q * film.std(ddof=1) / math.sqrt(BATCHES), ROUNDING)
+
+
+FD_STEP = {"sideways": 0.01, "depth": 0.25}  # world units: 0.1 px sideways; 6 % of the depth
+FLIPS = 16
+
+
+@pytest.mark.parametrize("motion", MOTIONS)
+@pytest.mark.parametrize("size, width", [(2, 8), (8, 16)], ids=["2px", "8px"])
+def test08_finite_difference_expects_the_closed_forms_own_central_difference(size, width, motion):
+    """FD = [Î(h) - Î(-h)] / 2h with common samples: its expectation is exactly [I(h) - I(-h)] / 2h.
+
+    A sample contributes ± w / 2h where visibility flipped between -h and +h, else 0 (w <= w_max,
+    the filter weight), so a pixel whose expectation is μ sees at least n · 2h |μ| / w_max flips
+    among its n samples. Where that count is small, the flips are rare events and the batch
+    standard error is no guide (measured: a pixel of the 8 px image with one flip in 2048
+    samples, estimate = stderr = 0.0037 against 0.0286, z = -6.8); the per-pixel test takes the
+    pixels with at least FLIPS = 16 flips expected, which carry 96–99 % of Σ |μ| here (asserted
+    >= 90 %). Depth moves the edges of a small triangle little, so its h is larger.
+
+    The truncation error of the central difference against the exact derivative is shown on the
+    closed form: O(h²), it quarters when h halves (ratio within [3.5, 4.5]).
+    """
+    scene = cf.pinhole_triangle_scene(size, width)
+    param, h, spp = MOTIONS[motion], FD_STEP[motion], 2048
+    exact = cf.triangle_image(scene, param).derivative
+
+    def central(step):
+        plus, minus = (
+            cf.triangle_image(scene, param, step).value,
+            cf.triangle_image(scene, param, -step).value,
+        )
+        return (plus - minus) / (2 * step)
+
+    expected = central(h)
+    g = s3.render_gradient(scene, param, method="finite_difference", spp=spp, seed=8, batches=64, h=h)
+    tested = spp * 2 * h * np.abs(expected) / _weight_max("gaussian") >= FLIPS
+    assert np.abs(expected[tested]).sum() >= 0.9 * np.abs(expected).sum()
+    outside = _pixels_outside(g.derivative[tested], g.derivative_stderr[tested], expected[tested], 63)
+    assert outside.size == 0
+    # the O(h²) truncation error of the central difference, on the closed form
+    error_h, error_half = np.abs(expected - exact).max(), np.abs(central(h / 2) - exact).max()
+    assert 3.5 < error_h / error_half < 4.5
+
+
+@pytest.mark.parametrize("motion", MOTIONS)
+@pytest.mark.parametrize("size, width", [(2, 8), (20, 32)], ids=["2px", "20px"])
+def test09_naive_misses_the_whole_silhouette_term(size, width, motion):
+    """Nothing but visibility moves, so ``naive`` gives exactly 0: its bias is -dI/dθ in every pixel."""
+    scene = cf.pinhole_triangle_scene(size, width)
+    param = MOTIONS[motion]
+    exact = cf.triangle_image(scene, param).derivative
+    g = s3.render_gradient(scene, param, method="naive", spp=64, seed=9, batches=BATCHES)
+    assert np.all(g.derivative == 0.0) and np.all(g.derivative_stderr == 0.0)
+    bias = g.derivative - exact
+    assert np.array_equal(bias, -exact) and np.abs(exact).max() > 0.1
