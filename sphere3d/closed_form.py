@@ -467,7 +467,7 @@ TRIANGLE_SHAPE = ((-0.5, -0.4, 0.0), (0.55, -0.3, 0.0), (0.05, 0.5, 0.0))
 
 
 def pinhole_triangle_scene(size: float, width: int = 16, filter: str = "gaussian", sky: float = 1.0) -> dict:
-    """A black triangle about ``size`` pixels across, near the centre of a ``width``² image, under the sky.
+    """A black triangle about ``size`` px across, centred in a ``width`` × ``width`` image, under the sky.
 
     The camera sits at (0, 0, -4) looking at the origin (up +y, so ``translate.x`` moves the
     triangle sideways, ``translate.z`` away from the camera); its fov makes a pixel
