@@ -7,7 +7,8 @@ derivative against central differences of the value, symmetric cases and bad inp
 07–10 check the estimators pixel by pixel, so that a bias confined to the silhouette cannot hide
 in an average over the image:
 
-- ``render`` (the primal): unbiased, every pixel within its Student-t interval;
+- ``render`` (the primal): unbiased, every pixel within its Student-t interval (the sky's
+  filter-weight noise taken out by a paired render, see test07);
 - ``finite_difference``: its expectation is the closed form's own central difference at the
   same h (the estimator is the difference of two unbiased renders); its O(h²) truncation
   error against the exact derivative is shown separately, on the closed form;
@@ -16,9 +17,16 @@ in an average over the image:
 - ``reparam``: its measured loss of the silhouette term for small triangles, tested as a bias
   against the numbers documented in :mod:`sphere3d.methods.reparam` (``Bias``).
 
+Tests 11–14 do the same for the shading integral: the irradiance at a point under the sky with
+a black triangle above it, ``E = L (π - Φ)``, Φ by Lambert's formula (against an area quadrature;
+its Dual derivative against differences), then ``naive`` and ``finite_difference`` against it and
+``reparam``'s documented loss as a bias.
+
 Per-pixel tests: |estimate - exact| <= q · stderr for every pixel, q the two-sided Student-t
 quantile (batches - 1 degrees of freedom) at the Šidák-corrected level 1 - (1 - α)^(1/m) over
-the m pixels of the image, α = 1e-3 per image; a difference below 1e-12 is rounding. Seeds are fixed.
+the m pixels of the image, α = 1e-3 per image; a difference below 1e-12 is rounding; pixels
+without spread and pixels of rare events are handled as :func:`_pixels_outside` and test08 say.
+Seeds are fixed.
 """
 
 from __future__ import annotations
