@@ -6,7 +6,7 @@ place an import that should not happen shows. ``import sphere3d`` loads flatland
 (Dual, rng, stats, validation) but not its 2D renderer, its command line or matplotlib;
 ``import flatland`` imports a public name's module on first use (PEP 562).
 
-The vocabulary checks (test07 on) compare explicit lists: the modules both renderers have
+The vocabulary checks (test08 on) compare explicit lists: the modules both renderers have
 (docs/theory/architecture.md), the public names each pair of modules exposes, and the
 options of the gradient methods both packages have, with the documented finite-difference
 steps pinned.
@@ -124,6 +124,17 @@ def test06_an_unknown_name_is_an_attribute_error():
         raise AssertionError("flatland.no_such_name resolved")
 
 
+MAX_LINES = 400
+"""Longest module allowed in the packages: a longer one is split by job."""
+
+
+def test07_no_module_of_either_package_is_longer_than_400_lines():
+    modules = sorted(p for package in ("flatland", "sphere3d") for p in (ROOT / package).rglob("*.py"))
+    assert ROOT / "flatland" / "core" / "dual.py" in modules  # the scan sees the packages
+    lengths = {str(p.relative_to(ROOT)): len(p.read_text(encoding="utf-8").splitlines()) for p in modules}
+    assert {name: n for name, n in lengths.items() if n > MAX_LINES} == {}
+
+
 # ------------------------------------------------------------------ the vocabulary both renderers share
 PACKAGES = ("flatland", "sphere3d")
 SHARED_MODULES = {
@@ -166,7 +177,7 @@ def _modules(package: str) -> set[str]:
     return {m.name[len(package) + 1 :] for m in pkgutil.walk_packages(root.__path__, package + ".")}
 
 
-def test07_both_renderers_have_the_shared_modules_and_no_retired_ones():
+def test08_both_renderers_have_the_shared_modules_and_no_retired_ones():
     for package in PACKAGES:
         modules = _modules(package)
         assert "core.dual" in modules or package == "sphere3d"  # the walk sees subpackages
@@ -175,7 +186,7 @@ def test07_both_renderers_have_the_shared_modules_and_no_retired_ones():
 
 
 @pytest.mark.parametrize("module", sorted(SHARED_NAMES))
-def test08_each_pair_of_shared_modules_exposes_the_same_public_names(module):
+def test09_each_pair_of_shared_modules_exposes_the_same_public_names(module):
     pair = [importlib.import_module(f"{package}.{module}") for package in PACKAGES]
     for mod in pair:
         assert SHARED_NAMES[module] - set(mod.__all__) == set(), mod.__name__
@@ -185,7 +196,7 @@ def test08_each_pair_of_shared_modules_exposes_the_same_public_names(module):
         assert len(kinds) == 1, f"{module}.{name}: {kinds}"
 
 
-def test09_the_shared_names_are_defined_where_the_vocabulary_says():
+def test10_the_shared_names_are_defined_where_the_vocabulary_says():
     for package in PACKAGES:
         table = importlib.import_module(f"{package}.methods._common").GRADIENT_METHODS
         for where in ("methods", "render", ""):
@@ -203,7 +214,7 @@ def test09_the_shared_names_are_defined_where_the_vocabulary_says():
         assert protocol and protocol <= set(dir(integrator.Identity)), package  # Identity implements it all
 
 
-def test10_methods_of_both_packages_have_the_same_option_names():
+def test11_methods_of_both_packages_have_the_same_option_names():
     tables = {p: importlib.import_module(f"{p}.methods").GRADIENT_METHODS for p in PACKAGES}
     assert set(tables["flatland"].names) & set(tables["sphere3d"].names) == set(SHARED_OPTIONS)
     for name, shared in SHARED_OPTIONS.items():
@@ -214,7 +225,7 @@ def test10_methods_of_both_packages_have_the_same_option_names():
         assert flat == shared, name
 
 
-def test11_finite_difference_steps_are_the_documented_ones():
+def test12_finite_difference_steps_are_the_documented_ones():
     """The steps differ on purpose (the docstrings say why); a change of either must be deliberate."""
     for package, h in FD_STEP.items():
         method = importlib.import_module(f"{package}.methods").GRADIENT_METHODS.get("finite_difference")
