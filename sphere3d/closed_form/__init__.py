@@ -1,0 +1,77 @@
+"""Closed forms the gradient methods are checked against, per pixel and per shading point.
+
+Two scenes of one black triangle (albedo 0, emission 0) in front of a constant sky
+``L`` have exact answers, values and θ-derivatives, to rounding:
+
+1. **The camera image** (:func:`triangle_image`). A camera ray either escapes to the
+   sky (radiance L) or meets the triangle (radiance 0), so the pixel integral of
+   :mod:`sphere3d.integrator` is
+
+       I(p) = ∫ k(s) L(ray(c_p + s)) ds = L (1 - ∫_T k(x - c_p) dx),
+
+   with k the pixel filter of :mod:`sphere3d.sampling`, c_p the pixel centre and T the
+   triangle projected to the film (pixel coordinates). The film integral is reduced to
+   the triangle's three edges by Green's theorem and the edge integrals are computed by
+   Gauss–Legendre quadrature between the kinks of the filter (:func:`polygon_filter_integral`);
+   its derivative is the Reynolds transport of T's boundary (:func:`polygon_filter_derivative`),
+   the silhouette term of Loubet et al. 2019, Sec. 3.2, that a gradient method must
+   recover at moving visibility edges.
+2. **The irradiance at a point under the sky** (:func:`occluded_sky_irradiance`):
+   ``E = π L - L Φ(T)``, Φ the projected solid angle of the triangle by Lambert's
+   polygon formula (:func:`projected_solid_angle`), Dual-aware, so its derivative comes
+   with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's ``E = L Φ``.
+
+Both are written from the scene's definition (camera frame, pixel mapping, filter
+profiles, shape transform), not from the estimators' code. The scenes the tests and
+``benchmarks/bench_reparam_bias.py`` use are built by :func:`pinhole_triangle_scene` and
+:func:`sky_triangle_scene`; :func:`share_lost` measures the share of an exact derivative an
+estimator misses.
+"""
+
+from sphere3d.closed_form.film import (
+    QUADRATURE_NODES,
+    TriangleImage,
+    filter_cdf_1d,
+    filter_kinks,
+    filter_profile_1d,
+    polygon_filter_derivative,
+    polygon_filter_integral,
+    project,
+    triangle_image,
+    triangle_vertices,
+)
+from sphere3d.closed_form.lambert import (
+    occluded_sky_irradiance,
+    polygon_irradiance,
+    projected_solid_angle,
+)
+from sphere3d.closed_form.scenes import (
+    PIXEL,
+    TRIANGLE_SHAPE,
+    ShareLost,
+    pinhole_triangle_scene,
+    share_lost,
+    sky_triangle_scene,
+)
+
+__all__ = [
+    "PIXEL",
+    "QUADRATURE_NODES",
+    "TRIANGLE_SHAPE",
+    "ShareLost",
+    "TriangleImage",
+    "filter_cdf_1d",
+    "filter_kinks",
+    "filter_profile_1d",
+    "occluded_sky_irradiance",
+    "pinhole_triangle_scene",
+    "polygon_filter_derivative",
+    "polygon_filter_integral",
+    "polygon_irradiance",
+    "project",
+    "projected_solid_angle",
+    "share_lost",
+    "sky_triangle_scene",
+    "triangle_image",
+    "triangle_vertices",
+]

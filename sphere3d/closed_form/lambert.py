@@ -1,0 +1,99 @@
+"""The irradiance at a point under the sky with a black triangle above it: Lambert's polygon
+formula for the projected solid angle, on Duals so that its θ-derivative comes with it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach, tangent, variable
+from flatland.core.validate import ValidationError
+from sphere3d.closed_form.film import triangle_vertices
+from sphere3d.scene import check_vector, load_scene
+
+__all__ = [
+    "occluded_sky_irradiance",
+    "polygon_irradiance",
+    "projected_solid_angle",
+]
+
+
+# ------------------------------------------------------------ Lambert's formula
+def projected_solid_angle(point: Any, normal: Any, vertices: Any) -> Any:
+    """Φ = ∫_{Ω(T)} n·ω dω, the projected solid angle of a polygon above the horizon (Lambert 1760).
+
+    With u_i the unit directions from the point to the vertices, the irradiance vector
+    of the cone over the polygon is ½ Σ γ_i m_i (Lambert; Arvo 1995, "Applications of
+    irradiance tensors"): each edge spans with the point a plane of unit normal m_i and
+    subtends the great arc u_i → u_{i+1} of angle γ_i, and by Stokes' theorem on the
+    sphere the cosine-weighted solid angle is the sum of those arcs' contributions:
+
+        Φ = ½ Σ_i γ_i n·m_i,    γ_i = atan2(|u_i × u_{i+1}|, u_i·u_{i+1}),
+                                m_i = (u_i × u_{i+1}) / |u_i × u_{i+1}|.
+
+    The sum is positive when the vertices wind counter-clockwise about n (seen from
+    the tip of n); the absolute value is returned. Dual-aware in all arguments.
+
+    Parameters
+    ----------
+    point, normal : array_like or Dual, shape (3,)
+        The shading point and its unit normal.
+    vertices : array_like or Dual, shape (V, 3)
+
+    Raises
+    ------
+    ValidationError
+        If a vertex is not strictly above the horizon (n·(v - x) <= 0): the formula needs
+        the polygon clipped there, which is not implemented.
+    """
+    d = vertices - point
+    height = d @ normal
+    if not np.all(np.asarray(detach(height)) > 0.0):
+        raise ValidationError(
+            "vertices",
+            f"must lie strictly above the horizon of the point, got heights {np.asarray(detach(height))}",
+        )
+    u = d / np.linalg.norm(d, axis=-1)[:, None]
+    v = u[np.roll(np.arange(len(u)), -1)]
+    c = np.cross(u, v)
+    sine = np.linalg.norm(c, axis=-1)
+    gamma = np.arctan2(sine, np.sum(u * v, axis=-1))  # the arc's angle, accurate near 0 and π
+    # a zero-length edge (two vertices in one direction) subtends no arc: γ = 0, no term (not 0/0)
+    safe = np.where(np.asarray(detach(sine)) > 0.0, sine, 1.0)
+    return np.abs(0.5 * np.sum(gamma * (c @ normal) / safe))
+
+
+def polygon_irradiance(point: Any, normal: Any, vertices: Any, radiance: Any) -> Any:
+    """Irradiance from a uniform one-sided polygonal emitter: E = L Φ if its front faces the point, else 0.
+
+    The front side is the one its normal (v1 - v0) × (v2 - v0) points to (as
+    :mod:`sphere3d.shapes` orients emitters); Φ from :func:`projected_solid_angle`. Dual-aware.
+    """
+    m = np.cross(vertices[1] - vertices[0], vertices[2] - vertices[0])
+    facing = float(np.asarray(detach(np.sum(m * (point - vertices[0]))))) > 0.0
+    return radiance * projected_solid_angle(point, normal, vertices) * facing
+
+
+def occluded_sky_irradiance(
+    scene: Any, point: Any, normal: Any, param: str | None = None, theta: float = 0.0
+) -> tuple[float, float]:
+    """E = sky (π - Φ(T)) at a point under a constant sky with the scene's black triangle above it, and dE/dθ.
+
+    The open sky gives ∫_H L cos θ dω = π L; the triangle (black, so nothing of it adds
+    light) removes L Φ. Returns (value, derivative) at the parameter offset ``theta``;
+    the derivative flows through Lambert's formula with a Dual θ (derivative 0 without
+    ``param``).
+    """
+    scene = load_scene(scene)
+    point = np.array(check_vector("point", point))
+    normal = np.array(check_vector("normal", normal))
+    length = float(np.linalg.norm(normal))
+    if length == 0.0:
+        raise ValidationError("normal", f"must not be zero, got {list(normal)}")
+    theta = float(check_vector("theta", [theta], 1)[0])
+    dual = variable(theta) if param is not None else theta
+    e = scene.sky * (
+        np.pi - projected_solid_angle(point, normal / length, triangle_vertices(scene, param, dual))
+    )
+    return float(np.asarray(detach(e))), float(np.asarray(tangent(e))) if param is not None else 0.0

@@ -1,0 +1,128 @@
+"""The test scenes the closed forms are stated for, and the share of an exact derivative an
+estimator misses."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.validate import ValidationError
+
+__all__ = [
+    "PIXEL",
+    "TRIANGLE_SHAPE",
+    "ShareLost",
+    "pinhole_triangle_scene",
+    "share_lost",
+    "sky_triangle_scene",
+]
+
+# ------------------------------------------------------------------ test scenes
+PIXEL = 0.1
+"""World size of one pixel at the depth of :func:`pinhole_triangle_scene`'s triangle (distance 4)."""
+TRIANGLE_SHAPE = ((-0.5, -0.4, 0.0), (0.55, -0.3, 0.0), (0.05, 0.5, 0.0))
+"""Local vertices of the test triangle, in units of its size: 1.05 × 0.9 across, no right angle."""
+
+
+def pinhole_triangle_scene(size: float, width: int = 16, filter: str = "gaussian", sky: float = 1.0) -> dict:
+    """A black triangle about ``size`` px across, centred in a ``width`` × ``width`` image, under the sky.
+
+    The camera sits at (0, 0, -4) looking at the origin (up +y, so ``translate.x`` moves the
+    triangle sideways, ``translate.z`` away from the camera); its fov makes a pixel
+    :data:`PIXEL` = 0.1 wide at the triangle's depth whatever ``width``
+    (tan(fov/2) = width · PIXEL / (2 · 4)). The triangle's centre is offset by (0.13, -0.21)
+    px from the optical axis, so no edge or vertex lines up with the pixel grid.
+    """
+    tan_half = width * PIXEL / 8.0
+    local = np.array(TRIANGLE_SHAPE) * size * PIXEL
+    return {
+        "name": f"triangle_{size:g}px",
+        "camera": {
+            "position": [0.0, 0.0, -4.0],
+            "look_at": [0.0, 0.0, 0.0],
+            "up": [0.0, 1.0, 0.0],
+            "fov": 2.0 * math.atan(tan_half),
+            "width": width,
+            "height": width,
+            "filter": filter,
+        },
+        "sky": sky,
+        "shapes": [
+            {
+                "name": "tri",
+                "type": "mesh",
+                "vertices": local.tolist(),
+                "faces": [[0, 1, 2]],
+                "albedo": 0.0,
+                "translate": [0.013, -0.021, 0.0],
+            }
+        ],
+    }
+
+
+def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:
+    """A black triangle with world ``vertices`` (3, 3) under a constant sky, centred on their centroid.
+
+    Rotate and scale parameters act about the centroid. The camera is a placeholder (the
+    irradiance at a point does not use it).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    centre = v.mean(axis=0)
+    return {
+        "name": "sky_triangle",
+        "camera": {
+            "position": [0.0, -3.0, 1.0],
+            "look_at": [0.0, 0.0, 0.0],
+            "fov": 0.8,
+            "width": 8,
+            "height": 8,
+        },
+        "sky": sky,
+        "shapes": [
+            {
+                "name": "tri",
+                "type": "mesh",
+                "vertices": (v - centre).tolist(),
+                "faces": [[0, 1, 2]],
+                "albedo": 0.0,
+                "translate": centre.tolist(),
+            }
+        ],
+    }
+
+
+@dataclass(frozen=True)
+class ShareLost:
+    """The share of an exact derivative an estimator misses, from its independent batches.
+
+    ``mean`` = 1 - mean over batches of Σ sign(g) d_b / Σ |g| (g the exact derivative, d_b a batch's
+    estimate; for a scalar 1 - d_b / g); ``stderr`` its standard error; ``batches`` the count.
+    Positive: the estimate is short of the exact derivative, as a missed boundary term makes it.
+    """
+
+    mean: float
+    stderr: float
+    batches: int
+
+
+def share_lost(batch_estimates: Any, exact: Any) -> ShareLost:
+    """:class:`ShareLost` of per-batch derivative estimates (B, ...) against the exact derivative (...).
+
+    Summing over the film with the sign of the exact derivative weighs every pixel by the
+    silhouette term's own direction, so a sideways motion (whose film sum is about 0: the
+    triangle's area does not change) is measured like a motion in depth (whose derivative
+    has one sign everywhere, so the weighted sum is the film sum itself).
+    """
+    d = np.asarray(batch_estimates, dtype=np.float64)
+    g = np.asarray(exact, dtype=np.float64)
+    if d.ndim != g.ndim + 1 or d.shape[1:] != g.shape or len(d) < 2:
+        raise ValidationError("batch_estimates", f"must be (batches >= 2, *{g.shape}), got shape {d.shape}")
+    total = float(np.sum(np.abs(g)))
+    if total == 0.0:
+        raise ValidationError("exact", "is zero everywhere: no share of it can be lost")
+    kept = np.sum((np.sign(g) * d).reshape(len(d), -1), axis=1) / total
+    lost = 1.0 - kept
+    return ShareLost(float(lost.mean()), float(lost.std(ddof=1) / math.sqrt(len(d))), len(d))
