@@ -46,7 +46,8 @@ from sphere3d.edges import Edges
 from sphere3d.integrator import Identity, camera_radiance
 from sphere3d.sampling import filter_radius, filter_value
 from sphere3d.state import SceneState
-from sphere3d.vector import dot, norm
+from sphere3d.tracing import Hits
+from sphere3d.vector import cross, dot, norm
 
 __all__ = ["EPS_FILM", "camera_edge_term"]
 
@@ -69,6 +70,41 @@ def _liang_barsky(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray
         t0 = np.where(flat, np.where(inside, t0, 1.0), np.maximum(t0, np.minimum(ta, tb)))
         t1 = np.where(flat, np.where(inside, t1, 0.0), np.minimum(t1, np.maximum(ta, tb)))
     return t0, t1
+
+
+def _side_hits(plain: SceneState, edges: Edges, d: np.ndarray) -> Hits:
+    """What the camera sees along ``d`` (2n, 3), the rays just beside the n edge points (minus side
+    first): on a side where one of the edge's own faces lies, the nearest such face; elsewhere the
+    traced first hit.
+
+    Tracing alone fails beside a face seen almost edge-on, whose image can be thinner than
+    :data:`EPS_FILM`: the ray beside a crease would pass it and report the background. A face
+    lies on the side of its centroid with respect to the plane through the camera and the edge
+    (the edge's vertices lie in that plane); the nearer face along the ray (plane intersection
+    in float64) is the one seen. Non-manifold edges are traced on both sides.
+    """
+    n = len(edges)
+    o0 = np.asarray(plain.camera.origin)
+    tri = np.asarray(plain.triangles)
+    traced = plain.tracer.intersect(o0, d)
+    shape, triangle = traced.shape.copy(), traced.triangle.copy()
+    plane = cross(edges.a - o0, edges.b - o0)
+    ray_side = np.sign(dot(np.concatenate([plane, plane]), d))
+    best = np.full(2 * n, np.inf)
+    for f, usable in ((edges.face, edges.count <= 2), (edges.other, edges.other >= 0)):
+        t3 = tri[np.maximum(f, 0)]
+        face_side = np.sign(dot(plane, t3.mean(axis=1) - o0))
+        normal = cross(t3[:, 1] - t3[:, 0], t3[:, 2] - t3[:, 0])
+        t3, normal = np.concatenate([t3, t3]), np.concatenate([normal, normal])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = dot(normal, t3[:, 0] - o0) / dot(normal, d)  # the ray meets the face's plane
+        ok = np.tile(usable & (face_side != 0.0), 2) & (np.tile(face_side, 2) == ray_side) & (t > 0.0)
+        nearer = ok & (t < best)
+        best = np.where(nearer, t, best)
+        f2 = np.tile(f, 2)
+        triangle = np.where(nearer, f2, triangle)
+        shape = np.where(nearer, plain.shape_of[np.maximum(f2, 0)], shape)
+    return Hits(shape, triangle, traced.t, traced.u, traced.v)
 
 
 def camera_candidates(state: SceneState, edges: Edges) -> np.ndarray:
@@ -155,7 +191,8 @@ def camera_edge_term(
     d = cam.directions(side[:, 0], side[:, 1])
     u = rng.random((n, SHADING_UNIFORMS))
     draws = Draws.of(seed, np.arange(n)).tile(2)
-    radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws))
+    hits = _side_hits(plain, edges.take(k), d)
+    radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits))
     jump = radiance[:n] - radiance[n:]
     # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2)
     weight = jump * np.sum(v * normal, axis=1) * (total / n) * seen

@@ -50,6 +50,8 @@ class Edges:
         The edge's endpoints as vertex slots (0, 1, 2) of ``face``.
     other : ndarray of int, shape (E,)
         The second triangle of a two-face edge; -1 for boundary and non-manifold edges.
+    count : ndarray of int, shape (E,)
+        How many triangles share the edge (1: boundary, 2: manifold, 3+: non-manifold).
     always : ndarray of bool, shape (E,)
         Boundary or non-manifold edges, and edges between two shapes: candidates from
         every viewpoint.
@@ -65,6 +67,7 @@ class Edges:
     ia: np.ndarray
     ib: np.ndarray
     other: np.ndarray
+    count: np.ndarray
     always: np.ndarray
     crease: np.ndarray
     a: np.ndarray
@@ -131,6 +134,7 @@ def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
         ia=ia[h1],
         ib=ib[h1],
         other=other,
+        count=count,
         always=~two | between_shapes,
         crease=crease,
         a=tri[face1, ia[h1]],

@@ -279,16 +279,25 @@ def pixel_samples(
 
 
 def camera_radiance(
-    state: SceneState, transforms: Transforms, d: np.ndarray, rotated: Any, u: np.ndarray, draws: Draws
+    state: SceneState,
+    transforms: Transforms,
+    d: np.ndarray,
+    rotated: Any,
+    u: np.ndarray,
+    draws: Draws,
+    hits: Hits | None = None,
 ) -> Any:
     """Radiance arriving at the camera along unit directions ``d`` (plain), re-attached along ``rotated``.
 
     Emission of the first hit's front side plus ``ρ/π E`` at diffuse hits, E estimated
     with the shading uniforms ``u`` (n, 5) under ``transforms``; the sky where a ray misses.
+    ``hits``: the rays' hits if the caller knows them (only ``shape`` and ``triangle`` are
+    read), else they are traced.
     """
     n = len(d)
     cam = state.camera
-    hits = state.tracer.intersect(detach(cam.origin), d)
+    if hits is None:
+        hits = state.tracer.intersect(detach(cam.origin), d)
     hit = np.flatnonzero(hits.hit)
     miss = np.flatnonzero(~hits.hit)
     radiance = scatter(n, miss, state.sky, state.dual)

@@ -96,8 +96,8 @@ class Package:
         The panel's gradient methods, in order; None: those of :data:`DEMO_METHODS` the
         package has.
     reference_method : str, optional
-        The method of the demo's reference and a study's default reference; None: ``boundary`` if the package has it,
-        else ``finite_difference``.
+        The method of the demo's reference and a study's default reference; None:
+        ``boundary`` if the package has it, else ``finite_difference``.
     demo_sections : tuple of callables
         Extra text sections printed by ``demo``, each called with the parsed arguments.
     studies : mapping

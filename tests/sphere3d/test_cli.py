@@ -93,7 +93,7 @@ def test03_study_on_a_scene_pixel(tmp_path, scene_file):
 
 
 def test04_help_offers_the_sphere3d_methods_and_an_unknown_one_is_a_usage_error(tmp_path, capsys):
-    """The help offers sphere3d's own methods (boundary among them); argparse refuses others, naming the choices."""
+    """The help offers sphere3d's methods (boundary among them); argparse refuses others, naming them."""
     assert main(["gradient", "--help"]) == 0
     assert "--method {naive,finite_difference,reparam,boundary}" in capsys.readouterr().out
     argv = ["gradient", "shadow", "--param", "occluder.translate.x", "--method", "textbook"]
