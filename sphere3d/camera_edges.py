@@ -180,7 +180,9 @@ def camera_edge_term(
     x = np.stack([detach(fx), detach(fy)], axis=-1)
     v = np.stack([tangent(fx), tangent(fy)], axis=-1)
     seg = fb[k] - fa[k]
-    normal = np.stack([-seg[:, 1], seg[:, 0]], axis=-1) / norm(seg)[:, None]
+    seg_length = norm(seg)
+    # a zero-length image is never drawn (rounding aside: its weight is then 0, not 0/0)
+    normal = np.stack([-seg[:, 1], seg[:, 0]], axis=-1) / np.where(seg_length > 0.0, seg_length, 1.0)[:, None]
     # the edge point itself must be the camera's first hit (up to 2ε before it)
     p0 = edges.a[k] + s[:, None] * (edges.b[k] - edges.a[k])
     to = p0 - o0

@@ -24,7 +24,10 @@ the Reynolds transport theorem
 silhouette edges with probability ∝ the angle γ_e it subtends above the horizon (the
 arc clipped to n·(P - x) > 0, a linear condition in s), then a point uniform in angle
 on that arc: density ``1/Γ`` per radian, Γ = Σ_e γ_e, and the estimate is
-``Γ [f(ω⁻) - f(ω⁺)] (m·ω̇)``. The 3D point P behind ω on the edge is found in the
+``Γ [f(ω⁻) - f(ω⁺)] (m·ω̇)``. Under a black sky f vanishes outside the emitters'
+directions on both sides of every arc, so the arcs are first clipped to the cone around
+the emitters' bounding sphere (:func:`_emitter_cone`): the same expectation, 20-27 % less
+standard error at the shadow scene's penumbra points. The 3D point P behind ω on the edge is found in the
 plane of the arc; ω̇ comes from forward AD of ``normalize(P(θ) - x(θ))`` with the
 edge's Dual vertices. Both sides are traced (two rays per shading point); L_i along a
 ray is deterministic, so the jump is exact up to the offset δ = :data:`EPS_ANGLE`.
@@ -63,9 +66,32 @@ def _incident(state, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
     return out
 
 
-def _pairs(edges: Edges, o: np.ndarray, n0: np.ndarray) -> tuple[np.ndarray, ...]:
+def _emitter_cone(state, o: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per point, the cone (unit axis, cos of the half-angle) holding every emitter, or None.
+
+    Only when the sky is black (and not the parameter): then f is 0 outside the emitters'
+    directions on both sides of any edge, so the arcs can be restricted to the cone around the
+    emitters' bounding sphere without bias. None (no restriction) when the point lies within
+    twice that sphere's radius, or there is no emitter.
+    """
+    sky = float(detach(state.sky)) != 0.0 or state.param == "sky.emission"
+    if sky or len(state.emitters) == 0:
+        return None
+    vertices = np.asarray(detach(state.triangles))[state.emitters].reshape(-1, 3)
+    centre = vertices.mean(axis=0)
+    radius = 1.001 * float(np.max(norm(vertices - centre)))  # margin: the side rays lie 1e-5 off the arc
+    to = centre - o
+    dist = norm(to)
+    far = dist > 2.0 * radius
+    if not far.all():
+        return None
+    return to / dist[:, None], np.sqrt(1.0 - (radius / dist) ** 2)
+
+
+def _pairs(edges: Edges, o: np.ndarray, n0: np.ndarray, cone) -> tuple[np.ndarray, ...]:
     """The (point, edge) pairs where the edge is a silhouette seen from the point and rises above its
-    horizon: their rows, edges, clipped ends (relative to ``o``), parameters s0 and s1, and angles γ.
+    horizon: their rows, edges, clipped ends (relative to ``o``), parameters s0 and s1, and the arc
+    of each to sample, its start angle and length γ (inside ``cone``, per point, if given).
 
     The silhouette test is two matrix products per block of points; everything else is computed
     on the pairs that pass it only (a few per cent of a fine mesh's edges).
@@ -94,24 +120,51 @@ def _pairs(edges: Edges, o: np.ndarray, n0: np.ndarray) -> tuple[np.ndarray, ...
     qa = qa_all + s0[:, None] * e
     qb = qa_all + s1[:, None] * e
     gamma = np.where(s1 > s0, np.arctan2(norm(cross(qa, qb)), dot(qa, qb)), 0.0)
-    return rows, cols, qa, qb, s0, s1, gamma
+    start = np.zeros_like(gamma)
+    if cone is not None:  # keep the part of each arc inside the emitters' cone seen from its point
+        start, gamma = _clip_to_cone(qa, qb, gamma, cone[0][rows], cone[1][rows])
+    return rows, cols, qa, qb, s0, s1, start, gamma
 
 
-def _choose(edges: Edges, o: np.ndarray, n0: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, ...]:
+def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors (w_a, w_⊥) with the arc from qa to qb at angles φ ∈ [0, γ]: cos φ w_a + sin φ w_⊥."""
+    wa = qa / norm(qa)[:, None]
+    perp = qb - wa * dot(qb, wa)[:, None]
+    return wa, perp / np.where(norm(perp) > 0.0, norm(perp), 1.0)[:, None]
+
+
+def _clip_to_cone(qa, qb, gamma, axis, cos_half) -> tuple[np.ndarray, np.ndarray]:
+    """The sub-arc [start, start + length] of [0, γ] inside the cone (unit ``axis``, ``cos_half``).
+
+    On the arc, ``w(φ)·axis = R cos(φ - φ₀)``: inside for |φ - φ₀| <= acos(cos_half / R)
+    (a cone of half-angle below π/2 meets a great circle in one arc).
+    """
+    wa, perp = _arc_frame(qa, qb)
+    a, b = dot(wa, axis), dot(perp, axis)
+    r = np.hypot(a, b)
+    phi0 = np.arctan2(b, a)
+    half = np.arccos(np.clip(cos_half / np.where(r > 0.0, r, 1.0), -1.0, 1.0))
+    lo = np.clip(phi0 - half, 0.0, gamma)
+    hi = np.clip(phi0 + half, 0.0, gamma)
+    length = np.where(r > cos_half, hi - lo, 0.0)
+    return lo, length
+
+
+def _choose(edges: Edges, o: np.ndarray, n0: np.ndarray, u: np.ndarray, cone) -> tuple[np.ndarray, ...]:
     """The points with a silhouette edge above the horizon, and for each: one such edge drawn ∝ its
     angle γ, its clipped ends, s0, s1, γ, and Γ = Σ γ."""
     m = len(o)
-    rows, cols, qa, qb, s0, s1, gamma = _pairs(edges, o, n0)
+    rows, cols, qa, qb, s0, s1, start, gamma = _pairs(edges, o, n0, cone)
     if rows.size == 0:
-        return (np.zeros(0, dtype=np.int64),) * 2 + (np.zeros((0, 3)),) * 2 + (np.zeros(0),) * 4
+        return (np.zeros(0, dtype=np.int64),) * 2 + (np.zeros((0, 3)),) * 2 + (np.zeros(0),) * 5
     total = np.bincount(rows, weights=gamma, minlength=m)
     cdf = np.cumsum(gamma)
-    start = np.concatenate([[0.0], cdf])[np.searchsorted(rows, np.arange(m))]  # pairs are sorted by row
-    # the pair whose cdf interval holds start + u Γ (zero-angle pairs are never chosen)
-    j = np.minimum(np.searchsorted(cdf, start + u * total, side="right"), len(cdf) - 1)
+    first = np.concatenate([[0.0], cdf])[np.searchsorted(rows, np.arange(m))]  # pairs are sorted by row
+    # the pair whose cdf interval holds first + u Γ (zero-angle pairs are never chosen)
+    j = np.minimum(np.searchsorted(cdf, first + u * total, side="right"), len(cdf) - 1)
     live = np.flatnonzero((total > 0.0) & (rows[j] == np.arange(m)))
     j = j[live]
-    return live, cols[j], qa[j], qb[j], s0[j], s1[j], gamma[j], total[live]
+    return live, cols[j], qa[j], qb[j], s0[j], s1[j], start[j], gamma[j], total[live]
 
 
 def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
@@ -138,14 +191,12 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
         return out
     o = shading.origin
     n0 = np.asarray(detach(shading.n), dtype=np.float64)
-    live, k, qa, qb, s0, s1, gamma, total = _choose(edges, o, n0, u[:, 0])
+    live, k, qa, qb, s0, s1, start, gamma, total = _choose(edges, o, n0, u[:, 0], _emitter_cone(state, o))
     if live.size == 0:
         return out
     # a direction uniform in angle on the arc from qa to qb
-    wa = qa / norm(qa)[:, None]
-    perp = qb - wa * dot(qb, wa)[:, None]
-    perp = perp / np.where(norm(perp) > 0.0, norm(perp), 1.0)[:, None]
-    phi = u[live, 1] * gamma
+    wa, perp = _arc_frame(qa, qb)
+    phi = start + u[live, 1] * gamma
     w = np.cos(phi)[:, None] * wa + np.sin(phi)[:, None] * perp
     normal = cross(qa, qb)
     normal = normal / norm(normal)[:, None]  # m: the arc's normal on S²

@@ -16,10 +16,12 @@ module's docstring says which of these it changes; the guide
 ``reparam``               rotations chosen by probe rays, vMF convolution;
                           options ``kappa``, ``probes``, ``spread``,
                           ``paired``
+``boundary``              edge sampling (Li et al. 2018): naive plus the
+                          boundary terms of the pixel integrals
+                          (:mod:`sphere3d.camera_edges`) and of the shading
+                          integrals (:mod:`sphere3d.shading_edges`); option
+                          ``rate``
 ========================  =====================================================
-
-There is no ``boundary`` method on the sphere: sampling silhouette curves on S²
-(Li et al. 2018) is out of scope; the finite-difference reference plays its role.
 """
 
 # registration order is the order methods are listed in: naive, finite_difference, reparam, boundary
