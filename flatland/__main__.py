@@ -59,9 +59,9 @@ STUDIES = {
         "reference": {"spp": 12288},
     },
 }
-"""Built-in studies (``python -m flatland study kappa``): the κ trade-off of DESIGN 2.7 on the
-two-step integral against its closed form, and the methods on the shadow scene (the sum of the
-derivative image) against a 12288-spp boundary reference, whose standard error is then below 1/4
+"""Built-in studies (``python -m flatland study kappa``): the κ trade-off of Loubet et al. 2019,
+Sec. 4.2, on the two-step integral against its closed form, and the methods on the shadow scene (the
+sum of the derivative image) against a 12288-spp boundary reference, whose standard error is then below 1/4
 of the boundary cells' at 64 spp (the smallest). Every method runs at several sample counts, the
 points of the error-versus-time figure."""
 

@@ -1,18 +1,18 @@
 """Vectorized ray casting against segments and circles, and re-attaching hits to θ.
 
-Data flow (DESIGN 4): rays are cast *detached* (plain float arrays, all rays
+Data flow (theory/architecture): rays are cast *detached* (plain float arrays, all rays
 against all primitives at once, in chunks so memory stays bounded) by
 :func:`cast`; the hits are then *re-attached* by :func:`attach`, which recomputes
 the hit point and normal from the hit primitive's θ-dependent geometry (Duals) and
 the possibly θ-dependent ray, so derivatives flow through the intersection. The
 reparameterization needs points that *follow the shape* instead:
 :func:`attached_points` keeps the hit's barycentric coordinate (segments) or world
-angle (circles) detached and moves the point with the primitive (DESIGN 2.8).
+angle (circles) detached and moves the point with the primitive (Loubet et al. 2019, Sec. 4.3).
 
 :func:`film_coordinate` and :func:`angle_of` turn points into the coordinates the
 pixel and shading integrals live in; :func:`silhouette_angles` enumerates the
 candidate discontinuities seen from a set of origins (segment endpoints and circle
-tangent points, DESIGN 2.10).
+tangent points, theory/boundary).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def angle_of(v: Any) -> Any:
 
 
 def film_direction(geom: Geometry, t: Any) -> Any:
-    """Unit ray direction normalize(forward + t · right) for film coordinates ``t`` (DESIGN 3)."""
+    """Unit ray direction normalize(forward + t · right) for film coordinates ``t`` (theory/radiometry)."""
     d = geom.cam_f + t[..., None] * geom.cam_r
     return d / np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])[..., None]
 
@@ -257,7 +257,7 @@ def attached_points(geom: Geometry, prim: np.ndarray, coord: np.ndarray) -> tupl
     Segment: a(θ) + u (b(θ) - a(θ)) with the barycentric u detached; circle:
     c(θ) + r(θ) (cos α, sin α) with the world angle α detached (a rotation about its
     centre leaves a circle unchanged). These are the points whose motion the
-    reparameterization follows (DESIGN 2.8).
+    reparameterization follows (Loubet et al. 2019, Sec. 4.3).
     """
     m = prim.size
     n_seg = geom.n_seg
@@ -280,7 +280,7 @@ def attached_points(geom: Geometry, prim: np.ndarray, coord: np.ndarray) -> tupl
 
 # ------------------------------------------------------------------ discontinuities
 def silhouette_angles(geom: Geometry, origins: Any) -> tuple[Any, np.ndarray]:
-    """Angles of every candidate discontinuity seen from each origin (DESIGN 2.10).
+    """Angles of every candidate discontinuity seen from each origin (theory/boundary).
 
     The candidates are the shapes' vertices and the two tangent points of every
     circle. Returns the angles φ_c(θ), shape (n, V + 2C) (a Dual when the geometry or

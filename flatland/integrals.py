@@ -5,7 +5,7 @@ with a θ-independent proposal density to sample x from, the closed forms I(θ) 
 dI/dθ, and the list of its discontinuities: where f jumps (a :class:`Dual` whose
 tangent is dc/dθ) and by how much (``f(c⁻) - f(c⁺)``). Moving integration limits
 are written as indicator discontinuities of an integrand on the whole domain, so
-the Leibniz rule of DESIGN 2.1 reads
+the Leibniz rule (theory/leibniz) reads
 
     dI/dθ = ∫ ∂f/∂θ dx + Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ).
 
@@ -77,7 +77,7 @@ class Line:
 
 
 class Circle:
-    """The circle S¹ (angles in radians). Its kernel is the von Mises density (DESIGN 2.7)."""
+    """The circle S¹ (angles in radians). Its kernel is the von Mises density (Sec. 4.2)."""
 
     name = "circle"
 
@@ -162,7 +162,7 @@ class Integrand(ABC):
         return t
 
     def discontinuity_term(self, theta: float) -> float:
-        """Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ): what naive differentiation drops (DESIGN 2.1)."""
+        """Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ): what naive differentiation drops (theory/leibniz)."""
         return float(sum(d.jump * float(d.location.tangent) for d in self.discontinuities(variable(theta))))
 
     def __repr__(self) -> str:
@@ -196,7 +196,7 @@ class LeibnizSeed(_GaussianProposal, Integrand):
     """The seed example: f = 1 for x > 2θ, 0 below, integrated over [0, 4θ]; I = 2θ, dI/dθ = 2.
 
     On the whole line f = 1_{2θ < x < 4θ}. Interior term 0, moving limit 1·4, moving
-    step (0 - 1)·2: dI/dθ = 2 (DESIGN 2.1). Two discontinuities moving at different
+    step (0 - 1)·2: dI/dθ = 2 (Leibniz rule, theory/leibniz). Two discontinuities moving at different
     speeds, so one translation per sample cannot follow both.
     """
 
@@ -252,7 +252,7 @@ class TwoSteps(_GaussianProposal, Integrand):
     """Two steps moving at different speeds: f = 1_{θ < x < 2θ} K(x).
 
     I = Φ(2θ) - Φ(θ), dI/dθ = 2K(2θ) - K(θ). One translation cannot follow both
-    ends (DESIGN 2.7): the case for convolution kernels.
+    ends (Loubet et al. 2019, Sec. 4.2): the case for convolution kernels.
     """
 
     name = "two_steps"

@@ -1,6 +1,6 @@
 """The flatland integrator: pixel integrals and shading integrals, with hooks for the gradient methods.
 
-Radiometry (DESIGN 3). Pixel j of the 1D film is ``I_j = ∫ k_j(t) L(t) dt``, with
+Radiometry (theory/radiometry). Pixel j of the 1D film is ``I_j = ∫ k_j(t) L(t) dt``, with
 k_j the pixel filter and L(t) the radiance arriving along film coordinate t; it is
 estimated with t ~ k_j (the filter is its own sampling density). At the first hit
 x, ``L = L_e(x) + (ρ/2) E(x)`` with the cosine-weighted incident radiance
@@ -11,12 +11,12 @@ L_i being the emission (or sky) the ray from x along φ meets: direct illuminati
 E is estimated with one cosine-weighted sample and one emitter sample combined by
 multiple importance sampling (balance heuristic): each sample φ contributes
 ``f(φ) / (p_cos(φ) + p_light(φ))``. All proposals are θ-free (evaluated on the
-detached geometry), so the estimators differentiate cleanly (DESIGN 2.5).
+detached geometry), so the estimators differentiate cleanly (Loubet et al. 2019, Sec. 3.2).
 
 Hooks. A gradient method changes *where* the integrands are evaluated, never the
 samples: :class:`Hooks` maps each film sample t to evaluation points ``T(t)`` and
 each direction sample φ to ``T(φ)`` (with a weight of value 1 that carries kernel
-derivatives), may replace one sample by a pair (DESIGN 2.9), and may add a
+derivatives), may replace one sample by a pair (theory/kernels), and may add a
 derivative-only term per shading point or per pixel (the boundary method). The
 default hooks are the identity: the naive estimator.
 
@@ -121,7 +121,7 @@ class Members:
     """Evaluation points for a set of samples: ``points`` (n, m), ``weights`` (n, m) or None.
 
     m = 1 for a single evaluation per sample, m = 2 for a pair sharing one transform
-    that :func:`combine` merges with the control variate of DESIGN 2.9. ``density``
+    that :func:`combine` merges with the paired-sample control variate (theory/kernels). ``density``
     (film only) replaces the pixel filter as the density of the sample the members
     were drawn around, when that is not the film sample itself.
     """
@@ -147,7 +147,7 @@ class Members:
 def combine(e: Any, w: Any, paired: bool) -> Any:
     """Per-sample estimate from member estimates ``e`` (n, m) carrying weights ``w`` (value 1).
 
-    Paired (DESIGN 2.9): 0.5 (e0 - e1/w1 (w0 - detach w0)) + 0.5 (e1 - e0/w0 (w1 - detach w1)):
+    Paired (theory/kernels): 0.5 (e0 - e1/w1 (w0 - detach w0)) + 0.5 (e1 - e0/w0 (w1 - detach w1)):
     each weight's derivative has zero mean given the pair's kernel centre and is
     independent of the other member, so it serves as the other's control variate.
     """
@@ -271,7 +271,8 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, 
     n = ignore.size
     x0, n0 = detach(x), detach(normal)
     phi_n0 = np.arctan2(n0[:, 1], n0[:, 0])
-    phis = [phi_n0 + np.arcsin(2.0 * u[:, 0] - 1.0)]  # cosine sampling: φ - φn = arcsin(2u - 1)  (DESIGN 3)
+    # cosine sampling: φ - φn = arcsin(2u - 1)   (theory/radiometry)
+    phis = [phi_n0 + np.arcsin(2.0 * u[:, 0] - 1.0)]
     keep = [np.ones(n, dtype=bool)]
     if not ctx.lights.empty:
         phi_l, chosen = ctx.lights.sample(u[:, 1], u[:, 2], x0)

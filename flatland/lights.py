@@ -13,7 +13,7 @@ not (:meth:`Lights.pdf`). That is the density multiple importance sampling needs
 emitters overlap in angle.
 
 Everything here is evaluated on the detached geometry at θ0: the proposal is a
-fixed, θ-free density, which is what the gradient methods require (DESIGN 2.5).
+fixed, θ-free density, which is what the gradient methods require (Loubet et al. 2019, Sec. 3.2).
 """
 
 from __future__ import annotations

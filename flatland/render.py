@@ -7,7 +7,7 @@ Entry points:
   -> GradientImage``: the image and its derivative with respect to one parameter.
 - :func:`irradiance` ``(scene, point, normal, param, method, n, seed, ...) ->
   Estimate``: the cosine-weighted incident radiance E(x) at a point, the shading
-  integral on its own (the closed forms of DESIGN 3 are stated for it).
+  integral on its own (the closed forms of theory/radiometry are stated for it).
 
 ``scene`` is anything :func:`flatland.scene.load_scene` accepts. The gradient
 methods live in :data:`GRADIENT_METHODS` (one module each in
@@ -158,7 +158,7 @@ def irradiance(
     """Estimate E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ at a fixed point and its derivative.
 
     The shading integral of the renderer on its own (same samplers, same methods),
-    at a point that does not move with θ. Closed forms (DESIGN 3): a uniform emitter
+    at a point that does not move with θ. Closed forms (theory/radiometry): a uniform emitter
     of radiance L between angles φ_a < φ_b from the normal gives L (sin φ_b - sin φ_a);
     the unoccluded sky of radiance 1 gives 2. With ``param=None`` only the value is
     estimated (derivative 0).

@@ -140,7 +140,7 @@ def pdf_uniform_circle(phi: np.ndarray) -> np.ndarray:
 
 
 def sample_cosine_half_circle(u: np.ndarray, normal_angle: float | np.ndarray = 0.0) -> np.ndarray:
-    """Cosine-weighted direction about ``normal_angle``: ``φ - φn = arcsin(2u - 1)`` (DESIGN 3)."""
+    """Cosine-weighted direction about ``normal_angle``: ``φ - φn = arcsin(2u - 1)`` (theory/radiometry)."""
     return normal_angle + np.arcsin(2.0 * np.asarray(u) - 1.0)
 
 
@@ -161,7 +161,7 @@ def log_pdf_von_mises(phi: Any, mu: Any, kappa: float) -> Any:
 
 
 def pdf_von_mises(phi: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
-    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (DESIGN 2.7)."""
+    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (theory/kernels)."""
     return np.exp(log_pdf_von_mises(np.asarray(phi, dtype=np.float64), mu, kappa))
 
 
@@ -219,7 +219,7 @@ def sample_segment_direction(u: np.ndarray, x: np.ndarray, a: np.ndarray, b: np.
 
 
 def pdf_segment_direction(phi: np.ndarray, x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angular density of :func:`sample_segment_direction`: ``|x - y| / (ℓ |cos θ_y|)`` (DESIGN 3).
+    """Angular density of :func:`sample_segment_direction`: ``|x - y| / (ℓ |cos θ_y|)`` (theory/radiometry).
 
     With d = (cos φ, sin φ), e = b - a, w = a - x, the ray x + s d meets the segment at
     s = (w × e) / (d × e), and dφ = |cos θ_y| dℓ / s in 2D, so the density per radian

@@ -15,13 +15,13 @@ A scene is a plain dict (or a JSON file of the same shape), validated on load::
 
 Shapes are made of line segments (``segment``: 2 points, ``polyline``: >= 2 points,
 ``polygon``: >= 3 points, closed) or are circles. Each has a diffuse ``albedo`` in
-[0, 1] (BRDF albedo/2, DESIGN 3) and an ``emission`` radiance >= 0. Emission is
+[0, 1] (BRDF albedo/2, theory/radiometry) and an ``emission`` radiance >= 0. Emission is
 two-sided unless ``one_sided`` is true; a one-sided segment emits toward the right of
 its direction a → b (outward for a counter-clockwise polygon), a circle outward. A
 ``segment`` emitter may ``fade`` linearly to zero over that fraction (<= 0.5) of its
-length at both ends, so its own edge is not a moving discontinuity (DESIGN 2.8).
+length at both ends, so its own edge is not a moving discontinuity (theory/probes).
 Rays that escape see the constant ``sky`` radiance. The camera is a pinhole with a 1D
-film: film coordinate t looks along normalize(forward + t · right) (DESIGN 3), right
+film: film coordinate t looks along normalize(forward + t · right) (theory/radiometry), right
 being forward turned clockwise; the ``pixels`` cover t in [-tan(fov/2), tan(fov/2)]
 left to right, each integrated against its ``filter`` (``box`` one pixel wide,
 ``tent`` of radius one pixel, ``gaussian`` of standard deviation half a pixel).

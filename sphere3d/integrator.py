@@ -7,7 +7,7 @@ Three nested integrals per pixel (direct illumination only):
    drawn from :func:`~sphere3d.sampling.sample_filter` and weighted by k / p; a
    method may rotate their directions, ω → R·ω_i, and the factor
    ``k J (Rω) / detach(k J (Rω))`` (value exactly 1) carries the change of the
-   filter under the rotation (Loubet et al. 2019, Sec. 4.1; DESIGN 2.11). Its
+   filter under the rotation (Loubet et al. 2019, Sec. 4.1; theory/pixel_filters). Its
    tangent has zero mean, which :class:`~sphere3d.tasks.ImageTask` uses as a
    control variate.
 2. **Radiance** along the ray: the sky where it misses; at a hit, front-side emission
@@ -268,7 +268,8 @@ def pixel_samples(
     if state.dual:
         rotated = camera_rotation.apply(d)
         fx, fy = cam.film(rotated)
-        # k(film(Rω)) J(Rω) / detach(...): value 1, derivative of the filter under the rotation (DESIGN 2.11)
+        # k(film(Rω)) J(Rω) / detach(...): value 1, derivative of the filter under the rotation
+        # (theory/pixel_filters)
         log_kj = log_filter_value(np.stack([fx - cx, fy - cy], axis=-1), cam.filter) + cam.log_jacobian(
             rotated
         )

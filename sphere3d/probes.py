@@ -1,4 +1,4 @@
-"""Choosing the rotation by ray tracing: the probe heuristic of Loubet et al. 2019, Sec. 4.3 (DESIGN 2.8).
+"""Choosing the rotation by ray tracing: the probe heuristic of Loubet et al. 2019, Sec. 4.3.
 
 Inside the support of an integrand a few probe rays (default 4) are traced, and one
 point p is picked whose motion the rotation should follow. The probes form a
@@ -27,7 +27,7 @@ Then:
 - otherwise the intersection of the two tangent planes with the plane through o
   spanned by the two probe directions (where the two surfaces would meet between
   the probes: a silhouette or crease), falling back to p0 when that 3×3 system is
-  degenerate; a departure from DESIGN 2.8, argued in :func:`select_points`: the
+  degenerate; a departure from Sec. 4.3, argued in :func:`select_points`: the
   fallback also applies when the point does not lie in front of o;
 - no probe hits: the identity.
 
@@ -63,7 +63,7 @@ __all__ = [
 ]
 
 PARALLEL = 0.99
-"""|n0·n1| above which the two tangent planes count as parallel (DESIGN 2.8)."""
+"""|n0·n1| above which the two tangent planes count as parallel (Loubet et al. 2019, Sec. 4.3)."""
 DEGENERATE = 1e-6
 """|det| of the plane system below which the intersection is ill-conditioned."""
 REFINE = 3
@@ -188,7 +188,7 @@ def select_points(
 
     Notes
     -----
-    Two refinements of DESIGN 2.8, both measured:
+    Two refinements of Loubet et al. 2019, Sec. 4.3, both measured:
 
     - When the point comes from one probe of a pair whose other probe sees something
       else, that probe's hit is first moved towards the silhouette between the two
@@ -217,7 +217,7 @@ def select_points(
     n0, n1 = face_normals(t0), face_normals(t1)
     o = origin + 0.0 * p0  # broadcast to (m, 3)
     p0v, p1v, n0v, n1v, ov = detach(p0), detach(p1), detach(n0), detach(n1), detach(o)
-    # tangent plane k separates the other hit from the origin: shape k occludes the other   (DESIGN 2.8)
+    # tangent plane k separates the other hit from the origin: shape k occludes the other   (Sec. 4.3)
     occ0 = dot(n0v, p1v - p0v) * dot(n0v, ov - p0v) < 0.0
     occ1 = dot(n1v, p0v - p1v) * dot(n1v, ov - p1v) < 0.0
     parallel = np.abs(dot(n0v, n1v)) > PARALLEL

@@ -1,4 +1,4 @@
-"""Differentiable rotations of the sphere S² (Loubet et al. 2019, Sec. 4.1; DESIGN 2.6).
+"""Differentiable rotations of the sphere S² (Loubet et al. 2019, Sec. 4.1).
 
 On S² the change of variables that makes one moving silhouette static is a rotation
 R(θ): integrate ``f(R(θ) ω, θ)`` instead of ``f(ω, θ)`` (|det J| = 1). It must be the
@@ -100,7 +100,7 @@ class Rotation:
 
     @staticmethod
     def following(omega_p: Any, active: np.ndarray | None = None) -> Rotation:
-        """The rotation whose derivative moves ``detach(ω_p)`` like ``ω_p`` (DESIGN 2.6).
+        """The rotation whose derivative moves ``detach(ω_p)`` like ``ω_p`` (Loubet et al. 2019, Sec. 4.1).
 
         ``omega_p`` need not be unit: it is normalized here, tangent included.
         Where ``active`` is False the direction is replaced by a constant, so the
@@ -129,7 +129,7 @@ class Rotation:
         return Rotation(self.target[index], self.active[index])
 
     def apply(self, omega: np.ndarray) -> Dual:
-        """R(θ) · detach(ω): value exactly ``detach(ω)``, tangent Ṙ ω (DESIGN 2.6).
+        """R(θ) · detach(ω): value exactly ``detach(ω)``, tangent Ṙ ω (Loubet et al. 2019, Sec. 4.1).
 
         Parameters
         ----------

@@ -97,7 +97,7 @@ def _check_kappa(kappa: float) -> float:
 
 
 def sample_vmf(u: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:
-    """Von Mises–Fisher direction about the unit ``mu`` with concentration κ (DESIGN 2.7).
+    """Von Mises–Fisher direction about the unit ``mu`` with concentration κ (Loubet et al. 2019, Sec. 4.2).
 
     ``cos θ = 1 + log(ξ + (1 - ξ) e^{-2κ}) / κ`` is evaluated as ``s = 1 - cos θ =
     -log1p((1 - ξ) expm1(-2κ)) / κ`` and ``sin θ = sqrt(s (2 - s))``, which keeps full
@@ -255,7 +255,7 @@ def filter_value(s, kind: str):
     ``box``: 1 on [-½, ½]²; ``tent``: (1 - |x|)(1 - |y|) on [-1, 1]²; ``gaussian``:
     the product of ``(e^{-x²/2σ²} - e^{-R²/2σ²}) / Z`` with σ = ½, R = 3σ, continuous at R.
     Tent and gaussian are continuous, which the reparameterized pixel integral needs
-    (DESIGN 2.11); a Dual ``s`` gives the filter's derivative.
+    (theory/pixel_filters); a Dual ``s`` gives the filter's derivative.
     """
     return _filter_1d(s[..., 0], kind) * _filter_1d(s[..., 1], kind)
 

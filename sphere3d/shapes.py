@@ -2,7 +2,7 @@
 
 Every shape is a :class:`LocalMesh`: vertices centred on the origin (the point that
 rotation and scale act about), outward (or +z) facing triangles, and per-vertex
-coordinates ``uv`` used by the radiance fade of area emitters (DESIGN 2.8):
+coordinates ``uv`` used by the radiance fade of area emitters (theory/probes):
 
 ============  ========================================  ==================================
 type          geometry                                  fade coordinate
@@ -197,7 +197,7 @@ def fade_weight(uv: Any, kind: np.ndarray, width: np.ndarray) -> Any:
     """
     active = width > 0.0
     w = np.where(active, width, 1.0)
-    # distance to the border in fade units, per coordinate (DESIGN 2.8: no moving emitter edge)
+    # distance to the border in fade units, per coordinate (theory/probes: no moving emitter edge)
     tu = (1.0 - np.abs(uv[..., 0])) / w
     tv = (1.0 - np.abs(uv[..., 1])) / w
     rect = _smoothstep(tu) * _smoothstep(tv)

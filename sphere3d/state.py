@@ -1,6 +1,6 @@
 """A scene evaluated at one parameter value θ: world-space triangles, materials, camera, tracer.
 
-:func:`build_state` is where θ enters (DESIGN 4, "scene + parameter → θ as a Dual"):
+:func:`build_state` is where θ enters (theory/architecture, "scene + parameter → θ as a Dual"):
 the parameter's offset ``theta`` is applied to its field — a float (finite
 differences, plain renders) or a :class:`~flatland.core.dual.Dual` (``variable(0.0)``
 for the gradient, taken at θ = 0 as in flatland) —

@@ -99,7 +99,7 @@ class ImageTask:
         is flat. The scale ``c_{-i}`` is the mean radiance of the *other* samples of the
         pixel in the batch (independent of sample i, so no bias); the value is
         untouched, bit for bit (an exact zero is subtracted). Not applied to the box
-        filter, whose weight derivative does not have zero mean (DESIGN 2.11).
+        filter, whose weight derivative does not have zero mean (theory/pixel_filters).
         """
         est = samples.estimate.reshape(-1, per_batch)
         if not isinstance(est, Dual) or per_batch < 2 or self.scene.camera.filter == "box":

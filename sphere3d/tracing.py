@@ -1,6 +1,6 @@
 """Ray tracing: detached queries in batches (Embree or brute force), hits re-attached with Duals.
 
-This is the only module that imports ``embreex``. The data flow of DESIGN 4:
+This is the only module that imports ``embreex``. The data flow of theory/architecture:
 
 1. **Trace detached.** A tracer holds the scene's triangles at θ0 (plain float32 for
    Embree) and answers batches of ray queries: which triangle each ray hits first

@@ -109,3 +109,14 @@ def test06_an_unknown_name_is_an_attribute_error():
         assert "no_such_name" in str(e)
     else:
         raise AssertionError("flatland.no_such_name resolved")
+
+
+MAX_LINES = 400
+"""Longest module allowed in the packages: a longer one is split by job."""
+
+
+def test07_no_module_of_either_package_is_longer_than_400_lines():
+    modules = sorted(p for package in ("flatland", "sphere3d") for p in (ROOT / package).rglob("*.py"))
+    assert ROOT / "flatland" / "core" / "dual.py" in modules  # the scan sees the packages
+    lengths = {str(p.relative_to(ROOT)): len(p.read_text(encoding="utf-8").splitlines()) for p in modules}
+    assert {name: n for name, n in lengths.items() if n > MAX_LINES} == {}

@@ -1,7 +1,7 @@
 """The shared contract, checked identically over every renderer package that is installed.
 
 API names, result types, method and option names, the command-line verbs and the
-one-line error behaviour (DESIGN 5), in-process and as real commands in a subprocess
+one-line error behaviour (theory/architecture), in-process and as real commands in a subprocess
 (a missing file, a malformed JSON scene, an unknown parameter, a negative spp, a scene
 nested 100 000 deep). An internal error is a traceback and status 1, never a usage
 error. The command line names what exists: scenes, methods, parameters, studies.
@@ -113,7 +113,8 @@ def test03_result_types_and_shared_primary_samples(package):
         assert g.derivative.shape == g.value_stderr.shape == g.derivative_stderr.shape == shape
         assert (g.param, g.method, g.spp, g.seed) == (PARAM, method, 4, 5)
         assert np.all(np.isfinite(g.derivative))
-    # T(·, θ0) is the identity: the reparameterized primal is the naive one, bit for bit (DESIGN 2.5)
+    # T(·, θ0) is the identity: the reparameterized primal is the naive one, bit for bit
+    # (Loubet et al. 2019, Sec. 3.2)
     assert np.array_equal(results["reparam"].value, results["naive"].value)
 
 

@@ -4,12 +4,15 @@
    docstring, and so does every function and class it exports (``__all__``, or its
    public definitions when it has no ``__all__``): the API reference is generated from
    them.
-2. The theory pages tie DESIGN sections to code with ``implements`` blocks (MyST
-   ``{implements} DESIGN x.y`` fences, one fully qualified name per line; see
-   docs/_ext/project_docs.py). Every block is well-formed and every name in it imports
-   and is a function or class.
-3. Every DESIGN section cited anywhere — docs pages, tutorials, the packages' source —
-   has at least one ``implements`` block, so a reader who meets "(DESIGN 2.5)" in a
+2. The theory pages tie their sections to code with ``implements`` blocks (MyST
+   ``{implements} theory-label`` fences, one fully qualified name per line; see
+   docs/_ext/project_docs.py). Every block is well-formed, its label is defined on its
+   own page just before a heading, and every name in it imports and is a function or
+   class.
+3. Every theory page and every section of the paper cited anywhere — docs pages,
+   tutorials, tests, the packages' source — leads to code: the page exists and has an
+   ``implements`` block, the section has a row in the theory index, so a reader who
+   meets "(Loubet et al. 2019, Sec. 4.2)" or "(Leibniz rule, theory/leibniz)" in a
    comment finds its theory and its code.
 4. Every explicit cross-reference to a ``flatland``/``sphere3d`` name in the hand-written
    pages (``{func}`~flatland.x.y```) names an importable object.
@@ -19,6 +22,11 @@
    ``docs/guides/image_method_example.py``, in both packages: plugged into the real
    method table for the test only, it renders through ``render_gradient`` and is the
    combination of finite differences it claims to be, bit for bit.
+7. The theory index (docs/theory/index.md) is a table with one row per ``implements``
+   label: the paper's section, the topic, the page and the names of that block, and
+   tests that exist.
+8. No file cites a document that is not shipped: a citation names the paper's section or a
+   theory page, never "DESIGN" followed by a section number.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import importlib.util
 import inspect
 import pkgutil
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +53,13 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 PACKAGES = ("flatland", "sphere3d")
 PAGES = sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.parts)
-DESIGN_CITATION = re.compile(r"\bDESIGN (\d+(?:\.\d+)?)\b")
+THEORY_INDEX = DOCS / "theory" / "index.md"
+THEORY_CITATION = re.compile(r"\btheory/([a-z_]+)")
+"""A theory page as code and tutorials cite it: ``theory/leibniz``, ``docs/theory/leibniz.md``."""
+PAPER_CITATION = re.compile(r"\bSec\. (\d+(?:\.\d+)?)(?:\s*[-–]\s*(\d+(?:\.\d+)?))?")
+"""A section of the paper as cited: ``Sec. 4.2``, or a range ``Sec. 4.1-4.2`` (both ends count)."""
+LABEL_TARGET = re.compile(r"^\(([^)\s]+)\)=[ \t]*\n#{1,6} ", re.MULTILINE)
+"""A MyST target ``(label)=`` on the line just before a heading: the label names that section."""
 ROLE = re.compile(r"\{(?:py:)?(?:func|class|meth|mod|data|attr|obj|exc)\}`([^`]+)`")
 
 
@@ -90,7 +105,7 @@ def exported(module: Any) -> list[str]:
 
 
 def implements_blocks() -> list[tuple[Path, str, list[str]]]:
-    """(page, DESIGN section, names) for every ``implements`` fence of the hand-written pages."""
+    """(page, label, names) for every ``implements`` fence of the hand-written pages."""
     md = MarkdownIt("commonmark")
     blocks = []
     for page in PAGES:
@@ -117,6 +132,39 @@ AVAILABLE = [p for p in PACKAGES if importable(p)]
 BLOCKS = implements_blocks()
 
 
+@dataclass(frozen=True)
+class IndexRow:
+    """One row of the theory index's table, as written."""
+
+    paper: str
+    sections: tuple[str, ...]
+    labels: tuple[str, ...]
+    pages: tuple[str, ...]
+    names: tuple[str, ...]
+    tests: tuple[str, ...]
+
+
+def theory_index() -> list[IndexRow]:
+    """The rows of the table in docs/theory/index.md (columns: paper, topic, page, names, tests)."""
+    rows = []
+    for line in THEORY_INDEX.read_text(encoding="utf-8").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("|") else []
+        if len(cells) != 5 or set(cells[0]) <= set("-: ") or not cells[2].startswith("{doc}"):
+            continue  # not a table line, the separator, or the header
+        paper, topic, page, names, tests = cells
+        rows.append(
+            IndexRow(
+                paper=paper,
+                sections=tuple(re.findall(r"\d+(?:\.\d+)?", paper)) if paper.startswith("Sec.") else (),
+                labels=tuple(re.findall(r"\{ref\}`([^`]+)`", topic)),
+                pages=tuple(re.findall(r"\{doc\}`([^`]+)`", page)),
+                names=tuple(n.lstrip("~") for n in ROLE.findall(names)),
+                tests=tuple(re.findall(r"`([^`]+)`", tests)),
+            )
+        )
+    return rows
+
+
 @pytest.mark.parametrize("package", AVAILABLE)
 def test01_every_public_function_and_class_has_a_docstring(package):
     missing = []
@@ -136,12 +184,17 @@ def test01_every_public_function_and_class_has_a_docstring(package):
 
 
 def test02_every_implements_block_is_well_formed_and_names_importable_code():
-    assert BLOCKS, "the theory pages tie no DESIGN section to code"
+    assert BLOCKS, "the theory pages tie no section to code"
     problems = []
+    arguments = [argument for _, argument, _ in BLOCKS]
     for page, argument, names in BLOCKS:
         where = f"{page.relative_to(DOCS)} [{argument}]"
-        if not re.fullmatch(r"DESIGN \d+(?:\.\d+)?", argument):
-            problems.append(f"{where}: argument must read 'DESIGN <section>'")
+        if not project_docs.LABEL.fullmatch(argument):
+            problems.append(f"{where}: argument must be a theory label such as 'theory-kernels'")
+        elif argument not in LABEL_TARGET.findall(page.read_text(encoding="utf-8")):
+            problems.append(f"{where}: the label is not defined on this page just before a heading")
+        if arguments.count(argument) > 1:
+            problems.append(f"{where}: the label closes more than one block")
         if not names:
             problems.append(f"{where}: lists no name")
         for name in names:
@@ -158,29 +211,44 @@ def test02_every_implements_block_is_well_formed_and_names_importable_code():
     assert not problems, "\n".join(problems)
 
 
-def cited_sections() -> dict[str, set[str]]:
-    """DESIGN section -> where it is cited (docs prose, tutorial scripts, package source)."""
+def citation_sources() -> list[tuple[Path, str]]:
+    """(path, text) of everything that cites: docs prose, tutorial scripts, tests, the packages' source."""
     sources = [(p, prose_of(p)) for p in PAGES]
     sources += [
         (p, p.read_text(encoding="utf-8")) for p in sorted((ROOT / "tutorials").glob("[0-9][0-9]_*.py"))
     ]
+    sources += [(p, p.read_text(encoding="utf-8")) for p in sorted((ROOT / "tests").rglob("*.py"))]
     for package in AVAILABLE:
         sources += [(p, p.read_text(encoding="utf-8")) for p in sorted((ROOT / package).rglob("*.py"))]
-    cited: dict[str, set[str]] = {}
-    for path, text in sources:
-        for section in DESIGN_CITATION.findall(text):
-            cited.setdefault(section, set()).add(str(path.relative_to(ROOT)))
-    return cited
+    return sources
 
 
-def test03_every_cited_design_section_has_an_implements_block():
-    documented = {argument.split()[-1] for _, argument, _ in BLOCKS}
-    cited = cited_sections()
-    assert cited, "nothing cites a DESIGN section"
-    undocumented = {s: sorted(w)[:3] for s, w in cited.items() if s not in documented}
-    assert not undocumented, (
-        f"DESIGN sections cited without an implements block in docs/theory: {undocumented}"
-    )
+def cited(pattern: re.Pattern[str]) -> dict[str, set[str]]:
+    """What ``pattern`` captures (every non-empty group) -> the files that cite it."""
+    found: dict[str, set[str]] = {}
+    for path, text in citation_sources():
+        for match in pattern.finditer(text):
+            for value in filter(None, match.groups()):
+                found.setdefault(value, set()).add(str(path.relative_to(ROOT)))
+    return found
+
+
+def test03_every_cited_theory_page_and_paper_section_leads_to_code():
+    pages = cited(THEORY_CITATION)
+    sections = cited(PAPER_CITATION)
+    assert pages and sections, "nothing cites a theory page or a section of the paper"
+    documented = {page.stem for page, _, _ in BLOCKS if page.parent == DOCS / "theory"}
+    documented.add(THEORY_INDEX.stem)  # the index is the table from sections to pages, code and tests
+    missing = {p: sorted(w)[:3] for p, w in pages.items() if p not in documented}
+    assert not missing, f"theory pages cited that do not exist or have no implements block: {missing}"
+    indexed = {s for row in theory_index() for s in row.sections}
+    # a whole chapter ("Sec. 3") is indexed when one of its sections is
+    unindexed = {
+        s: sorted(w)[:3]
+        for s, w in sections.items()
+        if s not in indexed and not any(i.startswith(s + ".") for i in indexed)
+    }
+    assert not unindexed, f"sections of the paper cited without a row in docs/theory/index.md: {unindexed}"
 
 
 def test04_explicit_project_cross_references_in_the_pages_import():
@@ -284,25 +352,40 @@ def build_tiny_site(tmp_path, page: str) -> str:
 def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tmp_path):
     page = "\n".join(
         [
-            "# Page",
+            "(tiny-follow)=",
+            "# Following the nearest jump",
             "",
             "```{py:function} flatland.textbook.reparam.follow_nearest(domain, discontinuities, points)",
             "```",
             "",
-            "```{implements} DESIGN 2.5",
+            "```{implements} tiny-follow",
             "flatland.textbook.reparam.follow_nearest",
             "flatland.no_such_function",
+            "```",
+            "",
+            "```{implements} tiny-undefined",
+            "flatland.textbook.reparam.follow_nearest",
+            "```",
+            "",
+            "```{implements} Sec. 4.2",
+            "flatland.textbook.reparam.follow_nearest",
             "```",
             "",
             "See {func}`flatland.also_missing`.",
         ]
     )
     warnings, html = build_tiny_site(tmp_path, page)
-    assert "DESIGN 2.5 in the code" in html
+    # the label renders as its section's title, linked to the section
+    assert re.search(
+        r'href="#tiny-follow"[^>]*><span[^>]*>Following the nearest jump</span></a> in the code', html
+    )
     assert 'href="#flatland.textbook.reparam.follow_nearest"' in html
     assert "flatland.no_such_function cannot be imported" in warnings
+    assert "undefined label: 'tiny-undefined'" in warnings
+    assert "argument must be a theory label such as 'theory-kernels', got 'Sec. 4.2'" in warnings
     assert "reference target not found: flatland.also_missing" in warnings
-    assert warnings.count("WARNING") == 3  # the bad name: not importable, and no page to link to
+    # the bad name (not importable, and no page to link to), the undefined label, the bad argument
+    assert warnings.count("WARNING") + warnings.count("ERROR") == 5
 
 
 # ------------------------------------------------------------------ the scene-file guide
@@ -523,3 +606,80 @@ def test12_the_image_method_guides_example_plugs_in_and_is_richardsons_combinati
     assert (g.method, dict(g.options)) == ("richardson", {"h": h})
     assert np.array_equal(g.value, naive.value)  # the same primary samples: the naive value, bit for bit
     assert np.array_equal(g.derivative, (4.0 * narrow.derivative - wide.derivative) / 3.0)
+
+
+# ------------------------------------------------------------------ the theory index and the citations
+def test13_the_theory_index_has_one_row_per_implements_block_with_its_names_and_real_tests():
+    rows = theory_index()
+    assert rows, "docs/theory/index.md has no table"
+    blocks = {argument: (page, names) for page, argument, names in BLOCKS if page.parent == DOCS / "theory"}
+    problems = []
+    seen: list[str] = []
+    for row in rows:
+        where = f"row {row.labels or row.paper!r}"
+        if len(row.labels) != 1 or len(row.pages) != 1:
+            problems.append(f"{where}: one {{ref}} label and one {{doc}} page per row")
+            continue
+        label, page = row.labels[0], row.pages[0]
+        seen.append(label)
+        if not row.sections and not row.paper.startswith("—"):
+            problems.append(f"{where}: the paper column reads 'Sec. x.y' or '— (source)', got {row.paper!r}")
+        if label not in blocks:
+            problems.append(f"{where}: no implements block has this label")
+            continue
+        block_page, names = blocks[label]
+        if block_page.stem != page:
+            problems.append(f"{where}: the block is on {block_page.stem}.md, the row says {page}")
+        if sorted(row.names) != sorted(names):
+            problems.append(f"{where}: names differ from the block's: {sorted(set(row.names) ^ set(names))}")
+        if not row.tests:
+            problems.append(f"{where}: names no test")
+        for test in row.tests:
+            path, _, name = test.partition("::")
+            source = ROOT / "tests" / path
+            if not name or not source.is_file():
+                problems.append(f"{where}: {test} is not tests/<file>::<test>")
+            elif not re.search(
+                rf"^def {re.escape(name)}[a-z]?_\w*\(", source.read_text(encoding="utf-8"), re.M
+            ):
+                problems.append(f"{where}: {path} has no test {name}")
+    problems += [f"label {s!r} has two rows" for s in sorted({s for s in seen if seen.count(s) > 1})]
+    problems += [f"implements block {s!r} has no row in the index" for s in sorted(set(blocks) - set(seen))]
+    assert not problems, "\n".join(problems)
+
+
+SHIPPED = ("flatland", "sphere3d", "tests", "tutorials", "docs", "README.md")
+GENERATED = ("_build", "jupyter_execute", "__pycache__", ".ipynb_checkpoints", ".hypothesis")
+"""Folders the build or the tools write (docs/.gitignore, .gitignore): not part of the sources."""
+
+
+def shipped_text_files() -> list[Path]:
+    found = []
+    for top in (ROOT / name for name in SHIPPED):
+        for path in [top] if top.is_file() else sorted(top.rglob("*")):
+            rel = path.relative_to(ROOT)
+            if not path.is_file() or any(part in GENERATED for part in rel.parts):
+                continue
+            if rel.parts[:3] == ("docs", "api", "generated") or rel.as_posix() == "docs/api/index.rst":
+                continue  # written by the docs build from the docstrings, which are scanned
+            if rel.parts[:2] == ("docs", "tutorials") and path.suffix == ".ipynb":
+                continue  # copies of tutorials/*.ipynb made by the docs build
+            found.append(path)
+    return found
+
+
+def test14_no_file_cites_a_document_that_is_not_shipped():
+    # built from pieces so that this file does not match its own pattern
+    pattern = re.compile("DESIGN" + " " + "[0-9]")
+    files = shipped_text_files()
+    assert any(p.name == "test_docs.py" for p in files) and any(p.suffix == ".ipynb" for p in files)
+    hits = []
+    for path in files:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError:
+            continue  # images and other binary files
+        for number, line in enumerate(text.splitlines(), 1):
+            if pattern.search(line):
+                hits.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()[:80]}")
+    assert not hits, "citations of an unshipped document:\n" + "\n".join(hits)

@@ -20,7 +20,7 @@
 # A rendered pixel is an integral $I(\theta) = \int_X f(x, \theta)\, dx$, and inverse rendering
 # needs its derivative with respect to a scene parameter $\theta$. The integral depends on $\theta$
 # in three ways: through the values of $f$, through the limits of integration, and through the
-# places where $f$ jumps (a silhouette, a shadow edge). The Leibniz rule (DESIGN 2.1) adds one
+# places where $f$ jumps (a silhouette, a shadow edge). The Leibniz rule (`docs/theory/leibniz.md`) adds one
 # term for each:
 #
 # $$
@@ -44,8 +44,8 @@ import numpy as np
 from scipy import integrate
 
 from flatland import INTEGRALS, detach, estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
 from flatland.integrals import Circle
+from flatland.plotting import textbook as pt
 
 SEED = 20191117
 

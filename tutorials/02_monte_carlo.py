@@ -19,7 +19,7 @@
 #
 # Renderers estimate integrals by Monte Carlo, and every gradient estimator in this project is a
 # Monte Carlo estimator too; its variance decides how many samples a trustworthy answer costs.
-# This notebook measures the three facts of DESIGN 2.2:
+# This notebook measures the three facts of `docs/theory/monte_carlo.md`:
 #
 # 1. the plain estimator $\hat I = \frac1N \sum_i f(x_i)/p(x_i)$, $x_i \sim p$, is unbiased with
 #    variance $\operatorname{Var}_p[f/p]/N$;
@@ -37,9 +37,9 @@ import numpy as np
 from scipy import integrate, special, stats
 
 from flatland import detach, estimate, get_integral
-from flatland import plot_textbook as pt
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
 from flatland.sampling import pdf_gaussian, pdf_tabulated, sample_gaussian, sample_tabulated
 
 SEED = 20191117
@@ -212,7 +212,7 @@ pt.plot_curves(
     xs,
     {"f / I (ideal)": detach(step.f(xs, theta)) / exact}
     | {name: pdf(xs) for name, (_, pdf, _) in proposals.items() if name != "ideal f / I"},
-    styles={"f / I (ideal)": {"color": "black", "linewidth": 2}},
+    styles={"f / I (ideal)": {"color": pt.REFERENCE_STYLE["color"], "linewidth": 2}},
     marks=[theta],
     xlabel="x",
     ylabel="density",
@@ -303,6 +303,6 @@ pt.plot_estimates(
 # The same two tools reappear in the gradient estimators. Reparameterization (tutorial 5) is
 # importance sampling with a proposal that moves with $\theta$: the samples
 # $x_i(\theta) = y_i + \theta - \theta_0$ follow the discontinuity. The authors' paired samples
-# (DESIGN 2.9, tutorial 6) are a control variate: the derivative of a kernel weight
+# (`docs/theory/kernels.md`, tutorial 6) are a control variate: the derivative of a kernel weight
 # $w = k/\operatorname{detach}(k)$ has zero mean, so subtracting a multiple of it changes the
 # variance and not the expectation.

@@ -18,9 +18,9 @@
 # # 3. Why naive automatic differentiation fails
 #
 # Forward-mode automatic differentiation of a Monte Carlo estimator is exact for smooth
-# integrands (DESIGN 2.3): the derivative of the estimator is an unbiased estimator of the
+# integrands (Loubet et al. 2019, Sec. 3.1): the derivative of the estimator is an unbiased estimator of the
 # derivative. This notebook shows, on two integrals side by side, what goes wrong when the
-# integrand jumps at a place that moves with $\theta$ (Loubet et al. 2019, Sec. 3.2; DESIGN 2.4):
+# integrand jumps at a place that moves with $\theta$ (Loubet et al. 2019, Sec. 3.2):
 #
 # - the paper's indicator example, $I(\theta) = \int 1_{x > \theta}\, K(x)\, dx$ with $K$ the
 #   standard normal density, so $dI/d\theta = -K(\theta)$;
@@ -39,10 +39,10 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 
 SEED = 20191117
 step = get_integral("step")

@@ -19,7 +19,7 @@
 #
 # Naive differentiation returns the interior term of the Leibniz rule and drops the term of the
 # moving discontinuities (tutorials 1 and 3). The direct remedy is to compute that term and add
-# it (DESIGN 2.1, 2.10):
+# it (`docs/theory/leibniz.md`, `docs/theory/boundary.md`):
 #
 # $$
 # \frac{dI}{d\theta} = \underbrace{\int \frac{\partial f}{\partial \theta}\,dx}_{\text{naive AD}}
@@ -50,10 +50,10 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, tangent, variable
-from flatland import plot_tutorials as ptu
 from flatland.core.stats import sidak
 from flatland.geometry import cast, direction, film_coordinate, silhouette_angles
 from flatland.integrator import incident
+from flatland.plotting import tutorials as ptu
 from flatland.scene import bind
 
 SEED = 20191117
@@ -115,9 +115,9 @@ assert np.all(tangent(t_c)[~moving] == 0.0) and np.all(np.abs(detach(t_c)[moving
 # $E(x) = \int L_i(x, \varphi) \max(0, \cos(\varphi - \varphi_n))\, d\varphi$. Here $L_i = 4$
 # toward the visible part of the light and 0 elsewhere. With the angles $\varphi$ measured from the
 # $x$ axis, $\cos(\varphi - \varphi_n) = \sin\varphi$ and a visible interval $[\varphi_1, \varphi_2]$
-# contributes $L\,(\cos\varphi_1 - \cos\varphi_2)$ (DESIGN 3). The visible intervals are the light's
-# interval minus the occluder's, which moves with $\theta$; written with `Dual` arithmetic this
-# closed form is a smooth function of $\theta$, and its tangent is the exact $dE/d\theta$.
+# contributes $L\,(\cos\varphi_1 - \cos\varphi_2)$ (`docs/theory/radiometry.md`). The visible intervals are
+# the light's interval minus the occluder's, which moves with $\theta$; written with `Dual`
+# arithmetic this closed form is a smooth function of $\theta$, and its tangent is the exact $dE/d\theta$.
 #
 # We pick $x = (0.5, 0)$, in the penumbra: the occluder's right end hides part of the light.
 

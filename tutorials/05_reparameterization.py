@@ -18,7 +18,7 @@
 # # 5. Reparameterization by translation
 #
 # Naive differentiation fails because the samples stay put while the discontinuity moves
-# (tutorial 3). Loubet et al. (2019, Sec. 3.2; DESIGN 2.5) turn this around: change the variable
+# (tutorial 3). Loubet et al. (2019, Sec. 3.2) turn this around: change the variable
 # of integration so that the discontinuity does not move. With $x = T(y, \theta)$,
 #
 # $$
@@ -47,11 +47,11 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
 from flatland.integrator import filter_value
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 from flatland.sampling import sample_tent
 
 SEED = 20191117
@@ -171,9 +171,9 @@ assert np.array_equal(detach(per_sample), radiance(y))
 
 # %% [markdown]
 # The library does this for every pixel, with two refinements (`flatland.methods.reparam`): it
-# finds the point to follow with probe rays around each sample instead of being told (DESIGN
-# 2.8), and it applies each translation inside a narrow Gaussian kernel on the film so that
-# samples far from any edge are left alone (DESIGN 2.7, tutorial 6). Its image value is the
+# finds the point to follow with probe rays around each sample instead of being told (Loubet
+# et al. 2019, Sec. 4.3), and it applies each translation inside a narrow Gaussian kernel on the film so that
+# samples far from any edge are left alone (Sec. 4.2, tutorial 6). Its image value is the
 # naive one bit for bit, because at $\theta_0$ every translation is the identity.
 
 
@@ -210,7 +210,7 @@ assert np.all(bar["reparam"].derivative[far] == 0.0)
 # the occluder whose right end is at $o_0(\theta) \approx 97°$. The integrand
 # $f(\varphi) = L_i(\varphi)\cos(\varphi - \varphi_n)$ jumps at two angles: $l_0$ (static) and
 # $o_0$ (moving). A rotation of the circle of directions is a translation of the angle
-# (DESIGN 2.6): $\Delta = o_0(\theta) - \operatorname{detach}(o_0(\theta))$.
+# (Loubet et al. 2019, Sec. 4.1): $\Delta = o_0(\theta) - \operatorname{detach}(o_0(\theta))$.
 #
 # Now there are two discontinuities and one translation. Applied to the whole integral, it makes
 # $o_0$ static and sets $l_0$ moving (in $y$) at $-o_0'$: the sliver of light between them slides
@@ -350,6 +350,6 @@ ptu.plot_gradient_panel(image, methods, title=f"shadow: d/d {PARAM}")
 # the same primal. The derivative moves from the jump into the smooth factors the translation
 # slides: $K$ for the step, the pixel filter on the film, the cosine and the other shapes'
 # silhouettes for shading. One translation follows one discontinuity, so it must be chosen per
-# neighbourhood (probe rays, DESIGN 2.8) and confined by a kernel (tutorial 6); where two
+# neighbourhood (probe rays, Sec. 4.3) and confined by a kernel (tutorial 6); where two
 # discontinuities move differently within one neighbourhood, or the filter itself jumps, it fails
 # (tutorial 7).

@@ -23,7 +23,7 @@
 # different speeds (two silhouette edges in one pixel, an occluder and its shadow) no single
 # translation makes both static, and the gradient is biased.
 #
-# Loubet et al. (2019, Sec. 4.2; DESIGN 2.7) localize the problem with a convolution kernel:
+# Loubet et al. (2019, Sec. 4.2) localize the problem with a convolution kernel:
 # write the integral as a double integral over a narrow kernel, and choose one translation per
 # kernel instead of one per integral. The kernel's concentration $\kappa$ sets a trade-off that
 # this notebook derives and measures on two textbook integrals with jumps moving at speeds 1 and 2:
@@ -42,8 +42,8 @@ from IPython.display import display
 from scipy import integrate, special, stats
 
 from flatland import estimate, get_integral, tangent, variable
-from flatland import plot_textbook as pt
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
 from flatland.textbook.reparam import follow_nearest
 
 SEED = 20191117
@@ -292,7 +292,7 @@ pt.plot_curves(
 )
 
 # %% [markdown]
-# ## Paired samples (DESIGN 2.9)
+# ## Paired samples (`docs/theory/kernels.md`)
 #
 # The authors' implementation tames the $\sqrt\kappa$ growth with a control variate
 # (tutorial 2). Draw the centre $\omega \sim p$ first and *two* kernel samples
@@ -341,15 +341,15 @@ pt.plot_curves(
     kappas,
     {
         "unpaired": sweep["two_steps"]["std"],
-        "paired (DESIGN 2.9)": paired_std,
+        "paired (authors' implementation)": paired_std,
         "σ(κ) predicted, unpaired": predicted_std["two_steps"](kappas),
     },
     logx=True,
     logy=True,
     styles={
         "unpaired": {"marker": "o"},
-        "paired (DESIGN 2.9)": {"marker": "s"},
-        "σ(κ) predicted, unpaired": {"linestyle": "--", "color": "black"},
+        "paired (authors' implementation)": {"marker": "s"},
+        "σ(κ) predicted, unpaired": pt.REFERENCE_STYLE,
     },
     xlabel="κ",
     ylabel="std of one sample's dI/dθ",
@@ -366,4 +366,4 @@ pt.plot_curves(
 # here, and the best $\kappa$ grows with the sample budget. In rendering the jumps are silhouettes
 # whose speeds are not known in advance and $b(\kappa)$ has no closed form; the reference defaults
 # of the authors' implementation (κ = 1000 for glossy BSDF lobes, $10^5$ for environment maps,
-# DESIGN 2.7) are fixed choices, and the flatland studies measure the same curve on scenes.
+# `docs/theory/kernels.md`) are fixed choices, and the flatland studies measure the same curve on scenes.

@@ -22,12 +22,13 @@
 # produces a bias that does not shrink with more samples:
 #
 # 1. **A box pixel filter.** Translating the film coordinate moves samples across the pixel's
-#    border, where the box filter jumps: the border becomes a moving discontinuity (DESIGN 2.11).
+#    border, where the box filter jumps: the border becomes a moving discontinuity
+#    (`docs/theory/pixel_filters.md`).
 # 2. **Occluders that overlap in view.** Two silhouettes that move differently within one kernel
 #    cannot both be followed.
 # 3. **Emitters with hard edges.** An emitter's end is a discontinuity too; where a moving
 #    occluder's edge passes near it, the translation that follows the occluder drags the
-#    emitter's end along (DESIGN 2.8).
+#    emitter's end along (`docs/theory/probes.md`).
 #
 # For each we measure the bias against an unbiased reference (a closed form or the `boundary`
 # method of tutorial 4), predict it, and apply the remedy. Standard errors of the renderer come
@@ -40,10 +41,10 @@ from scipy import stats
 
 import flatland as fl
 from flatland import detach, tangent, variable
-from flatland import plot_tutorials as ptu
 from flatland.core.stats import sidak
 from flatland.integrator import Job, filter_value, run
 from flatland.methods.reparam import ReparamHooks, default_kappa_film
+from flatland.plotting import tutorials as ptu
 from flatland.scene import parse_parameter
 
 SEED = 20191117
@@ -159,7 +160,7 @@ ptu.plot_film(
         "boundary": box_boundary,
         "reparam with a box filter": (box_reparam, box_stderr),
     },
-    styles={"closed form": {"color": "black", "linestyle": "--"}},
+    styles={"closed form": ptu.REFERENCE_STYLE},
     title="black bar, box filter: d/d bar.translate.x",
 )
 
@@ -275,8 +276,8 @@ ptu.plot_film(
 # translation follows the occluder and drags the light's end along: the sliver moves rigidly, and
 # AD returns the derivative of a rigid slide, almost zero, instead of the sliver's shrinking. The
 # prediction is the closed form of tutorial 5 with the light's ends dragged along. The remedy the
-# authors use is an emitter whose radiance fades to zero at its ends (scene key `fade`, DESIGN
-# 2.8): its end is then continuous, and dragging it costs nothing.
+# authors use is an emitter whose radiance fades to zero at its ends (scene key `fade`,
+# `docs/theory/probes.md`): its end is then continuous, and dragging it costs nothing.
 
 
 # %%

@@ -19,7 +19,7 @@
 #
 # Everything so far lived in flatland, where directions are angles on the circle $S^1$. A real
 # renderer integrates over the sphere of directions $S^2$ and traces rays against triangle meshes.
-# The `sphere3d` package carries each idea over (Loubet et al. 2019, Sec. 4.1-4.2; DESIGN 2.6-2.7):
+# The `sphere3d` package carries each idea over (Loubet et al. 2019, Sec. 4.1-4.2):
 #
 # | flatland (`import flatland as fl`) | sphere3d (`import sphere3d as s3`) |
 # |---|---|
@@ -43,10 +43,10 @@ from scipy import special, stats
 import flatland as fl
 import sphere3d as s3
 from flatland import detach, tangent, variable
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
 from flatland.core.rng import stream
 from flatland.core.stats import normal_quantile, sidak
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 from flatland.sampling import sample_von_mises
 from sphere3d.rotation import Rotation, rotation_matrix
 from sphere3d.sampling import sample_vmf
@@ -127,7 +127,7 @@ ptu.plot_gradient_panel(*results["sphere3d"], title=f"sphere3d silhouette: d/d {
 # rotation of the circle. On $S^2$ it is a rotation matrix $R(\theta)$, the identity at $\theta_0$,
 # chosen so that the direction $\omega_p(\theta)$ toward a point on the moving occluder moves
 # exactly: $\dot R\,\omega_p = \dot\omega_p$. `sphere3d.rotation` builds it as the rotation taking
-# $a = \operatorname{detach}(\omega_p)$ to $b = \omega_p$ (DESIGN 2.6),
+# $a = \operatorname{detach}(\omega_p)$ to $b = \omega_p$ (Sec. 4.1),
 #
 # $$
 # R(a \to b) = c\,I + [v]_\times + \frac{v\,v^\top}{1 + c}, \qquad v = a \times b,\ c = a \cdot b ,
@@ -167,7 +167,7 @@ assert np.allclose(tangent(rotated), others @ R_dot.T, atol=1e-12)
 # ## 3. The von Mises–Fisher kernel
 #
 # The convolution kernel of Sec. 4.2 on $S^2$ is the von Mises–Fisher density
-# $\frac{\kappa}{2\pi(1 - e^{-2\kappa})}\,e^{\kappa(\mu\cdot\omega - 1)}$ (DESIGN 2.7). Its sampler inverts
+# $\frac{\kappa}{2\pi(1 - e^{-2\kappa})}\,e^{\kappa(\mu\cdot\omega - 1)}$. Its sampler inverts
 # the distribution of $s = 1 - \mu\cdot\omega$, which is exponential with rate $\kappa$ truncated to
 # $[0, 2]$: $E[s] = 1/\kappa - 2e^{-2\kappa}/(1 - e^{-2\kappa})$. On the circle the von Mises kernel
 # $e^{\kappa\cos\varphi}/(2\pi I_0(\kappa))$ has $E[1 - \cos\varphi] = 1 - I_1(\kappa)/I_0(\kappa)$, about
@@ -214,9 +214,10 @@ pt.plot_histogram(
 #
 # The renderer traces *detached* rays (plain float32 numbers) with Embree, which reports which
 # triangle each ray hits and where (barycentric coordinates), and then recomputes what it needs
-# in float64 `Dual` arithmetic on the θ-dependent vertices (DESIGN 4). A point that *follows the
-# shape*, the kind the probe heuristic needs, keeps the hit's barycentrics fixed on moving
-# vertices (`attached_points`): for a translation its tangent is the translation direction.
+# in float64 `Dual` arithmetic on the θ-dependent vertices (`docs/theory/architecture.md`).
+# A point that *follows the shape*, the kind the probe heuristic needs, keeps the hit's
+# barycentrics fixed on moving vertices (`attached_points`): for a translation its tangent is the
+# translation direction.
 #
 # We trace one ray through every pixel centre of the 24 × 24 sphere `silhouette` camera with
 # Embree and with the library's brute-force numpy tracer (every ray against every triangle), and

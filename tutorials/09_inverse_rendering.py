@@ -43,8 +43,8 @@ from scipy import stats
 
 import flatland as fl
 import sphere3d as s3
-from flatland import plot_textbook as pt
-from flatland import plot_tutorials as ptu
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
 
 SEED = 20191117
 PARAM = "occluder.translate.x"

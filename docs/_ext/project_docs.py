@@ -1,20 +1,27 @@
-"""Sphinx extension of this site: DESIGN-to-code links, strict project cross-references, generated pages.
+"""Sphinx extension of this site: theory-to-code links, strict project cross-references, generated pages.
 
 The ``implements`` directive
 ----------------------------
-Every theory page ties each DESIGN section it explains to the code that implements
-it, in one machine-checkable form (MyST syntax)::
+Every theory page ties each topic it explains to the code that implements it, in one
+machine-checkable form (MyST syntax)::
 
-    ```{implements} DESIGN 2.5
+    (theory-change-of-variables)=
+    ## Change of variables that stops the jumps
+    ...
+    ```{implements} theory-change-of-variables
     flatland.textbook.reparam.follow_nearest
     flatland.textbook.reparam.reparam
     ```
 
-The argument names the DESIGN section, the body lists fully qualified names of
-functions or classes, one per line. The directive renders a line "DESIGN 2.5 in the
-code: ..." whose names link to the API reference, and warns (an error under ``-W``)
-when a name cannot be imported or has no page in the API reference.
-``tests/test_docs.py`` checks the same blocks without building the site.
+The argument is the label of the theory section the block closes (a MyST target
+``(label)=`` placed just before that section's heading); the body lists fully
+qualified names of functions or classes, one per line. The directive renders a line
+"<section title> in the code: ..." whose names link to the API reference, and warns
+(an error under ``-W``) when the label is not defined, or when a name cannot be
+imported or has no page in the API reference. The theory index
+(``docs/theory/index.md``) has one row per label: the paper's section, the topic, the
+page, the same names, and the tests that check them. ``tests/test_docs.py`` checks
+the blocks and the index against each other without building the site.
 
 Strict project references
 -------------------------
@@ -61,7 +68,8 @@ from sphinx.util import logging
 from sphinx.util.docutils import SphinxDirective
 
 PROJECT_PACKAGES = ("flatland", "sphere3d")
-DESIGN_ARGUMENT = re.compile(r"DESIGN (\d+(?:\.\d+)?)")
+LABEL = re.compile(r"[a-z][a-z0-9]*(?:-[a-z0-9]+)*")
+"""A theory label as ``implements`` takes it: lowercase words joined by hyphens."""
 logger = logging.getLogger(__name__)
 
 
@@ -83,21 +91,36 @@ def resolve_name(dotted: str) -> Any:
 
 
 class Implements(SphinxDirective):
-    """``{implements} DESIGN x.y`` with one fully qualified name per body line."""
+    """``{implements} <theory label>`` with one fully qualified name per body line."""
 
     required_arguments = 1
     final_argument_whitespace = True
     has_content = True
 
     def run(self) -> list[nodes.Node]:
-        match = DESIGN_ARGUMENT.fullmatch(self.arguments[0].strip())
-        if match is None:
-            raise self.error(f"implements: argument must read 'DESIGN <section>', got {self.arguments[0]!r}")
+        label = self.arguments[0].strip()
+        if LABEL.fullmatch(label) is None:
+            raise self.error(
+                f"implements: argument must be a theory label such as 'theory-kernels', got {label!r}"
+            )
         targets = [line.strip() for line in self.content if line.strip()]
         if not targets:
             raise self.error("implements: list at least one fully qualified name")
         para = nodes.paragraph(classes=["implements"])
-        para += nodes.strong(text=f"DESIGN {match.group(1)} in the code: ")
+        section = addnodes.pending_xref(
+            "",
+            refdomain="std",
+            reftype="ref",
+            reftarget=label,
+            refdoc=self.env.docname,
+            refexplicit=False,
+            refwarn=True,
+        )
+        section += nodes.inline(label, label)  # replaced by the section's title when the label resolves
+        strong = nodes.strong()
+        strong += section
+        strong += nodes.Text(" in the code: ")
+        para += strong
         for i, target in enumerate(targets):
             try:
                 obj = resolve_name(target)

@@ -28,8 +28,8 @@ def edge_sampling(integrand: Integrand, theta: float, n: int, seed: int) -> Esti
 
     The Monte Carlo counterpart of :func:`flatland.textbook.boundary.boundary`, in the
     spirit of edge sampling (Li et al. 2018; Loubet et al. 2019, Sec. 2): instead of
-    summing the Leibniz term ``Σ_j t_j``, ``t_j = [f(c_j⁻) - f(c_j⁺)] c_j'(θ)`` (DESIGN
-    2.1, 2.10), each sample picks one jump J with probability ``P_j = |t_j| / Σ_k |t_k|``
+    summing the Leibniz term ``Σ_j t_j``, ``t_j = [f(c_j⁻) - f(c_j⁺)] c_j'(θ)`` (theory/leibniz),
+    each sample picks one jump J with probability ``P_j = |t_j| / Σ_k |t_k|``
     and adds ``t_J / P_J``. Unbiased whenever the list of jumps is complete:
     ``E[t_J / P_J] = Σ_j P_j t_j / P_j = Σ_j t_j``. The jump choice adds the variance
     ``(Σ|t_j|)² - (Σ t_j)²`` per sample, zero when all terms share a sign.
@@ -53,8 +53,8 @@ def edge_sampling(integrand: Integrand, theta: float, n: int, seed: int) -> Esti
     """
     theta_d = variable(theta)
     s = primary_samples(integrand, n, seed)
-    interior = integrand.f(s.x, theta_d) / s.pdf  # a Dual: value f/p, tangent ∂f/∂θ / p   (DESIGN 2.3)
-    # Leibniz jump terms t_j = (f(c-) - f(c+)) * dc/dtheta, one per listed jump   (DESIGN 2.1)
+    interior = integrand.f(s.x, theta_d) / s.pdf  # a Dual: value f/p, tangent ∂f/∂θ / p   (Sec. 3.1)
+    # Leibniz jump terms t_j = (f(c-) - f(c+)) * dc/dtheta, one per listed jump   (theory/leibniz)
     terms = np.array([d.jump * float(tangent(d.location)) for d in integrand.discontinuities(theta_d)])
     total = float(np.abs(terms).sum())
     if total == 0.0:  # no jump moves: the interior term is the whole derivative

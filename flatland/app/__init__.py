@@ -6,6 +6,7 @@ through its :class:`~flatland.app.cli.Package` description (built by the package
 :mod:`flatland.app.study` (method × option × trial grids against a reference: the
 runner, with :mod:`~flatland.app.study_config`, :mod:`~flatland.app.study_trials`,
 :mod:`~flatland.app.study_reference` and :mod:`~flatland.app.study_result`),
-:mod:`flatland.app.table` (text tables) and
-:mod:`flatland.app.plotting` (matplotlib figures, imported when a figure is drawn).
+:mod:`flatland.app.table` (text tables); the verbs of the command line are in
+:mod:`flatland.app.commands`. Figures are drawn by :mod:`flatland.plotting`,
+imported when a figure is drawn.
 """

@@ -1,6 +1,6 @@
 """The command line shared by both packages: ``python -m flatland …`` and ``python -m sphere3d …``.
 
-Verbs (the same in both packages):
+Verbs (the same in both packages; implemented in :mod:`flatland.app.commands`):
 
 ``demo``
     The package's default scene as the side-by-side panel "primal | naive | boundary
@@ -32,22 +32,17 @@ Two kinds of failure, told apart by the exit status:
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
-import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
-import numpy as np
-
-from flatland.app.table import error_table, method_label
+from flatland.app.commands import UsageError, verb_demo, verb_gradient, verb_render, verb_study
 from flatland.core.contract import MethodTable
-from flatland.core.stats import z_score
-from flatland.core.validate import ValidationError, check_int, check_positive, check_seed
+from flatland.core.validate import ValidationError, check_int, check_seed
 
 __all__ = ["EXIT_INTERNAL", "EXIT_USAGE", "Package", "main"]
 
@@ -55,10 +50,6 @@ EXIT_USAGE = 2
 """Exit status for bad arguments, scene files or configurations."""
 EXIT_INTERNAL = 1
 """Exit status for an internal error (an exception that is not a user's mistake)."""
-
-DEMO_METHODS = ("naive", "boundary", "reparam", "finite_difference")
-"""Panel columns after the primal, in order (those the package has)."""
-PANEL_TITLES = {"finite_difference": "finite differences"}
 
 
 @dataclass(frozen=True)
@@ -93,8 +84,8 @@ class Package:
         Options of the reference method (e.g. a larger finite-difference step ``h``,
         trading an O(h²) bias for less variance).
     demo_methods : tuple of str, optional
-        The panel's gradient methods, in order; None: those of :data:`DEMO_METHODS` the
-        package has.
+        The panel's gradient methods, in order; None: those of
+        :data:`~flatland.app.commands.DEMO_METHODS` the package has.
     reference_method : str, optional
         The method of the demo's reference and a study's default reference; None:
         ``boundary`` if the package has it, else ``finite_difference``.
@@ -110,8 +101,8 @@ class Package:
         problems ``{"integral": ...}``; None where the package offers none.
     plot_image, plot_gradient, plot_panel, plot_study : callable, optional
         Figure writers; None (the default) draws with the shared
-        :mod:`flatland.app.plotting`, imported (with matplotlib) only when there is a
-        figure to draw.
+        :mod:`flatland.plotting.films` and :mod:`flatland.plotting.study`, imported
+        (with matplotlib) only when there is a figure to draw.
     """
 
     name: str
@@ -144,18 +135,14 @@ class Package:
         own = getattr(self, f"plot_{kind}")
         if own is not None:
             return own
-        from flatland.app import plotting  # matplotlib only once there is a figure to draw
+        from flatland.plotting import films, study  # matplotlib only once there is a figure to draw
 
-        return getattr(plotting, f"plot_{kind}")
-
-
-class _UsageError(Exception):
-    """An argparse error, reported as one line."""
+        return getattr(study if kind == "study" else films, f"plot_{kind}")
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
-        raise _UsageError(f"{self.prog.split()[-1]}: {message}")
+        raise UsageError(f"{self.prog.split()[-1]}: {message}")
 
 
 # ---------------------------------------------------------------------------------------------- helpers
@@ -166,191 +153,6 @@ def _check_counts(args: argparse.Namespace) -> None:
             check_int(name, getattr(args, name))
     if args.seed is not None:
         check_seed("seed", args.seed)
-
-
-def _load_scene(pkg: Package, source: str) -> Any:
-    """The scene ``source`` (name or JSON file); every bad source is a ValidationError."""
-    return pkg.load_scene(source)
-
-
-def _stem(source: str) -> str:
-    return Path(source).stem if source.endswith(".json") else source
-
-
-def _save_fields(path: Path, **fields: np.ndarray) -> Path:
-    """One ``.npy`` holding a structured array with one float64 field per keyword."""
-    shape = np.shape(next(iter(fields.values())))
-    out = np.empty(shape, dtype=[(k, np.float64) for k in fields])
-    for k, v in fields.items():
-        out[k] = v
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.save(path, out)
-    return path
-
-
-def _options(args: argparse.Namespace) -> dict[str, Any]:
-    """Method options given on the command line (unset ones are left to the method's defaults)."""
-    options = {}
-    if args.kappa is not None:
-        options["kappa"] = check_positive("kappa", args.kappa)
-    if args.probes is not None:
-        options["probes"] = args.probes
-    if args.paired:
-        options["paired"] = True
-    if args.h is not None:
-        options["h"] = check_positive("h", args.h)
-    return options
-
-
-def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int) -> int | None:
-    """Reference spp that makes its film-sum stderr 1/4 of the smallest unbiased method's (x 1.25
-    for the scatter of the estimated errors), or None if it already is."""
-    from flatland.core.bias import REFERENCE_RATIO, reference_spp_needed
-
-    ref_se = float(np.sqrt(np.sum(np.square(reference.derivative_stderr))))
-    ratio = _reference_ratio(gradients, reference)
-    if ratio <= REFERENCE_RATIO:
-        return None
-    return reference_spp_needed(ref_spp, ref_se, ref_se / ratio)
-
-
-def _reference_ratio(gradients: Mapping[str, Any], reference: Any) -> float:
-    """Reference film-sum stderr / the smallest among the methods the bias tests do not flag (a flag
-    already counts the reference's noise in its z); 0 when there is none."""
-    from flatland.core.bias import Z_FLAG
-
-    def se(g: Any) -> float:
-        return float(np.sqrt(np.sum(np.square(g.derivative_stderr))))
-
-    judged = []
-    for g in gradients.values():
-        z = z_score(
-            float(np.sum(g.derivative)), float(np.sum(reference.derivative)), math.hypot(se(g), se(reference))
-        )
-        if abs(z) <= Z_FLAG and se(g) > 0.0:
-            judged.append(se(g))
-    return se(reference) / min(judged) if judged else 0.0
-
-
-def _film_sum(g: Any) -> str:
-    """Σ_j dI_j/dθ ± its standard error (pixels estimated independently)."""
-    total = float(np.sum(g.derivative))
-    stderr = float(np.sqrt(np.sum(np.square(g.derivative_stderr))))
-    return f"{total:+.4g} ± {stderr:.2g}"
-
-
-# ------------------------------------------------------------------------------------------------ verbs
-def _demo(pkg: Package, args: argparse.Namespace) -> int:
-    spp = args.spp or pkg.demo_spp
-    seed = args.seed
-    scene = _load_scene(pkg, pkg.demo_scene)
-    table = pkg.methods
-    methods = list(pkg.demo_methods or [m for m in DEMO_METHODS if m in table.names])
-    reference_method = pkg.reference_method or (
-        "boundary" if "boundary" in table.names else "finite_difference"
-    )
-    out = Path(args.out)
-
-    start = time.perf_counter()
-    primal = pkg.render(scene, spp=spp, seed=seed)
-    gradients, seconds = {}, {}
-    for method in methods:
-        t0 = time.perf_counter()
-        gradients[method] = pkg.render_gradient(scene, pkg.demo_param, method=method, spp=spp, seed=seed)
-        seconds[method] = time.perf_counter() - t0
-    ref_spp = pkg.reference_factor * spp
-    ref_options = dict(pkg.reference_options)
-    ref_label = method_label(reference_method, ref_options.items())
-    reference = pkg.render_gradient(
-        scene, pkg.demo_param, method=reference_method, spp=ref_spp, seed=seed + 1, **ref_options
-    )
-    needed = _reference_needed(gradients, reference, ref_spp)
-    if needed is not None:  # the reference must be 4 × more precise than the methods it judges
-        ref_spp = min(needed, 4 * ref_spp)  # at most 4 × (the ratio is printed: the cap shows there)
-        reference = pkg.render_gradient(
-            scene, pkg.demo_param, method=reference_method, spp=ref_spp, seed=seed + 1, **ref_options
-        )
-    columns = {PANEL_TITLES.get(m, m): g for m, g in gradients.items()}
-    title = f"{pkg.demo_scene}: d/d {pkg.demo_param}, {spp} spp"
-    panel = pkg.plot("panel")(primal, columns, out / "demo_panel.png", title=title)
-    title = (
-        f"{pkg.name} demo: scene {pkg.demo_scene!r}, parameter {pkg.demo_param!r}, {spp} spp, seed {seed}\n"
-        f"reference: {ref_label} at {ref_spp} spp, seed {seed + 1}: Σ dI/dθ = {_film_sum(reference)}"
-        f"; its stderr / the smallest unbiased method's = {_reference_ratio(gradients, reference):.2f}"
-        " (required <= 0.25)"
-    )
-    print(error_table(gradients, seconds, reference, title))
-    print(f"\nwrote {panel}  ({time.perf_counter() - start:.1f} s)")
-    for section in pkg.demo_sections:
-        print()
-        print(section(args))
-    return 0
-
-
-def _render(pkg: Package, args: argparse.Namespace) -> int:
-    scene = _load_scene(pkg, args.scene)
-    image = pkg.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
-    name = _stem(args.scene)
-    out = Path(args.out)
-    png = pkg.plot("image")(image, out / f"{name}.png", title=f"{name}, {args.spp} spp")
-    npy = _save_fields(out / f"{name}.npy", value=image.value, stderr=image.stderr)
-    print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
-    return 0
-
-
-def _gradient(pkg: Package, args: argparse.Namespace) -> int:
-    scene = _load_scene(pkg, args.scene)
-    if args.param is None:
-        names = ", ".join(pkg.parameter_names(scene))
-        raise _UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
-    g = pkg.render_gradient(
-        scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
-        **_options(args),
-    )  # fmt: skip
-    name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
-    out = Path(args.out)
-    title = f"{_stem(args.scene)}: d/d {args.param}, {args.method}, {args.spp} spp"
-    png = pkg.plot("gradient")(g, out / f"{name}.png", title=title)
-    npy = _save_fields(
-        out / f"{name}.npy",
-        value=g.value,
-        value_stderr=g.value_stderr,
-        derivative=g.derivative,
-        derivative_stderr=g.derivative_stderr,
-    )
-    print(f"Σ dI/dθ over the film = {_film_sum(g)} (one standard error)")
-    print(f"wrote {png} and {npy} (fields value, value_stderr, derivative, derivative_stderr)")
-    return 0
-
-
-def _study(pkg: Package, args: argparse.Namespace) -> int:
-    from flatland.app.study import run_study
-    from flatland.app.study_config import load_config
-
-    source: Any = args.config
-    if not Path(source).exists():
-        if source not in pkg.studies:
-            raise ValidationError(
-                "study",
-                f"no file {source!r} and no built-in study of that name; built-in studies: "
-                + ", ".join(pkg.studies),
-            )
-        source = pkg.studies[args.config]
-    config = load_config(source, package=pkg, seed=args.seed, samples=args.spp, name=_stem(args.config))
-    out = Path(args.out)
-    cache = Path(args.cache_dir) if args.cache_dir else out / ".cache" / "reparam-lab"
-    result = run_study(
-        config,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        cache_dir=cache,
-        progress=False if args.quiet else None,
-    )
-    csv_path = result.to_csv(out / f"{config.name}.csv")
-    figures = pkg.plot("study")(result, out)
-    print(result.table())
-    print(f"\nwrote {csv_path}" + "".join(f", {f}" for f in figures) + f"  ({result.seconds:.1f} s)")
-    return 0
 
 
 # ------------------------------------------------------------------------------------------------ parser
@@ -379,12 +181,12 @@ def _parser(pkg: Package) -> _Parser:
 
     demo = verbs.add_parser("demo", help="the default scene: panel of methods and error table (< 1 min)")
     common(demo, f"samples per pixel (default {pkg.demo_spp})", None)
-    demo.set_defaults(func=_demo)
+    demo.set_defaults(func=verb_demo)
 
     render = verbs.add_parser("render", help="render SCENE to PNG and .npy")
     scene_arg(render)
     common(render, "samples per pixel (default 64)", 64)
-    render.set_defaults(func=_render)
+    render.set_defaults(func=verb_render)
 
     gradient = verbs.add_parser("gradient", help="derivative image of SCENE w.r.t. --param, PNG and .npy")
     scene_arg(gradient)
@@ -400,11 +202,13 @@ def _parser(pkg: Package) -> _Parser:
     )
     gradient.add_argument("--probes", type=int, default=None, help="reparam: probe rays")
     gradient.add_argument(
-        "--paired", action="store_true", help="reparam: paired samples sharing one transform (DESIGN 2.9)"
+        "--paired",
+        action="store_true",
+        help="reparam: paired samples sharing one transform (see docs/theory/kernels.md)",
     )
     gradient.add_argument("--h", type=float, default=None, help="finite_difference: step")
     common(gradient, "samples per pixel (default 64)", 64)
-    gradient.set_defaults(func=_gradient)
+    gradient.set_defaults(func=verb_gradient)
 
     study = verbs.add_parser("study", help="run a study CONFIG (JSON file or built-in name): CSV and figures")
     builtin = f"; built-in: {', '.join(pkg.studies)}" if pkg.studies else ""
@@ -413,7 +217,7 @@ def _parser(pkg: Package) -> _Parser:
     study.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
     study.add_argument("--cache-dir", default=None, help="reference cache (default OUT/.cache/reparam-lab)")
     common(study, "replace every cell's samples per trial (n or spp)", None, seed=None)
-    study.set_defaults(func=_study)
+    study.set_defaults(func=verb_study)
     return parser
 
 
@@ -436,7 +240,7 @@ def main(package: Package, argv: Sequence[str] | None = None) -> int:
         args = _parser(package).parse_args(argv)
         _check_counts(args)
         return args.func(package, args)
-    except _UsageError as e:
+    except UsageError as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:  # output piped into e.g. `head`: stop quietly

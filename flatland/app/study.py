@@ -2,7 +2,7 @@
 
 A study answers "how biased, how noisy and how fast is each estimator here?" for one
 scalar derivative dI/dθ, the numbers behind the bias/variance trade-off of the
-convolution kernel (Loubet et al. 2019, Sec. 4.2; DESIGN 2.7) and behind equal-time
+convolution kernel (Loubet et al. 2019, Sec. 4.2) and behind equal-time
 comparisons of the methods.
 
 Problems

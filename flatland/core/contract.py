@@ -16,7 +16,7 @@ How to add an estimator
 3. Make theta a :class:`~flatland.core.dual.Dual` with ``variable(theta)`` and
    write the estimator as plain numpy on Duals; the derivative is the tangent.
    Keep derivations on the line that uses them, e.g.
-   ``# discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz, DESIGN 2.1)``.
+   ``# discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz rule, theory/leibniz)``.
 4. Return an :class:`Estimate` with per-sample (or per-batch) standard errors:
    summarize i.i.d. per-sample contributions with :func:`flatland.core.stats.summarize`.
 5. Register it in the package's :class:`MethodTable` with an :class:`Option` per

@@ -3,7 +3,8 @@
 A :class:`Dual` carries a primal ``value`` and a ``tangent`` (the derivative with
 respect to one scalar parameter, usually the scene parameter theta) as two float64
 arrays of the same shape. Every numpy ufunc and array function that rendering code
-needs has one JVP rule here, so estimator code reads like plain numpy::
+needs has one JVP rule (ufuncs in :mod:`flatland.core.dual_ufuncs`, array functions
+in :mod:`flatland.core.dual_functions`), so estimator code reads like plain numpy::
 
     theta = Dual(0.3, 1.0)            # d theta / d theta = 1
     y = np.sin(theta * x) / np.hypot(x, theta)
@@ -19,7 +20,6 @@ than silently dropping the tangent; so does converting a Dual to a plain array, 
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Callable
 from typing import Any
 
@@ -37,20 +37,6 @@ _VALUE_ONLY = {
     np.isnan, np.isfinite, np.isinf, np.signbit, np.sign, np.floor, np.ceil,
     np.rint, np.trunc,
 }  # fmt: skip
-
-
-def _zero_where_no_tangent(t: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """``t * scale`` with 0 wherever ``t == 0`` (so a singular ``scale`` there is harmless)."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        out = t * scale
-    return np.where(t == 0.0, 0.0, out)
-
-
-def _safe_scale(t: np.ndarray, num: Any, den: np.ndarray) -> np.ndarray:
-    """``t * num / den`` with 0 where ``t == 0``, quiet about 0/0 there."""
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        scale = num / den
-    return _zero_where_no_tangent(t, scale)
 
 
 class Dual(np.lib.mixins.NDArrayOperatorsMixin):
@@ -215,7 +201,7 @@ class Dual(np.lib.mixins.NDArrayOperatorsMixin):
             name = getattr(func, "__name__", str(func))
             raise TypeError(
                 f"np.{name} is not supported for Dual (it would drop the tangent); "
-                "apply it to detach(x), or add a rule in flatland.core.dual"
+                "apply it to detach(x), or add a rule in flatland.core.dual_functions"
             )
         return rule(*args, **kwargs)
 
@@ -248,15 +234,6 @@ def variable(value: float | np.ndarray) -> Dual:
     return Dual(value, np.ones_like(np.asarray(value, dtype=np.float64)))
 
 
-def _vt(x: Any) -> tuple[Any, Any]:
-    """(value, tangent) of a Dual or of a constant (tangent 0 as a scalar, broadcasting)."""
-    if isinstance(x, Dual):
-        return x.value, x.tangent
-    if isinstance(x, numbers.Number):
-        return float(x), 0.0
-    return np.asarray(x, dtype=np.float64), 0.0
-
-
 def _unary(*ufuncs: np.ufunc):
     def register(rule):
         for u in ufuncs:
@@ -284,153 +261,6 @@ def _implements(*funcs: Callable[..., Any]):
     return register
 
 
-def _shape_like(t: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """``t`` as a writable float array of ``shape`` (tangents of constants are scalars)."""
-    arr = np.asarray(t, dtype=np.float64)
-    return arr if arr.shape == shape else np.broadcast_to(arr, shape).copy()
-
-
-# ------------------------------------------------------------------- unary rules
-_unary(np.negative)(lambda v, t: (-v, -t))
-_unary(np.positive)(lambda v, t: (+v, +t))
-_unary(np.exp)(lambda v, t: ((e := np.exp(v)), t * e))
-_unary(np.expm1)(lambda v, t: (np.expm1(v), t * np.exp(v)))
-_unary(np.log)(lambda v, t: (np.log(v), _safe_scale(t, 1.0, v)))
-_unary(np.log1p)(lambda v, t: (np.log1p(v), _safe_scale(t, 1.0, 1.0 + v)))
-_unary(np.sin)(lambda v, t: (np.sin(v), t * np.cos(v)))
-_unary(np.cos)(lambda v, t: (np.cos(v), -t * np.sin(v)))
-_unary(np.tan)(lambda v, t: ((y := np.tan(v)), t * (1.0 + y * y)))
-_unary(np.sinh)(lambda v, t: (np.sinh(v), t * np.cosh(v)))
-_unary(np.cosh)(lambda v, t: (np.cosh(v), t * np.sinh(v)))
-_unary(np.tanh)(lambda v, t: ((y := np.tanh(v)), t * (1.0 - y * y)))
-_unary(np.arctan)(lambda v, t: (np.arctan(v), t / (1.0 + v * v)))
-_unary(np.square)(lambda v, t: (v * v, 2.0 * v * t))
-_unary(np.absolute)(lambda v, t: (np.abs(v), t * np.sign(v)))
-_unary(np.reciprocal)(lambda v, t: (1.0 / v, _safe_scale(t, -1.0, v * v)))
-
-
-@_unary(np.sqrt)
-def _sqrt(v, t):
-    s = np.sqrt(v)
-    # d sqrt(v) = t / (2 sqrt v); infinite at v = 0, reported as 0 where t = 0 there
-    return s, _safe_scale(t, 0.5, s)
-
-
-@_unary(np.cbrt)
-def _cbrt(v, t):
-    c = np.cbrt(v)
-    return c, _safe_scale(t, 1.0, 3.0 * c * c)
-
-
-@_unary(np.arcsin)
-def _arcsin(v, t):
-    return np.arcsin(v), _safe_scale(t, 1.0, np.sqrt(1.0 - v * v))
-
-
-@_unary(np.arccos)
-def _arccos(v, t):
-    return np.arccos(v), _safe_scale(t, -1.0, np.sqrt(1.0 - v * v))
-
-
-# ------------------------------------------------------------------ binary rules
-@_binary(np.add)
-def _add(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    return av + bv, _shape_like(at + bt, np.broadcast_shapes(np.shape(av), np.shape(bv)))
-
-
-@_binary(np.subtract)
-def _subtract(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    return av - bv, _shape_like(at - bt, np.broadcast_shapes(np.shape(av), np.shape(bv)))
-
-
-@_binary(np.multiply)
-def _multiply(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    # product rule: (ab)' = a' b + a b'
-    return av * bv, _shape_like(at * bv + av * bt, np.broadcast_shapes(np.shape(av), np.shape(bv)))
-
-
-@_binary(np.divide)
-def _divide(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    q = av / bv
-    # quotient rule: (a/b)' = (a' - q b') / b
-    return q, _shape_like((at - q * bt) / bv, np.shape(q))
-
-
-@_binary(np.power)
-def _power(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    y = np.power(av, bv)
-    # d a^b = b a^(b-1) a' + a^b log(a) b'
-    da = _zero_where_no_tangent(np.broadcast_to(at, y.shape), bv * np.power(av, bv - 1.0))
-    db = 0.0
-    if isinstance(b, Dual):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            log_a = np.log(av)
-        db = _zero_where_no_tangent(np.broadcast_to(bt, y.shape), y * log_a)
-    return y, _shape_like(da + db, y.shape)
-
-
-@_binary(np.arctan2)
-def _arctan2(y, x):
-    (yv, yt), (xv, xt) = _vt(y), _vt(x)
-    r2 = xv * xv + yv * yv
-    # d atan2(y, x) = (x y' - y x') / (x^2 + y^2)
-    return np.arctan2(yv, xv), _shape_like((xv * yt - yv * xt) / r2, np.shape(r2))
-
-
-@_binary(np.hypot)
-def _hypot(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    h = np.hypot(av, bv)
-    num = _shape_like(av * at + bv * bt, h.shape)
-    return h, _safe_scale(num, 1.0, h)
-
-
-@_binary(np.minimum, np.fmin)
-def _minimum(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    pick_a = av <= bv
-    return np.where(pick_a, av, bv), np.where(pick_a, at, bt)
-
-
-@_binary(np.maximum, np.fmax)
-def _maximum(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    pick_a = av >= bv
-    return np.where(pick_a, av, bv), np.where(pick_a, at, bt)
-
-
-@_binary(np.remainder)
-def _remainder(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    r = np.remainder(av, bv)
-    # a mod b = a - floor(a / b) b: tangent a' - floor(a / b) b'  (a.e.)
-    return r, _shape_like(at - np.floor(av / bv) * bt, np.shape(r))
-
-
-@_binary(np.fmod)
-def _fmod(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    r = np.fmod(av, bv)
-    # fmod(a, b) = a - trunc(a / b) b  (a.e.)
-    return r, _shape_like(at - np.trunc(av / bv) * bt, np.shape(r))
-
-
-@_binary(np.matmul)
-def _matmul(a, b):
-    (av, at), (bv, bt) = _vt(a), _vt(b)
-    y = np.matmul(av, bv)
-    t = np.zeros_like(y)
-    if isinstance(a, Dual):
-        t = t + np.matmul(at, bv)
-    if isinstance(b, Dual):
-        t = t + np.matmul(av, bt)
-    return y, t
-
-
-# Array-function rules live beside the ufunc rules; importing registers them.
+# The rules live in their own modules; importing them fills the tables above.
 from flatland.core import dual_functions as _dual_functions  # noqa: E402,F401
+from flatland.core import dual_ufuncs as _dual_ufuncs  # noqa: E402,F401

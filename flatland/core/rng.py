@@ -4,7 +4,7 @@ Every estimator draws each kind of random number from its own stream, keyed by t
 user's seed and a stream name (``"samples"``, ``"kernel"``, ``"probes"``, ...). Two
 methods that share a stream name see the same numbers for the same seed, whatever
 else they draw: that is what keeps the reparameterized primal estimate bit-identical
-to the naive one (DESIGN 2.5), and what common random numbers in finite differences
+to the naive one (Loubet et al. 2019, Sec. 3.2), and what common random numbers in finite differences
 rely on.
 
 Two kinds of stream. :func:`stream` is a sequential generator for draws that belong

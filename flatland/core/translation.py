@@ -1,11 +1,11 @@
 """The building blocks of a reparameterized estimator, shared by flatland and sphere3d.
 
 Loubet et al. 2019, "Reparameterizing Discontinuous Integrands for Differentiable
-Rendering": the change of variables whose value is the identity (Sec. 3.2, DESIGN
-2.5), the kernel weight of a convolution (Sec. 4.2, DESIGN 2.7), the fallback to the
-identity where ray tracing chose no point (Sec. 4.3, DESIGN 2.8), the paired-sample
-control variate of the authors' implementation (DESIGN 2.9) and the refusal of a box
-pixel filter (DESIGN 2.11); plus the central finite difference the methods are
+Rendering": the change of variables whose value is the identity (Sec. 3.2), the kernel
+weight of a convolution (Sec. 4.2), the fallback to the identity where ray tracing
+chose no point (Sec. 4.3), the paired-sample control variate of the authors'
+implementation (theory/kernels) and the refusal of a box pixel filter
+(theory/pixel_filters); plus the central finite difference the methods are
 checked against (not part of the paper).
 
 Dimension-free: every function works on arrays of any shape and on
@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 SMALL_WEIGHT = 1e-5
-"""Paired weights with ``|w|`` below this count as 1 (the authors' implementation, DESIGN 2.9)."""
+"""Paired weights with ``|w|`` below this count as 1 (the authors' implementation, theory/kernels)."""
 
 
 def translation_offset(c: Any, ok: Any = None) -> Any:
@@ -42,7 +42,7 @@ def translation_offset(c: Any, ok: Any = None) -> Any:
 
     A sample y evaluated at ``T(y, θ) = y + Δ`` is where it was at θ0 (T is the
     identity there, so the primal is the naive one) and moves like the point c
-    (Loubet et al. 2019, Sec. 3.2; DESIGN 2.5). The same difference ``x - detach(x)``
+    (Loubet et al. 2019, Sec. 3.2). The same difference ``x - detach(x)``
     is the zero-value part of a weight in :func:`control_variate`.
 
     Parameters
@@ -53,7 +53,7 @@ def translation_offset(c: Any, ok: Any = None) -> Any:
     ok : ndarray of bool, optional
         Where a point to follow was found. Elsewhere the offset is an exact 0 (value
         and derivative): the identity transform, which ray tracing falls back to
-        when the probes chose nothing (Sec. 4.3; DESIGN 2.8).
+        when the probes chose nothing (Loubet et al. 2019, Sec. 4.3).
 
     Returns
     -------
@@ -69,10 +69,10 @@ def unit_weight(log_k: Any) -> Any:
     """The kernel weight ``w = k / detach(k)`` from ``log k``: value exactly 1, derivative (log k)'.
 
     A convolution kernel k(T μ, ω) evaluated at the transformed sample carries the
-    derivative the transform gives the kernel (Loubet et al. 2019, Sec. 4.2; DESIGN
-    2.7). Computed as ``exp(log k - detach(log k))``: a kernel value that underflows
-    to 0 cannot make 0/0, and any additive constant of log k (a normalization)
-    cancels, so callers may pass an unnormalized log-kernel such as ``κ cos``.
+    derivative the transform gives the kernel (Loubet et al. 2019, Sec. 4.2). Computed as
+    ``exp(log k - detach(log k))``: a kernel value that underflows to 0 cannot make 0/0,
+    and any additive constant of log k (a normalization) cancels, so callers may pass an
+    unnormalized log-kernel such as ``κ cos``.
 
     Parameters
     ----------
@@ -94,7 +94,7 @@ def control_variate(e: Any, scale: Any, w: Any) -> Any:
     (a kernel or filter weight: its integral is 1 for every θ), zero expectation.
     Subtracting it times a ``scale`` independent of w keeps the expectation of e,
     value and derivative, and cancels the noise ``scale · w'`` when scale tracks e
-    (DESIGN 2.2; the authors' implementation uses it for paired samples, DESIGN 2.9).
+    (theory/monte_carlo; the authors' implementation uses it for paired samples, theory/kernels).
     The value is e's bit for bit: an exact zero is subtracted.
 
     Parameters
@@ -115,7 +115,7 @@ def control_variate(e: Any, scale: Any, w: Any) -> Any:
 
 
 def paired_combine(e0: Any, e1: Any, w0: Any, w1: Any) -> Any:
-    """Two members of a pair serve as each other's control variate (authors' implementation, DESIGN 2.9).
+    """Two members of a pair serve as each other's control variate (authors' implementation, theory/kernels).
 
     ``0.5 (e0 - e1 / w1 (w0 - detach(w0))) + 0.5 (e1 - e0 / w0 (w1 - detach(w1)))``:
     both members share one transform and are drawn from one kernel centre
@@ -146,7 +146,7 @@ def paired_combine(e0: Any, e1: Any, w0: Any, w1: Any) -> Any:
 
 
 def check_continuous_filter(kind: str) -> None:
-    """Refuse a box pixel filter for a reparameterized pixel integral (DESIGN 2.11).
+    """Refuse a box pixel filter for a reparameterized pixel integral (theory/pixel_filters).
 
     Translating or rotating the film samples (Loubet et al. 2019, Sec. 4.1) moves
     them across the pixel's footprint; a box filter's edges then become moving
@@ -166,7 +166,8 @@ def check_continuous_filter(kind: str) -> None:
         raise ValidationError(
             "camera.filter",
             "the reparam method needs a continuous pixel filter, got 'box': reparameterizing the film "
-            "moves samples across the box's edges, which become moving discontinuities (DESIGN 2.11); "
+            "moves samples across the box's edges, which become moving discontinuities "
+            "(docs/theory/pixel_filters); "
             "use 'tent' or 'gaussian'",
         )
 

@@ -8,7 +8,7 @@ each shading point inside :func:`~flatland.integrator.shade`, after its MIS esti
 
 Loubet et al. 2019 compare against edge sampling (Li et al. 2018); in flatland the
 discontinuities of every integrand are points that can be enumerated, so the
-Leibniz rule's jump term (DESIGN 2.1, 2.10) is computed exactly instead of sampled.
+Leibniz rule's jump term (theory/leibniz, theory/boundary) is computed exactly instead of sampled.
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ class BoundaryHooks(Hooks):
             d = direction(phi + sign * EPS_ANGLE)
             hits = cast(ctx.geom0, origins, d, ignore[rows])
             sides.append(incident(ctx.geom0, origins, d, hits)[0])
-        # discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz, DESIGN 2.1)
+        # discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz rule, theory/leibniz)
         term = (sides[0] - sides[1]) * cos_c[rows, cols] * tangent(phi_c)[rows, cols]
         return np.bincount(rows, weights=term, minlength=n)
 
@@ -130,14 +130,14 @@ class BoundaryHooks(Hooks):
                 ctx, t_eval, np.concatenate([u, u]), draws
             )  # same samples both sides
             jump = (radiance[: m * n_s] - radiance[m * n_s :]).reshape(m, n_s).mean(axis=1)
-            # discontinuity term: k_j(t_c) (L(t_c-) - L(t_c+)) * dt_c/dtheta   (Leibniz, DESIGN 2.1)
+            # discontinuity term: k_j(t_c) (L(t_c-) - L(t_c+)) * dt_c/dtheta   (Leibniz rule, theory/leibniz)
             out[b] = (weights * (jump * speed)[:, None]).sum(axis=0)
         return out
 
 
 @GRADIENT_METHODS.register("boundary")
 def boundary(job: Job) -> BatchResult:
-    """Naive interior term plus every discontinuity term, computed explicitly (DESIGN 2.10).
+    """Naive interior term plus every discontinuity term, computed explicitly (theory/boundary).
 
     For the pixel integral ``I_j = ∫ k_j(t) L(t) dt`` and for every shading integral
     ``E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ`` the Leibniz rule reads

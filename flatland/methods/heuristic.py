@@ -4,8 +4,8 @@ Where the integrator calls it: not directly. :class:`~flatland.methods.reparam.R
 calls :func:`choose_points` from its ``film`` and ``directions`` hooks, once per chunk
 of samples, after tracing the probes and before forming the evaluation points.
 
-The 2D form of DESIGN 2.8. Per sample, a few probe rays are traced inside the
-kernel's support from the integral's origin o (the camera, or a shading point), in
+The 2D form of the probe heuristic of Loubet et al. 2019, Sec. 4.3. Per sample, a few probe
+rays are traced inside the kernel's support from the integral's origin o (the camera, or a shading point), in
 angular (film) order:
 
 - probe 0 is paired with the *last* probe that hits a different shape (a miss
@@ -60,7 +60,7 @@ from flatland.scene import Geometry
 __all__ = ["PARALLEL", "Choice", "choose_points"]
 
 PARALLEL = 0.99
-"""|n0·n1| above which two tangent lines count as parallel (DESIGN 2.8)."""
+"""|n0·n1| above which two tangent lines count as parallel (Loubet et al. 2019, Sec. 4.3)."""
 
 
 @dataclass(frozen=True)

@@ -27,14 +27,15 @@ def naive(job: Job) -> BatchResult:
     differentiated exactly: hit points sliding along moving surfaces, normals,
     cosines, emission fades, albedo and emission parameters, the moving camera.
 
-    Assumes each integrand is continuous in θ at every sample (DESIGN 2.3). Biased
+    Assumes each integrand is continuous in θ at every sample (Loubet et al. 2019, Sec. 3.1). Biased
     wherever it is not: a film sample whose ray changes primitive as θ moves, or a
     direction sample whose ray passes a moving occluder or emitter edge, contributes
     a derivative of zero instead of its share of the jump. The estimate converges to
     the interior term of the Leibniz rule alone and misses
     ``Σ_c k_j(c) [L(c⁻) - L(c⁺)] c'(θ)`` over the silhouettes seen from the camera and
     ``(ρ/2) Σ_c [f(c⁻) - f(c⁺)] c'(θ)`` over those seen from each shading point
-    (DESIGN 2.1, 2.4); the boundary method adds exactly these terms. The value
-    estimate is unbiased and, for the same seed, identical to the other methods'.
+    (Leibniz rule, theory/leibniz; Loubet et al. 2019, Sec. 3.2); the boundary method adds
+    exactly these terms. The value estimate is unbiased and, for the same seed, identical to
+    the other methods'.
     """
     return run(job, job.geometry(variable(0.0)), Hooks())

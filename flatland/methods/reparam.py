@@ -10,9 +10,9 @@ The extras stay ``None``.
 
 Loubet et al. 2019: Sec. 3.2 (change of variables), 4.1 (in 2D a rotation of
 directions is a translation of the angle, and the film is a line), 4.2 (convolution
-kernels), 4.3 (choosing the transform by ray tracing, DESIGN 2.8,
+kernels), 4.3 (choosing the transform by ray tracing,
 :mod:`flatland.methods.heuristic`), and the paired samples of the authors'
-implementation (DESIGN 2.9).
+implementation (theory/kernels).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def default_kappa_film(pixel_width: float) -> float:
     """Film kernel concentration 2 / (0.4 Δt)²: a Gaussian of σ ≈ 0.28 pixel.
 
     The flat-film form of the authors' camera kernel κ = 1 / (1 - cos(0.4 · pixel
-    angle)) (DESIGN 2.7), since 1 - cos x ≈ x² / 2.
+    angle)) (Loubet et al. 2019, Sec. 4.2), since 1 - cos x ≈ x² / 2.
     """
     return 2.0 / (0.4 * pixel_width) ** 2
 
@@ -59,9 +59,9 @@ class ReparamHooks(Hooks):
 
     Film: kernel g = N(0, 1/κ_film) on t. Directions: von Mises of concentration κ on
     the angle. Unpaired, the kernel is read in the reverse order (the joint density
-    p(y) k(y, ω) of DESIGN 2.7 with y the primary sample, ω ~ k(·, y) the centre),
+    p(y) k(y, ω) of Loubet et al. 2019, Sec. 4.2, with y the primary sample, ω ~ k(·, y) the centre),
     which keeps every evaluation point's value that of the naive estimator. Probes at
-    ω + σ · spread · linspace(-1, 1, probes) pick an attached point p (DESIGN 2.8), and
+    ω + σ · spread · linspace(-1, 1, probes) pick an attached point p (Loubet et al. 2019, Sec. 4.3), and
     the sample is evaluated at ``T(y) = y + Δ`` with ``Δ = c_p(θ) - detach(c_p(θ))``,
     c_p the film coordinate of p or its angle seen from the (moving) shading point.
     The weight ``k(T y, ω) / detach(k(T y, ω))`` (value 1) carries the kernel's derivative.
@@ -116,10 +116,10 @@ class ReparamHooks(Hooks):
         v = choice.point - geom.cam_o
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
-        # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (DESIGN 2.5)
+        # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (Loubet et al. 2019, Sec. 3.2)
         points = mu + translation_offset(t_p, ok)[:, None]
         sq = (points - center[:, None]) ** 2
-        # w = k(T y, ω) / detach(k(T y, ω)), log k = -κ/2 x² + const for the Gaussian   (DESIGN 2.7)
+        # w = k(T y, ω) / detach(k(T y, ω)), log k = -κ/2 x² + const for the Gaussian   (Sec. 4.2)
         return Members(points, unit_weight(-0.5 * self.kappa_film * sq), self.paired, density)
 
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
@@ -143,10 +143,10 @@ class ReparamHooks(Hooks):
         # derivative of atan2 there is 0/0, so that sample keeps the identity transform
         ok = choice.ok & (np.hypot(*detach(offset).T) > EPS_DIST)
         angle = angle_of(np.where(ok[:, None], offset, direction(center)))
-        # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (DESIGN 2.6)
+        # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (Sec. 4.1)
         points = mu + translation_offset(angle, ok)[:, None]
         c = np.cos(points - center[:, None])
-        # von Mises weight, log k = κ cos(T y - ω) + const   (DESIGN 2.7)
+        # von Mises weight, log k = κ cos(T y - ω) + const   (Loubet et al. 2019, Sec. 4.2)
         return Members(points, unit_weight(kappa * c), self.paired)
 
 
@@ -184,7 +184,7 @@ def reparam(
         see :mod:`flatland.methods.heuristic`).
     paired : bool
         Two evaluations share one transform and serve as each other's control
-        variate (DESIGN 2.9), at twice the cost per level. The kernel is then used in
+        variate (theory/kernels), at twice the cost per level. The kernel is then used in
         the paper's order (ω is the outer sample), so the value is a different
         estimate from the naive one. On the film ω = t + σz with its closed-form
         density k_j ⊛ g (sampling ω from k_j itself would miss the blurred integrand
@@ -197,7 +197,7 @@ def reparam(
     own transform; the samples, their densities and the MIS weights stay the naive
     estimator's at θ0 (θ-free functions of the untransformed sample, which keeps the
     MIS decomposition exact for every θ). Unpaired, the transform's value is the
-    identity: the image value equals the naive one bit for bit (DESIGN 2.5).
+    identity: the image value equals the naive one bit for bit (Loubet et al. 2019, Sec. 3.2).
 
     Emitter samples: the authors used one transform per shading point, from the mean
     of the occluded shadow rays' hits, and emitters faded at their ends. Here each
@@ -206,13 +206,13 @@ def reparam(
     discontinuity unless faded) lies within the kernel.
 
     Assumes a continuous pixel filter (a box filter's edges would become moving
-    discontinuities, DESIGN 2.11: refused) and that one translation follows every
+    discontinuities, theory/pixel_filters: refused) and that one translation follows every
     discontinuity within a kernel. Biased where it does not: discontinuities moving
     differently inside one kernel (``two_occluders``), a wrong pick by the heuristic,
     an attached point moving unlike the silhouette (first order in its distance from
     it, exact under translation), an edge beyond the probes. The bias falls as the
     kernels narrow, while the variance of the weights' derivatives (about √κ per
-    affected sample) grows: the trade-off of DESIGN 2.7. The tent filter's
+    affected sample) grows: the trade-off of Loubet et al. 2019, Sec. 4.2. The tent filter's
     log-derivative grows like 1 / distance near its support's end (a mildly heavy
     tail); the Gaussian filter's does not.
     """

@@ -29,7 +29,7 @@ class Samples:
 def primary_samples(integrand: Integrand, n: int, seed: int) -> Samples:
     """The ``n`` proposal samples every method draws first, from the ``"samples"`` stream.
 
-    All methods given the same seed see these same samples (DESIGN 2.5).
+    All methods given the same seed see these same samples (Loubet et al. 2019, Sec. 3.2).
     """
     x = integrand.sample(stream(seed, "samples").random(n))
     return Samples(x=x, pdf=integrand.pdf(x))

@@ -10,7 +10,7 @@ from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
 @METHODS.register("boundary")
 def boundary(integrand: Integrand, theta: float, n: int, seed: int) -> Estimate:
-    """Naive interior term plus ``Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ)`` computed exactly (DESIGN 2.10).
+    """Naive interior term plus ``Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ)`` computed exactly (theory/boundary).
 
     In 1D the discontinuities are points that the integrand enumerates, so the
     boundary term of the Leibniz rule needs no sampling: it is added as a constant
@@ -21,6 +21,6 @@ def boundary(integrand: Integrand, theta: float, n: int, seed: int) -> Estimate:
     theta_d = variable(theta)
     s = primary_samples(integrand, n, seed)
     interior = integrand.f(s.x, theta_d) / s.pdf
-    # discontinuity term: (f(c-) - f(c+)) * dc/dtheta, summed   (Leibniz, DESIGN 2.1)
+    # discontinuity term: (f(c-) - f(c+)) * dc/dtheta, summed   (Leibniz rule, theory/leibniz)
     term = sum(d.jump * float(d.location.tangent) for d in integrand.discontinuities(theta_d))
     return to_estimate(interior, n, "boundary", {}, extra_derivative=float(term))

@@ -2,7 +2,7 @@
 
 Loubet et al. 2019, Sec. 3.2 (change of variables), 4.1 (one transform per integral,
 here a translation), 4.2 (convolution kernels) and the paired-sample control variate
-of the authors' implementation (DESIGN 2.9).
+of the authors' implementation (theory/kernels).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ __all__ = ["follow_nearest", "reparam"]
 def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], points: np.ndarray) -> Dual:
     """Per point, the translation Δ = c(θ) - detach(c(θ)) of the discontinuity nearest to it.
 
-    Δ has value 0 (so T(y, θ0) = y + Δ is the identity, DESIGN 2.5) and derivative
+    Δ has value 0 (so T(y, θ0) = y + Δ is the identity, Loubet et al. 2019, Sec. 3.2) and derivative
     c'(θ) of the chosen discontinuity. With no discontinuity the translation is the
     identity (Δ = 0, Δ' = 0).
     """
@@ -35,7 +35,7 @@ def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], poin
     locations = np.stack([d.location for d in discontinuities])  # Dual, shape (m,)
     distance = domain.distance(points[None, :], detach(locations)[:, None])  # (m, n)
     chosen = locations[np.argmin(distance, axis=0)]  # gather: Dual, shape (n,)
-    # T(y, θ) = y + c(θ) - c(θ0): value 0, tangent c'(θ)   (DESIGN 2.5)
+    # T(y, θ) = y + c(θ) - c(θ0): value 0, tangent c'(θ)   (Loubet et al. 2019, Sec. 3.2)
     return translation_offset(chosen)
 
 
@@ -71,7 +71,7 @@ def reparam(
     two kernel samples μ_i0, μ_i1 ~ k(·, ω_i) share one translation, and each one's
     zero-mean weight derivative serves as the other's control variate:
     ``0.5 (e0 - e1 / w1 (w0 - detach(w0))) + 0.5 (e1 - e0 / w0 (w1 - detach(w1)))``
-    (DESIGN 2.9). ``n`` counts integrand evaluations, so n // 2 pairs; the primal
+    (theory/kernels). ``n`` counts integrand evaluations, so n // 2 pairs; the primal
     is then a different (still unbiased) estimate than the naive one.
     """
     theta_d = variable(theta)
@@ -92,10 +92,10 @@ def reparam(
         for j in range(2):  # the two members of each pair (not a loop over samples)
             mu = domain.sample_kernel(u[j], s.x, kappa)
             y = mu + shift
-            w.append(unit_weight(domain.log_kernel(y, s.x, kappa)))  # k / detach(k), value 1 (DESIGN 2.7)
+            w.append(unit_weight(domain.log_kernel(y, s.x, kappa)))  # k / detach(k), value 1 (Sec. 4.2)
             e.append(integrand.f(y, theta_d) * w[j] / s.pdf)
         # each weight's derivative has zero mean given ω and is independent of the other sample:
-        # a control variate scaled by the other sample's estimate          (DESIGN 2.9)
+        # a control variate scaled by the other sample's estimate   (paired samples, theory/kernels)
         pair = paired_combine(e[0], e[1], w[0], w[1])
         return to_estimate(pair, 2 * pairs, "reparam", options)
 
@@ -107,6 +107,6 @@ def reparam(
     # kernel centre ω_i ~ k(·, x_i) from its own stream: the primary samples stay the naive ones
     center = domain.sample_kernel(stream(seed, "kernel").random(n), s.x, kappa)
     y = s.x + follow_nearest(domain, discontinuities, center)
-    w = unit_weight(domain.log_kernel(y, center, kappa))  # k / detach(k), value 1 (DESIGN 2.7)
-    # f(T x) k(T x, ω) / (p(x) k(x, ω)): value f(x) / p(x), derivative with the kernel factor   (DESIGN 2.7)
+    w = unit_weight(domain.log_kernel(y, center, kappa))  # k / detach(k), value 1 (Sec. 4.2)
+    # f(T x) k(T x, ω) / (p(x) k(x, ω)): value f(x) / p(x), derivative with the kernel factor   (Sec. 4.2)
     return to_estimate(integrand.f(y, theta_d) * w / s.pdf, n, "reparam", options)

@@ -26,6 +26,6 @@ def naive(task: ImageTask | PointTask) -> Tally:
     camera, shadow boundaries, the horizon of the environment behind an occluder —
     the integrand has discontinuities that move, each sample's derivative misses
     them, and the estimate converges to the interior term alone: biased by minus the
-    boundary term of the Leibniz rule (Sec. 3.2, DESIGN 2.4). The value is unbiased.
+    boundary term of the Leibniz rule (Loubet et al. 2019, Sec. 3.2). The value is unbiased.
     """
     return task.evaluate(variable(0.0), Identity())

@@ -11,7 +11,63 @@ samples), calling back ``Shading.trace`` and ``Shading.evaluate_bsdf``. A
 Loubet et al. 2019, Sec. 3.2 (change of variables), 4.1 (one rotation per integral),
 4.2 (convolution kernels for integrands of large support), 4.3 (choosing the
 rotation by ray tracing), and the paired-sample control variate of the authors'
-implementation (DESIGN 2.6–2.9).
+implementation (theory/kernels).
+
+Bias
+----
+Measured against the closed forms of :mod:`sphere3d.closed_form` by
+``python -m benchmarks --only reparam_bias`` (defaults: κ = 1000, 4 probes, spread 3;
+seed 11, 16 batches; ± one standard error); tested as biases in
+``tests/sphere3d/test_triangle_closed_form.py``.
+
+**Camera: one rotation per pixel and batch.** A black triangle about s pixels across
+against a constant sky (:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian
+filter), moving sideways (``translate.x``) or away from the camera (``translate.z``).
+Share of the silhouette term lost, 1 - Σ sign(g) d / Σ |g| over the film (g the exact
+derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
+
+========  ==================  ==================  ==================
+size      image, spp          sideways            depth
+========  ==================  ==================  ==================
+1 px      8 × 8, 65536        68.6 % ± 0.7 %      79.8 % ± 1.3 %
+2 px      8 × 8, 65536        39.7 % ± 2.7 %      75.9 % ± 3.1 %
+4 px      8 × 8, 65536        15.4 % ± 1.3 %      32.8 % ± 1.3 %
+8 px      16 × 16, 16384      10.5 % ± 0.9 %      17.6 % ± 0.9 %
+20 px     32 × 32, 4096       4.3 % ± 0.4 %       6.6 % ± 0.5 %
+========  ==================  ==================  ==================
+
+The estimate is always short of the exact derivative, never noisier around the right
+value: a ring of probes wider than the silhouette (3σ = 1.5 px) mostly misses a triangle of
+1–2 px, so the rotation follows nothing or one probe; where a pixel's footprint holds two
+edges or a corner, one rotation follows one of them. Motion in depth loses more: the
+silhouette's film velocity varies along the edges (the image scales about the principal
+point), and the followed point, the mean of the probes that hit, lies inside the triangle,
+where the image moves more slowly than at its edge. Not fixed by more samples.
+
+**Shading: the cosine-sampled integral with the vMF kernel.** The irradiance at the origin
+(normal +z) under a constant sky with a black triangle above it
+(:func:`~sphere3d.closed_form.occluded_sky_irradiance`, Lambert's formula); share of dE/dθ
+lost, 1 - d / g. The triangle (-0.2, -0.5, 1), (0.9, 0.1, 1.1), (0.1, 0.6, 0.9) moves about
+its centroid; "near the horizon": a large triangle whose lower edge lies 20, 10 or 5 degrees
+above the horizon, its apex high (``horizon_triangle`` in the benchmark), moving sideways:
+
+=====================================  ==========  ==================
+case                                   samples     lost
+=====================================  ==========  ==================
+z-translation                          2^22        5.4 % ± 0.7 %
+x-translation                          2^24        4.8 % ± 1.3 %
+scale                                  2^22        5.1 % ± 0.6 %
+rotation about x                       2^24        11.4 % ± 1.5 %
+rotation about y                       2^24        4.6 % ± 1.3 %
+near the horizon: 20°, 10°, 5°         2^22        4.6, 3.1, 2.9 % (± 0.7, 0.5, 0.4 %)
+``kappa=None``: z-translation, scale   2^22        100.9 %, 99.5 % (± 0.1 %)
+=====================================  ==========  ==================
+
+Always short, never long: a kernel that reaches an edge none of its probes detects (near
+the triangle's corners), or two edges one rotation cannot follow, drops its share of the
+boundary term. Without a kernel (``kappa=None``) one
+rotation from cosine-distributed probes serves the whole hemisphere and the derivative is
+lost entirely (the estimate is within 1 % of zero).
 """
 
 from __future__ import annotations
@@ -74,7 +130,7 @@ class ReparamTransforms:
         grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film it is
         capped at the filter's radius.
     paired : bool
-        Two kernel samples per outer sample share one rotation (DESIGN 2.9).
+        Two kernel samples per outer sample share one rotation (theory/kernels).
     """
 
     kappa: float | None
@@ -156,7 +212,7 @@ class ReparamTransforms:
         return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal)
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
-        """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (DESIGN 2.7)."""
+        """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (Loubet et al. 2019, Sec. 4.2)."""
         return unit_weight(self.kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
@@ -181,7 +237,7 @@ class ReparamTransforms:
         return scatter(len(mu), live, est, shading.state.dual)
 
     def _paired(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (DESIGN 2.9)."""
+        """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (theory/kernels)."""
         rotation = self._probe_rotation(shading, mu)
         u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
         e, w = [], []
@@ -196,7 +252,7 @@ class ReparamTransforms:
             mass = np.where(detach(mass) > 0.0, mass, 1.0)  # C = 0 only far below the horizon, where f = 0
             e.append(shading.evaluate_bsdf(member, rotated, shading.trace(member)) * weight / (pdf * mass))
         # each weight's derivative has zero mean given ω and is independent of the other member:
-        # a control variate scaled by the other member's estimate                      (DESIGN 2.9)
+        # a control variate scaled by the other member's estimate   (paired samples, theory/kernels)
         return paired_combine(e[0], e[1], w[0], w[1])
 
 
@@ -232,7 +288,7 @@ def reparam(
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
     Each integral's samples ω are evaluated at R(θ)·ω, R the identity at θ0 that moves
-    like one chosen occluder point (Sec. 4.1, DESIGN 2.6), |det J| = 1:
+    like one chosen occluder point (Loubet et al. 2019, Sec. 4.1), |det J| = 1:
 
     - **pixel integral** (support: the filter footprint): one rotation per pixel and
       batch from ``probes`` camera rays on a ring over the footprint and the
@@ -240,13 +296,13 @@ def reparam(
       derivative of k·J under the rotation, with a zero-mean control variate
       (:class:`~sphere3d.tasks.ImageTask`); it needs a continuous filter (tent,
       gaussian): with ``box`` the footprint's edge would move and bias the gradient
-      (DESIGN 2.11), so a box filter is refused, as in flatland.
+      (theory/pixel_filters), so a box filter is refused, as in flatland.
     - **emitter sampling**: one rotation per shading point following the mean of the
       attached hits of the occluded ones among ``probes`` shadow rays (the authors'
       implementation), else the mean attached probe point on the emitters. Exact
       when one rigid occluder shadows a small emitter; biased when occluders moving
       differently share the emitter's solid angle, and at an emitter's own border
-      unless its radiance fades there (``fade``, DESIGN 2.8): a 0.6 × 0.4 light moving
+      unless its radiance fades there (``fade``, theory/probes): a 0.6 × 0.4 light moving
       sideways 1.5 above a point got 73 % of its derivative lost without a fade, none
       with it (tests/sphere3d/test_closed_forms.py).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
@@ -263,9 +319,9 @@ def reparam(
     shadow ray blocked, a cosine ray hitting a dark surface) get no probes. The
     primal is bit-identical to ``naive``'s for the same seed, except with
     ``paired=True`` (needs ``kappa``): then the outer sample is the cosine sample, two
-    kernel samples around it share the rotation, and the control variate of DESIGN
-    2.9 reduces the variance of the kernel weights; the kernel mass below the
-    horizon is restored by :func:`~sphere3d.sampling.vmf_hemisphere_fraction` (a
+    kernel samples around it share the rotation, and the control variate of the
+    authors' implementation (theory/kernels) reduces the variance of the kernel weights; the
+    kernel mass below the horizon is restored by :func:`~sphere3d.sampling.vmf_hemisphere_fraction` (a
     different, still unbiased primal, at twice the rays per sample).
     """
     if isinstance(task, ImageTask):

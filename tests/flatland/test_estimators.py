@@ -1,4 +1,4 @@
-"""The four textbook estimators against closed forms (DESIGN 2.1-2.9).
+"""The four textbook estimators against closed forms (theory/leibniz to theory/kernels).
 
 Tolerance: an unbiased estimate must lie within Z standard errors of its reference, with
 Z the two-sided normal quantile at family-wise level 1e-4, Šidák-corrected over the
@@ -125,7 +125,7 @@ def two_steps_kernel_bias(theta, kappa):
 
 
 def test07_kernel_trade_off_bias_falls_and_variance_rises_with_kappa():
-    """DESIGN 2.7 on the two-step integral, N = 1 000 000 per κ.
+    """Loubet et al. 2019, Sec. 4.2, on the two-step integral, N = 1 000 000 per κ.
 
     Bias: each measured bias agrees with the prediction above, and |bias| falls
     monotonically over κ = 1, 4, 16 (the predicted steps 0.044 and 0.040 are > 10
@@ -156,7 +156,7 @@ def test08_reparam_with_kernel_is_unbiased_when_one_translation_follows_all(name
 
 
 def test09_paired_samples_reduce_the_kernel_variance():
-    """DESIGN 2.9: at κ = 100 on the paper's step, paired samples at the same number of
+    """Paired samples (theory/kernels): at κ = 100 on the paper's step, paired samples at the same number of
     evaluations lower the derivative variance (measured 0.0076² vs 0.0127² at 200k)."""
     a = estimate("step", 0.5, "reparam", n=N, seed=SEED, kappa=100.0)
     b = estimate("step", 0.5, "reparam", n=N, seed=SEED, kappa=100.0, paired=True)

@@ -88,7 +88,7 @@ def test04_leibniz_interior_plus_discontinuity_term_is_the_derivative(name):
 
 
 def test05_seed_example_numbers():
-    """DESIGN 2.1: interior 0, moving limit 1·4, moving step (0 - 1)·2, dI/dθ = 2, I = 2θ."""
+    """theory/leibniz: interior 0, moving limit 1·4, moving step (0 - 1)·2, dI/dθ = 2, I = 2θ."""
     ig = INTEGRALS["leibniz_seed"]
     terms = sorted(d.jump * float(tangent(d.location)) for d in ig.discontinuities(variable(1.3)))
     assert terms == [-2.0, 4.0]
@@ -96,7 +96,7 @@ def test05_seed_example_numbers():
 
 
 def test06_paper_example_naive_derivative_is_zero_per_sample():
-    """DESIGN 2.4: every sample of 1_{x>θ} K(x) has zero θ-derivative."""
+    """Loubet et al. 2019, Sec. 3.2: every sample of 1_{x>θ} K(x) has zero θ-derivative."""
     ig = INTEGRALS["step"]
     x = np.linspace(-3, 3, 101)
     assert np.all(tangent(ig.f(x, variable(0.2))) == 0.0)

@@ -256,7 +256,7 @@ HEURISTIC_SCENE = {
 
 
 def test04_probe_heuristic_one_configuration_per_rule():
-    """Hand-made probe hits from o = (0, 0) looking along +y, four probes in order (DESIGN 2.8).
+    """Hand-made probe hits from o = (0, 0) looking along +y, four probes in order (theory/probes).
 
     Expected points by hand: a segment's hit at barycentric u is a + u (b - a); the roof's
     corner under ``right.translate.x`` = θ is where y = x + 2 meets y = 2 - (x - θ), i.e.

@@ -8,10 +8,10 @@ import pytest
 
 from flatland import plot
 from flatland.__main__ import PACKAGE
-from flatland.app import plotting
 from flatland.app.study import run_study
 from flatland.app.study_config import StudyConfig
 from flatland.core.image import GradientImage, Image
+from flatland.plotting import films, study, style
 
 W = 48
 
@@ -82,9 +82,9 @@ def test03_symmetric_limit_is_shared_and_ignores_a_few_outliers():
     b = 0.5 * a.copy()
     b[3] = 1e6  # one wild finite-difference pixel
     # the larger of the arrays' 99.5th percentiles of |g|: a's, and not b's outlier
-    assert plotting.symmetric_limit([a, b]) == pytest.approx(np.percentile(np.abs(a), 99.5))
-    assert plotting.symmetric_limit([b]) < 1.0
-    assert plotting.symmetric_limit([np.zeros(5)]) == 1.0
+    assert style.symmetric_limit([a, b]) == pytest.approx(np.percentile(np.abs(a), 99.5))
+    assert style.symmetric_limit([b]) < 1.0
+    assert style.symmetric_limit([np.zeros(5)]) == 1.0
 
 
 @pytest.mark.parametrize("shape", [(W,), (24, 32)], ids=["film1d", "film2d"])
@@ -150,16 +150,16 @@ def test06_error_time_figure_is_log_log_with_one_line_per_method(tmp_path, monke
     )
     result = run_study(config, progress=False)
     seen = {}
-    original = plotting.plt.close
+    original = films.save_png
 
-    def keep(fig):  # inspect the axes before the figure is closed
+    def keep(fig, path):  # inspect the axes of the figure being written
         ax = fig.axes[0]
         seen.update(
             x=ax.get_xscale(), y=ax.get_yscale(), labels=[line.get_label() for line in ax.get_lines()]
         )
-        original(fig)
+        return original(fig, path)
 
-    monkeypatch.setattr(plotting.plt, "close", keep)
+    monkeypatch.setattr(study, "save_png", keep)
     path = plot.plot_error_time(result, tmp_path / "et.png")
     assert path.stat().st_size > 10_000 and seen["x"] == "log" and seen["y"] == "log"
     methods = [label for label in seen["labels"] if not label.startswith(("∝", "_"))]

@@ -18,10 +18,10 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from flatland import estimate
-from flatland import plot_textbook as pt
 from flatland.core.dual import variable
 from flatland.core.stats import normal_quantile
 from flatland.integrals import INTEGRALS
+from flatland.plotting import textbook as pt
 
 
 def segments_of(ax):
@@ -43,7 +43,7 @@ def test01_helpers_return_figures_outside_pyplot():
         pt.plot_terms(["a"], {"t": [1.0]}),
         pt.plot_estimates({"a": (1.0, 0.1)}, 1.0),
         pt.plot_variance([10, 100], {"v": [1.0, 0.1]}),
-        pt.plot_kappa_tradeoff([1, 10], [0.1, 0.0], [0.01, 0.02], [1.0, 3.0]),
+        pt.plot_kappa_tradeoff([1, 10], [0.1, 0.0], [0.01, 0.02], [1.0, 3.0], level=0.99),
     ]
     assert all(isinstance(f, Figure) for f in figs)
     assert plt.get_fignums() == before
@@ -88,7 +88,7 @@ def test04_plot_estimates_draws_z_stderr_bars_and_the_reference():
     reference = [line for line in ax.lines if line.get_linestyle() == "--"]
     assert len(reference) == 1 and reference[0].get_ydata()[0] == -0.35
     assert [t.get_text() for t in ax.get_xticklabels()] == ["naive", "pair"]
-    assert "99%" in ax.get_legend().get_texts()[-1].get_text()
+    assert "estimate ± 99 % interval" in [t.get_text() for t in ax.get_legend().get_texts()]
 
 
 def test05_plot_estimates_reads_the_value_when_asked():
@@ -96,7 +96,7 @@ def test05_plot_estimates_reads_the_value_when_asked():
     fig = pt.plot_estimates({"naive": est}, of="value", level=0.999)
     bars = segments_of(fig.axes[0])
     assert (bars[0, 1] + bars[0, 3]) / 2 == pytest.approx(est.value)
-    assert "99.9%" in fig.axes[0].get_legend().get_texts()[0].get_text()
+    assert fig.axes[0].get_legend().get_texts()[0].get_text() == "estimate ± 99.9 % interval"
 
 
 def test06_plot_variance_uses_log_axes_and_draws_predictions_dashed():
@@ -162,7 +162,7 @@ def test09_plot_curves_and_histogram_draw_what_they_are_given():
         (lambda: pt.plot_estimates({"a": (1.0, 2.0, 3.0)}), "estimates['a']"),
         (lambda: pt.plot_estimates({"a": (1.0, 2.0)}, of="bias"), "of"),
         (lambda: pt.plot_variance([1, 2], {"v": [1.0]}), "variances['v']"),
-        (lambda: pt.plot_kappa_tradeoff([1, 2], [0.1], [0.1, 0.1], [1, 1]), "bias"),
+        (lambda: pt.plot_kappa_tradeoff([1, 2], [0.1], [0.1, 0.1], [1, 1], level=0.99), "bias"),
     ],
 )
 def test10_mismatched_input_raises_one_value_error_naming_the_field(call, field):

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from flatland import plot_tutorials as ptu
 from flatland.core.image import GradientImage, Image
 from flatland.core.stats import normal_quantile
 from flatland.core.validate import ValidationError
+from flatland.plotting import tutorials as ptu
 
 RNG = np.random.default_rng(20191117)
 

@@ -1,4 +1,4 @@
-"""The renderer against closed forms (DESIGN 3), every method on them, and the render API's contract.
+"""The renderer against closed forms (theory/radiometry), every method on them, and the render API's contract.
 
 Closed forms:
 
@@ -138,7 +138,8 @@ def test03_reparam_pixel_derivative_matches_the_closed_form_and_naive_misses_it(
     g = render_gradient(_segment_scene(filt), "occ.translate.x", method="reparam", spp=8192, seed=3)
     assert _within(g.derivative, g.derivative_stderr, deriv)
     naive = render_gradient(_segment_scene(filt), "occ.translate.x", method="naive", spp=64, seed=3)
-    # naive AD sees no moving discontinuity: exactly zero, the whole boundary term missing (DESIGN 2.4)
+    # naive AD sees no moving discontinuity: exactly zero, the whole boundary term missing
+    # (Loubet et al. 2019, Sec. 3.2)
     assert np.all(naive.derivative == 0.0)
 
 

@@ -133,7 +133,7 @@ def test02_sampler_draws_from_its_pdf(name):
 
 
 def test03_segment_density_matches_the_change_of_measure():
-    """dφ = |cos θ_y| dℓ / |x - y| (DESIGN 3): density |x - y| / (ℓ |cos θ_y|) toward y."""
+    """dφ = |cos θ_y| dℓ / |x - y| (theory/radiometry): density |x - y| / (ℓ |cos θ_y|) toward y."""
     u = np.array([0.1, 0.5, 0.9])
     y = A + u[:, None] * (B - A)
     phi = s.sample_segment_direction(u, X, A, B)

@@ -1,4 +1,4 @@
-"""The κ trade-off of DESIGN 2.7, asserted from the CSV that ``python -m flatland study`` writes.
+"""The κ trade-off (Loubet et al. 2019, Sec. 4.2), asserted from the CSV ``python -m flatland study`` writes.
 
 Study: reparam with a Gaussian kernel on the two-step integral 1[θ < x < 2θ] K(x) at
 θ = 1, κ in {1, 10, 100, 1000, 10000}, 20 trials of 50 000 samples, seed 3, 99 %

@@ -8,8 +8,8 @@ from flatland.core.validate import ValidationError
 from flatland.integrals import INTEGRALS
 from flatland.textbook_report import DEFAULT_METHODS, Z_FLAG, textbook_rows, textbook_table
 
-# Biased by construction (DESIGN 2.4, 2.7): naive drops every moving jump; one translation per sample
-# cannot follow two jumps moving at different speeds.
+# Biased by construction (Loubet et al. 2019, Sec. 3.2 and 4.2): naive drops every moving jump; one
+# translation per sample cannot follow two jumps moving at different speeds.
 EXPECTED_FLAGS = {(name, "naive") for name in INTEGRALS if name != "smooth"} | {
     ("leibniz_seed", "reparam"),
     ("two_steps", "reparam"),

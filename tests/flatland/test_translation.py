@@ -1,8 +1,8 @@
 """flatland.core.translation: the reparameterization's building blocks against closed forms.
 
 Loubet et al. 2019, Sec. 3.2 (offset of value 0), 4.2 (kernel weight of value 1), the
-authors' paired control variate (DESIGN 2.9), the box-filter refusal (DESIGN 2.11) and
-the central finite difference.
+authors' paired control variate (theory/kernels), the box-filter refusal (theory/pixel_filters)
+and the central finite difference.
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def test05_paired_combination_has_the_expectation_of_one_member():
     ∫ cos(y - θ) N(y; ω, σ²) dy = cos(ω - θ) e^{-σ²/2}: derivative at θ = 0 is
     sin(ω) e^{-σ²/2}, value cos(ω) e^{-σ²/2}. Each member's derivative comes from its
     weight alone (cos(μ + Δ - θ) does not move), w' = -(μ - ω) / σ², zero mean and
-    independent of the other member: the pair keeps the expectation (DESIGN 2.9).
+    independent of the other member: the pair keeps the expectation (paired samples, theory/kernels).
     """
     omega, sigma, pairs = 0.6, 0.5, 20000
     theta = variable(0.0)

@@ -1,4 +1,4 @@
-"""The probe heuristic of DESIGN 2.8 on hand-made configurations, one case per rule.
+"""The probe heuristic of Loubet et al. 2019, Sec. 4.3, on hand-made configurations, one case per rule.
 
 Scene: a big background wall at z = -2 and a small square occluder at z = -1 (both
 facing the origin), plus a concave corner of two walls meeting at a right angle at

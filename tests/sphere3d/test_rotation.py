@@ -1,4 +1,4 @@
-"""The differentiable rotation of DESIGN 2.6, property by property (hypothesis).
+"""The differentiable rotation of Loubet et al. 2019, Sec. 4.1, property by property (hypothesis).
 
 R(a → b) = c I + [v]× + v vᵀ / (1 + c) with v = a × b, c = a · b. Checked for random
 unit vectors: it is a rotation (orthonormal, det +1) taking a to b; with b = ω_p a
@@ -55,7 +55,7 @@ def test03_identity_in_value_exactly(p, p_dot, w):
 
 @given(vectors, vectors)
 def test04_derivative_moves_the_followed_direction_exactly(p, p_dot):
-    # ω_p(θ) = normalize(p + θ ṗ): ∂R/∂θ ω_p0 must equal ∂ω_p/∂θ (DESIGN 2.6)
+    # ω_p(θ) = normalize(p + θ ṗ): ∂R/∂θ ω_p0 must equal ∂ω_p/∂θ (Loubet et al. 2019, Sec. 4.1)
     omega_p = normalize(Dual(_unit(p), p_dot))
     rotated = Rotation.following(omega_p[None]).apply(detach(omega_p)[None])
     np.testing.assert_allclose(tangent(rotated)[0], tangent(omega_p), atol=1e-12)

@@ -1,6 +1,6 @@
 """Figures for the rendering tutorials (3-9): matplotlib only, no numerics.
 
-Like :mod:`flatland.plot_textbook`, every function draws data computed elsewhere and
+Like :mod:`flatland.plotting.textbook`, every function draws data computed elsewhere and
 returns a :class:`~matplotlib.figure.Figure` created without pyplot (a notebook shows
 exactly the figures its cells return; nothing is registered globally). The helpers
 take the renderers' results as they come, in either package: a 1D film (flatland) is
@@ -19,12 +19,13 @@ A *series* is given as an array, as a ``(values, stderr)`` tuple, or as a result
 object: a :class:`~flatland.core.image.GradientImage` stands for its derivative and
 its standard error, an :class:`~flatland.core.image.Image` for its value and standard
 error. Derivatives use the diverging map ``RdBu_r`` centred on zero, radiance the
-grey map, as in the packages' file-writing figures (:mod:`flatland.app.plotting`).
+grey map, and a series named after a method has the method's colour, as in the
+packages' file-writing figures: all come from :mod:`flatland.plotting.style`, and
+bands are drawn by :func:`~flatland.plotting.bands.draw_estimate`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -33,16 +34,31 @@ from matplotlib.axes import Axes
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
-from flatland.core.stats import normal_quantile
 from flatland.core.validate import ValidationError
-from flatland.plot_textbook import FIGSIZE, REFERENCE_STYLE, _axes
+from flatland.plotting.bands import draw_estimate
+from flatland.plotting.style import (
+    DIVERGING,
+    FIGSIZE,
+    PRIMAL,
+    REFERENCE_STYLE,
+    method_colour,
+    neutral_cycle,
+    new_axes,
+    radiance_norm,
+    series_styles,
+    symmetric_limit,
+    symmetric_norm,
+)
 
-__all__ = ["plot_descent", "plot_film", "plot_gradient_panel", "plot_grid"]
-
-DIVERGING = "RdBu_r"
-"""Colormap of derivatives: blue negative, white zero, red positive."""
-PRIMAL = "gray"
-"""Colormap of radiance."""
+__all__ = [
+    "DIVERGING",
+    "PRIMAL",
+    "REFERENCE_STYLE",
+    "plot_descent",
+    "plot_film",
+    "plot_gradient_panel",
+    "plot_grid",
+]
 
 
 def _series(name: str, item: Any) -> tuple[np.ndarray, np.ndarray | None]:
@@ -69,13 +85,6 @@ def _series(name: str, item: Any) -> tuple[np.ndarray, np.ndarray | None]:
 def _primal(item: Any) -> np.ndarray:
     """The pixel values of an Image, a GradientImage or an array."""
     return np.asarray(getattr(item, "value", item), dtype=np.float64)
-
-
-def _limit(arrays: Sequence[np.ndarray]) -> float:
-    """A symmetric colour limit: the largest finite |value| of all ``arrays`` (1 if all are 0)."""
-    finite = [np.abs(a[np.isfinite(a)]) for a in arrays]
-    top = max((float(a.max()) for a in finite if a.size), default=0.0)
-    return top if top > 0.0 and math.isfinite(top) else 1.0
 
 
 def plot_grid(
@@ -109,6 +118,8 @@ def plot_grid(
         raise ValidationError("titles", f"{len(titles)} titles for {ncols * nrows} panels")
     fig = Figure(figsize=(panel_size[0] * ncols, panel_size[1] * nrows), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes:
+        neutral_cycle(ax)  # series without a method's colour never take one
     for ax, text in zip(axes, titles, strict=False):
         ax.set_title(text, fontsize=10)
     if title:
@@ -139,7 +150,9 @@ def plot_film(
         without a standard error get no band, and neither do pixels whose standard
         error is not finite.
     styles : mapping of str to dict, optional
-        Extra matplotlib keywords per label, e.g. ``{"closed form": {"color": "k"}}``.
+        Extra matplotlib keywords per label, e.g. ``{"closed form": REFERENCE_STYLE}``.
+        Without them a label naming a method has the method's colour, and the
+        variants of one method (``"reparam, κ × 4"``) differ by line style.
     marks : sequence of float
         Pixel positions (pixel j spans [j - 0.5, j + 0.5]) to mark with thin lines.
     ax, title, xlabel, ylabel
@@ -150,8 +163,8 @@ def plot_film(
     Figure
     """
     styles = styles or {}
-    z = normal_quantile(level)
-    ax = _axes(ax, title)
+    ax = new_axes(ax, title)
+    variants = series_styles(curves, vary="linestyle", others=False)  # a method's colour, variants dashed
     length = None
     for label, item in curves.items():
         values, stderr = _series(f"curves[{label!r}]", item)
@@ -161,19 +174,16 @@ def plot_film(
             raise ValidationError(f"curves[{label!r}]", f"has {values.size} pixels, expected {length}")
         length = values.size
         x = np.arange(values.size, dtype=np.float64)
-        style = {"linewidth": 1.3, **dict(styles.get(label, {}))}
-        (line,) = ax.plot(x, values, label=label, **style)
-        if stderr is not None:
-            ok = np.isfinite(stderr)
-            ax.fill_between(x, values - z * stderr, values + z * stderr, where=ok, color=line.get_color(),
-                            alpha=0.2, linewidth=0, interpolate=False)  # fmt: skip
+        style = {"linewidth": 1.3, **variants[label], **dict(styles.get(label, {}))}
+        where = None if stderr is None else np.isfinite(stderr)
+        draw_estimate(ax, x, values, stderr=stderr, level=level, label=label, where=where, **style)
     for m in marks:
         ax.axvline(float(m), color="gray", linestyle=":", linewidth=1.0)
     ax.axhline(0.0, color="0.6", linewidth=0.6)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if curves:
-        ax.legend(loc="best", fontsize=8, title=f"bands: {100 * level:.10g}%", title_fontsize=7)
+        ax.legend(loc="best", fontsize=8)
     return ax.figure
 
 
@@ -225,15 +235,13 @@ def plot_gradient_panel(
         if values.shape != image.shape:
             raise ValidationError(f"gradients[{label!r}]", f"has shape {values.shape}, primal {image.shape}")
     columns = 1 + len(series)
-    limit = _limit([v for v, _ in series.values()])
-    norm = Normalize(-limit, limit)
-    top = float(np.max(image[np.isfinite(image)])) if np.isfinite(image).any() else 1.0
-    grey = Normalize(0.0, top if top > 0.0 else 1.0)
+    norm = symmetric_norm(symmetric_limit([v for v, _ in series.values()], percentile=100.0))
+    grey = radiance_norm(image)
     if image.ndim == 1:
         fig = Figure(figsize=(max(2.6 * columns, 7.0), 5.0), layout="constrained")
         grid = fig.add_gridspec(2, columns, height_ratios=(1.0, 2.2))
         axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
-        curves = fig.add_subplot(grid[1, :])
+        curves = neutral_cycle(fig.add_subplot(grid[1, :]))
     else:
         aspect = image.shape[0] / max(image.shape[1], 1)
         fig = Figure(figsize=(2.7 * columns + 0.8, 2.7 * aspect + 0.7), layout="constrained")
@@ -284,7 +292,7 @@ def plot_descent(
     if set(loss) != set(params):
         raise ValidationError("params", f"labels {sorted(params)} differ from the loss's {sorted(loss)}")
     fig = Figure(figsize=(FIGSIZE[0] * 1.8, FIGSIZE[1]), layout="constrained")
-    left, right = fig.subplots(1, 2)
+    left, right = (neutral_cycle(ax) for ax in fig.subplots(1, 2))
     for label in loss:
         values = np.asarray(loss[label], dtype=np.float64).ravel()
         theta = np.asarray(params[label], dtype=np.float64).ravel()
@@ -293,7 +301,7 @@ def plot_descent(
                 f"params[{label!r}]", f"has {theta.size} iterations, the loss {values.size}"
             )
         steps = np.arange(values.size)
-        (line,) = left.plot(steps, values, marker="o", markersize=3, label=label)
+        (line,) = left.plot(steps, values, marker="o", markersize=3, label=label, color=method_colour(label))
         right.plot(steps, theta, marker="o", markersize=3, color=line.get_color(), label=label)
     if target is not None:
         right.axhline(float(target), label="target", **REFERENCE_STYLE)

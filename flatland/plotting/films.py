@@ -1,0 +1,197 @@
+"""Film figures written to PNG files, shared by flatland (1D film strips) and sphere3d (2D images).
+
+Gradient images use a diverging colormap centred on zero with one symmetric colour
+scale shared by every method in a figure, so equal colours mean equal derivatives.
+A 1D film is drawn as a strip (one row of pixels stretched vertically) and, in the
+panel, also as curves with ± 2 standard-error bands (their coverage, 95.45 %, in
+the legend), each method in its colour (:mod:`flatland.plotting.style`).
+
+Every function writes one PNG and returns its path. Figures are made without pyplot,
+so no backend is selected or needed and nothing stays open after saving.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+
+from flatland.plotting.bands import draw_estimate
+from flatland.plotting.style import (
+    DIVERGING,
+    PRIMAL,
+    TWO_SIGMA,
+    method_colour,
+    neutral_cycle,
+    radiance_norm,
+    symmetric_limit,
+    symmetric_norm,
+)
+
+__all__ = [
+    "DIVERGING",
+    "PRIMAL",
+    "gradient_figure",
+    "image_figure",
+    "panel_figure",
+    "plot_gradient",
+    "plot_image",
+    "plot_panel",
+    "save_png",
+    "symmetric_limit",
+]
+
+DPI = 110
+"""Resolution of the written PNGs."""
+
+
+def save_png(fig: Figure, path: str | os.PathLike) -> Path:
+    """Write ``fig`` to the PNG ``path`` (making its folder) and return the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    return path
+
+
+def _film(ax: Any, array: np.ndarray, cmap: str, norm: Normalize, title: str = "") -> Any:
+    """Draw a 1D film as a strip or a 2D film as an image; returns the mappable."""
+    array = np.asarray(array, dtype=np.float64)
+    if array.ndim == 1:
+        im = ax.imshow(array[None, :], cmap=cmap, norm=norm, aspect="auto", interpolation="nearest",
+                       extent=(0, array.size, 0, 1))  # fmt: skip
+        ax.set_yticks([])
+        ax.set_xlabel("pixel")
+    else:
+        im = ax.imshow(array, cmap=cmap, norm=norm, interpolation="nearest")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if title:
+        ax.set_title(title, fontsize=10)
+    return im
+
+
+def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, color: Any = None) -> None:
+    """A film as a curve over pixel centres with its ± 2 standard-error band (coverage 95.45 %)."""
+    x = np.arange(np.size(array)) + 0.5
+    halfwidth = None if stderr is None else 2 * stderr
+    draw_estimate(ax, x, array, halfwidth=halfwidth, level=TWO_SIGMA, label=label, color=color, lw=1.2)
+
+
+def image_figure(
+    value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = ""
+) -> Path:
+    """A rendered image (1D: strip over a curve with ±2 standard errors; 2D: grey image)."""
+    value = np.asarray(value)
+    norm = radiance_norm(value)
+    if value.ndim == 1:
+        fig = Figure(figsize=(7, 3.2))
+        top, bottom = fig.subplots(2, 1, height_ratios=(1, 2), sharex=True)
+        _film(top, value, PRIMAL, norm, title)
+        top.set_xlabel("")
+        _curve(bottom, value, stderr, "radiance", color="k")
+        bottom.set_xlabel("pixel")
+        bottom.set_ylabel("radiance")
+        bottom.set_xlim(0, value.size)
+    else:
+        fig = Figure(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4))
+        ax = fig.subplots()
+        fig.colorbar(_film(ax, value, PRIMAL, norm, title), ax=ax, shrink=0.8)
+    return save_png(fig, path)
+
+
+def gradient_figure(
+    derivative: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
+    limit: float | None = None,
+) -> Path:  # fmt: skip
+    """A derivative image on the diverging map centred on zero (1D: strip over a curve)."""
+    derivative = np.asarray(derivative)
+    limit = symmetric_limit([derivative]) if limit is None else limit
+    norm = symmetric_norm(limit)
+    if derivative.ndim == 1:
+        fig = Figure(figsize=(7, 3.2))
+        top, bottom = fig.subplots(2, 1, height_ratios=(1, 2), sharex=True)
+        fig.colorbar(
+            _film(top, derivative, DIVERGING, norm, title), ax=[top, bottom], shrink=0.6, label="dI/dθ"
+        )
+        top.set_xlabel("")
+        _curve(bottom, derivative, stderr, "dI/dθ", color="k")
+        bottom.axhline(0.0, color="0.5", lw=0.6)
+        bottom.set_xlabel("pixel")
+        bottom.set_ylabel("dI/dθ")
+        bottom.set_xlim(0, derivative.size)
+    else:
+        fig = Figure(figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4))
+        ax = fig.subplots()
+        fig.colorbar(_film(ax, derivative, DIVERGING, norm, title), ax=ax, shrink=0.8, label="dI/dθ")
+    return save_png(fig, path)
+
+
+def panel_figure(
+    primal: np.ndarray,
+    gradients: Mapping[str, tuple[np.ndarray, np.ndarray | None]],
+    path: str | os.PathLike,
+    title: str = "",
+) -> Path:
+    """The side-by-side panel: primal, then each method's derivative on one shared diverging scale.
+
+    ``gradients`` maps a column title to ``(derivative, stderr)``. A 1D film gets a
+    second row with all derivatives as curves (± 2 standard errors) on one axis, each
+    in its method's colour when the title names one (``"finite differences"`` does).
+    """
+    primal = np.asarray(primal)
+    columns = 1 + len(gradients)
+    limit = symmetric_limit([np.asarray(d) for d, _ in gradients.values()])
+    norm = symmetric_norm(limit)
+    primal_norm = radiance_norm(primal)
+    if primal.ndim == 1:
+        fig = Figure(figsize=(2.6 * columns, 5.2))
+        grid = fig.add_gridspec(2, columns, height_ratios=(1, 1.6), hspace=0.45)
+        axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
+        curves = neutral_cycle(fig.add_subplot(grid[1, :]))
+    else:
+        aspect = primal.shape[0] / max(primal.shape[1], 1)
+        fig = Figure(figsize=(2.6 * columns, 2.6 * aspect + 0.9), layout="constrained")
+        axes, curves = list(np.atleast_1d(fig.subplots(1, columns))), None
+    _film(axes[0], primal, PRIMAL, primal_norm, "primal")
+    mappable = None
+    for ax, (label, (derivative, _)) in zip(axes[1:], gradients.items(), strict=True):
+        mappable = _film(ax, derivative, DIVERGING, norm, label)
+    if mappable is not None:
+        fig.colorbar(mappable, ax=axes, shrink=0.85, label="dI/dθ (shared scale)", pad=0.02)
+    if curves is not None:
+        for label, (derivative, stderr) in gradients.items():
+            stderr = None if stderr is None else np.asarray(stderr)
+            _curve(curves, np.asarray(derivative), stderr, label, method_colour(label))
+        curves.axhline(0.0, color="0.5", lw=0.6)
+        curves.set_xlim(0, primal.size)
+        curves.set_ylim(-1.15 * limit, 1.15 * limit)
+        curves.set_xlabel("pixel")
+        curves.set_ylabel("dI/dθ")
+        curves.legend(fontsize=8, ncols=min(len(gradients), 5), loc="upper right")
+    if title:
+        fig.suptitle(title)
+    return save_png(fig, path)
+
+
+def plot_image(image: Any, path: str | os.PathLike, title: str = "") -> Path:
+    """PNG of an :class:`~flatland.core.image.Image`."""
+    return image_figure(image.value, image.stderr, path, title or image.scene)
+
+
+def plot_gradient(
+    gradient: Any, path: str | os.PathLike, title: str = "", limit: float | None = None
+) -> Path:
+    """PNG of a :class:`~flatland.core.image.GradientImage`'s derivative, diverging map centred on 0."""
+    title = title or f"{gradient.scene}: d/d {gradient.param} ({gradient.method})"
+    return gradient_figure(gradient.derivative, gradient.derivative_stderr, path, title, limit)
+
+
+def plot_panel(primal: Any, gradients: Mapping[str, Any], path: str | os.PathLike, title: str = "") -> Path:
+    """The side-by-side panel from an Image and GradientImages keyed by column title."""
+    columns = {label: (g.derivative, g.derivative_stderr) for label, g in gradients.items()}
+    return panel_figure(primal.value, columns, path, title)

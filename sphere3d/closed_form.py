@@ -1,0 +1,572 @@
+"""Closed forms the gradient methods are checked against, per pixel and per shading point.
+
+Two scenes of one black triangle (albedo 0, emission 0) in front of a constant sky
+``L`` have exact answers, values and θ-derivatives, to rounding:
+
+1. **The camera image** (:func:`triangle_image`). A camera ray either escapes to the
+   sky (radiance L) or meets the triangle (radiance 0), so the pixel integral of
+   :mod:`sphere3d.integrator` is
+
+       I(p) = ∫ k(s) L(ray(c_p + s)) ds = L (1 - ∫_T k(x - c_p) dx),
+
+   with k the pixel filter of :mod:`sphere3d.sampling`, c_p the pixel centre and T the
+   triangle projected to the film (pixel coordinates). The film integral is reduced to
+   the triangle's three edges by Green's theorem and the edge integrals are computed by
+   Gauss–Legendre quadrature between the kinks of the filter (:func:`polygon_filter_integral`);
+   its derivative is the Reynolds transport of T's boundary (:func:`polygon_filter_derivative`),
+   the silhouette term of Loubet et al. 2019, Sec. 3.2, that a gradient method must
+   recover at moving visibility edges.
+2. **The irradiance at a point under the sky** (:func:`occluded_sky_irradiance`):
+   ``E = π L - L Φ(T)``, Φ the projected solid angle of the triangle by Lambert's
+   polygon formula (:func:`projected_solid_angle`), Dual-aware, so its derivative comes
+   with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's ``E = L Φ``.
+
+Both are written from the scene's definition (camera frame, pixel mapping, filter
+profiles, shape transform), not from the estimators' code. The scenes the tests and
+``benchmarks/bench_reparam_bias.py`` use are built by :func:`pinhole_triangle_scene` and
+:func:`sky_triangle_scene`; :func:`share_lost` measures the share of an exact derivative an
+estimator misses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import special
+
+from flatland.core.dual import detach, tangent, variable
+from flatland.core.validate import ValidationError, check_choice
+from sphere3d.sampling import FILTERS, GAUSSIAN_RADIUS, GAUSSIAN_SIGMA
+from sphere3d.scene import AXES, Camera, Scene, check_vector, load_scene
+from sphere3d.state import euler_matrix
+
+__all__ = [
+    "PIXEL",
+    "QUADRATURE_NODES",
+    "TRIANGLE_SHAPE",
+    "ShareLost",
+    "TriangleImage",
+    "filter_cdf_1d",
+    "filter_kinks",
+    "filter_profile_1d",
+    "occluded_sky_irradiance",
+    "pinhole_triangle_scene",
+    "polygon_filter_derivative",
+    "polygon_filter_integral",
+    "polygon_irradiance",
+    "project",
+    "projected_solid_angle",
+    "share_lost",
+    "sky_triangle_scene",
+    "triangle_image",
+    "triangle_vertices",
+]
+
+QUADRATURE_NODES = {"box": 2, "tent": 4, "gaussian": 16}
+"""Gauss–Legendre nodes per smooth piece of an edge. Between the kinks of the filter the
+edge integrands are polynomials in the edge parameter s (box: degree 1, tent: degree 3,
+for the value and the derivative alike), which n nodes integrate exactly up to degree
+2n - 1; the gaussian's pieces are entire functions of s, for which 24 nodes on pieces at
+most 1.5 px = 3σ long leave a relative error below 1e-14 (test_closed_form.py test03)."""
+
+# the truncated gaussian profile k₁(x) = (g(x) - g(R)) / Z on |x| <= R, g(x) = exp(-x²/2σ²):
+# Z = ∫_{-R}^{R} (g - g(R)) dx = σ√(2π) (2Φ(R/σ) - 1) - 2 R g(R)       (Φ the normal CDF)
+_SIGMA, _RADIUS = GAUSSIAN_SIGMA, GAUSSIAN_RADIUS
+_G_R = math.exp(-0.5 * (_RADIUS / _SIGMA) ** 2)
+_PHI_LOW = float(special.ndtr(-_RADIUS / _SIGMA))
+_Z = _SIGMA * math.sqrt(2.0 * math.pi) * (1.0 - 2.0 * _PHI_LOW) - 2.0 * _RADIUS * _G_R
+
+
+# ------------------------------------------------------------------- 1D filter
+def filter_kinks(kind: str) -> tuple[float, ...]:
+    """Offsets (pixels) where the 1D profile k₁ or its CDF K is not smooth, plus the gaussian's centre.
+
+    box: the support's ends ±½ (k₁ jumps); tent: -1, 0, 1 (k₁' jumps); gaussian: ±R (k₁'
+    jumps where the shifted profile reaches 0) and 0, which is smooth but halves the pieces.
+    """
+    kind = check_choice("filter", kind, FILTERS)
+    return {"box": (-0.5, 0.5), "tent": (-1.0, 0.0, 1.0), "gaussian": (-_RADIUS, 0.0, _RADIUS)}[kind]
+
+
+def filter_profile_1d(x: Any, kind: str) -> Any:
+    """The 1D profile k₁ of the separable pixel filter k(x, y) = k₁(x) k₁(y), integral 1.
+
+    box: 1 on [-½, ½]; tent: max(1 - |x|, 0); gaussian: (e^{-x²/2σ²} - e^{-R²/2σ²}) / Z on
+    [-R, R] (σ = ½, R = 3σ as :mod:`sphere3d.sampling`), 0 outside. Dual-aware.
+    """
+    kind = check_choice("filter", kind, FILTERS)
+    if kind == "box":
+        return np.where(np.abs(x) <= 0.5, 1.0, 0.0) + 0.0 * x
+    if kind == "tent":
+        return np.maximum(1.0 - np.abs(x), 0.0)
+    return np.maximum(np.exp(-0.5 * (x / _SIGMA) ** 2) - _G_R, 0.0) / _Z
+
+
+def filter_cdf_1d(x: np.ndarray, kind: str) -> np.ndarray:
+    """K(x) = ∫_{-∞}^x k₁(t) dt, from 0 below the support to 1 above it (plain arrays).
+
+    box: clip(x + ½, 0, 1). tent: ½ (1 + x)² on [-1, 0], 1 - ½ (1 - x)² on [0, 1].
+    gaussian: [σ√(2π) (Φ(x/σ) - Φ(-R/σ)) - g(R) (x + R)] / Z on [-R, R].
+    """
+    kind = check_choice("filter", kind, FILTERS)
+    x = np.asarray(x, dtype=np.float64)
+    if kind == "box":
+        return np.clip(x + 0.5, 0.0, 1.0)
+    if kind == "tent":
+        t = np.clip(x, -1.0, 1.0)
+        return np.where(t <= 0.0, 0.5 * (1.0 + t) ** 2, 1.0 - 0.5 * (1.0 - t) ** 2)
+    t = np.clip(x, -_RADIUS, _RADIUS)
+    inner = (
+        _SIGMA * math.sqrt(2.0 * math.pi) * (special.ndtr(t / _SIGMA) - _PHI_LOW) - _G_R * (t + _RADIUS)
+    ) / _Z
+    return np.clip(inner, 0.0, 1.0)
+
+
+# --------------------------------------------------------------- film polygon
+def _edges(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end points (E, 2) of the edges of a polygon, counter-clockwise in (x, y).
+
+    Green's theorem needs the boundary positively oriented in the coordinates used; the
+    film's y axis points down, so the order is taken from the sign of the shoelace area
+    ½ Σ (x_i y_{i+1} - x_{i+1} y_i), not from how the polygon looks on screen.
+    """
+    a = polygon
+    b = np.roll(polygon, -1, axis=0)
+    area2 = np.sum(a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1])
+    return (a, b) if area2 >= 0.0 else (b[::-1], a[::-1])
+
+
+def _check_polygon(field: str, polygon: Any) -> np.ndarray:
+    p = np.asarray(polygon, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3 or not np.all(np.isfinite(p)):
+        raise ValidationError(field, f"must be at least 3 finite [x, y] vertices, got shape {p.shape}")
+    return p
+
+
+def _pieces(a: np.ndarray, b: np.ndarray, centres: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre nodes s (P, E, N) and weights on the edges a→b, split at the filter's kinks.
+
+    For pixel centre c, the edge point p(s) = a + s (b - a) crosses a kink κ of the
+    profile in x where a_x + s (b_x - a_x) = c_x + κ, i.e. s = (c_x + κ - a_x) / (b_x - a_x);
+    same in y. Those s in (0, 1), with 0 and 1, cut [0, 1] into pieces on which the
+    integrand is smooth; each piece [s0, s1] gets the nodes s0 + (s1 - s0)(g + 1)/2 and
+    weights (s1 - s0) w / 2 (zero-length pieces weigh 0).
+    """
+    kinks = np.asarray(filter_kinks(kind))
+    d = b - a  # (E, 2)
+    cuts = [np.zeros((len(centres), len(a), 1)), np.ones((len(centres), len(a), 1))]
+    for axis in (0, 1):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (centres[:, None, axis, None] + kinks - a[None, :, axis, None]) / d[None, :, axis, None]
+        cuts.append(np.where(np.isfinite(s), np.clip(s, 0.0, 1.0), 0.0))  # parallel edges: no cut
+    s = np.sort(np.concatenate(cuts, axis=-1), axis=-1)  # (P, E, C)
+    g, w = np.polynomial.legendre.leggauss(QUADRATURE_NODES[kind])
+    lo, hi = s[..., :-1, None], s[..., 1:, None]  # (P, E, C-1, 1)
+    nodes = lo + 0.5 * (hi - lo) * (g + 1.0)
+    weights = 0.5 * (hi - lo) * w
+    shape = (*nodes.shape[:2], -1)
+    return nodes.reshape(shape), weights.reshape(shape)
+
+
+def polygon_filter_integral(polygon: Any, centres: Any, kind: str) -> np.ndarray:
+    """∫_T k(x - c) dx for every centre c: the share of each pixel's filter the polygon T covers.
+
+    Green's theorem with Q = K(x - c_x) k₁(y - c_y), P = 0 (∂Q/∂x = k₁(x - c_x) k₁(y - c_y) = k):
+    ``∫_T k dA = ∮_∂T K(x - c_x) k₁(y - c_y) dy``, and on the edge a→b, p(s) = a + s (b - a),
+    dy = (b_y - a_y) ds:
+
+        ∫_T k = Σ_edges (b_y - a_y) ∫_0^1 K(p_x(s) - c_x) k₁(p_y(s) - c_y) ds,
+
+    each 1D integral by Gauss–Legendre between the kinks (:data:`QUADRATURE_NODES`).
+
+    Parameters
+    ----------
+    polygon : array_like, shape (V, 2)
+        A simple polygon in pixel coordinates, either orientation.
+    centres : array_like, shape (P, 2)
+        Filter centres (pixel centres).
+    kind : {"box", "tent", "gaussian"}
+
+    Returns
+    -------
+    ndarray, shape (P,)
+    """
+    kind = check_choice("filter", kind, FILTERS)
+    a, b = _edges(_check_polygon("polygon", polygon))
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    s, w = _pieces(a, b, c, kind)  # (P, E, N)
+    px = a[None, :, 0, None] + s * (b - a)[None, :, 0, None]
+    py = a[None, :, 1, None] + s * (b - a)[None, :, 1, None]
+    f = filter_cdf_1d(px - c[:, None, 0, None], kind) * filter_profile_1d(py - c[:, None, 1, None], kind)
+    return np.sum(np.sum(f * w, axis=-1) * (b - a)[None, :, 1], axis=-1)
+
+
+def polygon_filter_derivative(polygon: Any, polygon_dot: Any, centres: Any, kind: str) -> np.ndarray:
+    """d/dθ ∫_{T(θ)} k(x - c) dx when the polygon's vertices move with velocities ``polygon_dot``.
+
+    Reynolds transport: k does not depend on θ, so only the boundary moves,
+    ``d/dθ ∫_T k = ∮_∂T k(p) (v·n) dl``, n the outward unit normal. The polygon at θ is
+    the one through the moved vertices, so its edge a→b at θ + dθ is the segment between
+    a + ȧ dθ and b + ḃ dθ, and the point p(s) = a + s (b - a) moves with
+    v(s) = (1 - s) ȧ + s ḃ. For a counter-clockwise edge, n dl = (dy, -dx) = (b - a)^⊥ ds:
+
+        d/dθ ∫_T k = Σ_edges ∫_0^1 k(p(s) - c) [v_x(s) (b_y - a_y) - v_y(s) (b_x - a_x)] ds.
+
+    Parameters
+    ----------
+    polygon, polygon_dot : array_like, shape (V, 2)
+        Vertices and their θ-derivatives, in the same order.
+    centres : array_like, shape (P, 2)
+    kind : {"box", "tent", "gaussian"}
+
+    Returns
+    -------
+    ndarray, shape (P,)
+    """
+    kind = check_choice("filter", kind, FILTERS)
+    p = _check_polygon("polygon", polygon)
+    v = _check_polygon("polygon_dot", polygon_dot)
+    if v.shape != p.shape:
+        raise ValidationError("polygon_dot", f"must have the shape of polygon {p.shape}, got {v.shape}")
+    # orient (vertex, velocity) pairs together: a reversed polygon reverses its velocities
+    a, b = _edges(p)
+    reverse = not np.array_equal(a, p)
+    va, vb = (np.roll(v, -1, axis=0)[::-1], v[::-1]) if reverse else (v, np.roll(v, -1, axis=0))
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    s, w = _pieces(a, b, c, kind)
+    d = b - a
+    px = a[None, :, 0, None] + s * d[None, :, 0, None]
+    py = a[None, :, 1, None] + s * d[None, :, 1, None]
+    vx = (1.0 - s) * va[None, :, 0, None] + s * vb[None, :, 0, None]
+    vy = (1.0 - s) * va[None, :, 1, None] + s * vb[None, :, 1, None]
+    normal_speed = vx * d[None, :, 1, None] - vy * d[None, :, 0, None]  # (v·n) dl/ds
+    k = filter_profile_1d(px - c[:, None, 0, None], kind) * filter_profile_1d(py - c[:, None, 1, None], kind)
+    return np.sum(k * normal_speed * w, axis=(-2, -1))
+
+
+# ---------------------------------------------------------------- projection
+def project(camera: Camera, points: Any) -> tuple[Any, Any]:
+    """Continuous pixel coordinates (x right, y down) of 3D points through the pinhole; Dual-aware.
+
+    With (f, r, u) the camera frame (:meth:`~sphere3d.scene.Camera.frame`) and
+    q = P - position, the ray through P meets the film plane (distance 1 along f) at
+    (q·r, q·u) / (q·f); the camera maps the film square [-t, t] (t = tan(fov/2)) to
+    [0, width) and [-t h/w, t h/w] to [0, height) top to bottom (square pixels):
+
+        x = (q·r / q·f / t + 1) w / 2,    y = (1 - q·u / q·f / (t h / w)) h / 2.
+
+    Raises
+    ------
+    ValidationError
+        If a point is not strictly in front of the camera (q·f <= 0): behind the pinhole
+        a straight edge does not project to a straight segment.
+    """
+    f, r, u = camera.frame()
+    q = points - np.asarray(camera.position)
+    depth = q @ f
+    if not np.all(np.asarray(detach(depth)) > 0.0):
+        raise ValidationError(
+            "vertices", f"must lie in front of the camera (depth > 0), got depths {np.asarray(detach(depth))}"
+        )
+    t = math.tan(0.5 * camera.fov)
+    w, h = camera.width, camera.height
+    x = ((q @ r) / depth / t + 1.0) * (0.5 * w)
+    y = (1.0 - (q @ u) / depth / (t * h / w)) * (0.5 * h)
+    return x, y
+
+
+def _triangle_shape(scene: Scene, field: str = "scene") -> int:
+    """Index of the scene's single black triangle; one ValidationError if the scene is not that."""
+    if len(scene.shapes) != 1:
+        raise ValidationError(
+            f"{field}.shapes", f"must hold exactly one triangle, got {len(scene.shapes)} shapes"
+        )
+    s = scene.shapes[0]
+    if len(s.mesh.faces) != 1:
+        raise ValidationError(
+            f"{field}.shapes[0]", f"must be a single triangle, got {len(s.mesh.faces)} faces"
+        )
+    if s.albedo != 0.0 or s.emission != 0.0:
+        raise ValidationError(
+            f"{field}.shapes[0]", f"must be black (albedo 0, emission 0), got {s.albedo!r}, {s.emission!r}"
+        )
+    return 0
+
+
+def triangle_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) -> Any:
+    """World vertices (3, 3) of the scene's triangle with ``param`` offset by ``theta`` (float or Dual).
+
+    The scene's transform of a shape (:mod:`sphere3d.scene`): world = translate + R (scale · local),
+    R = Rz Ry Rx of ``rotate``; ``NAME.translate.a`` adds θ to translate[a], ``NAME.rotate.a``
+    to rotate[a], ``NAME.scale`` multiplies the scale by 1 + θ.
+    """
+    i = _triangle_shape(scene)
+    s = scene.shapes[i]
+    translate, rotate, scale = np.array(s.translate), np.array(s.rotate), s.scale
+    if param is not None:
+        param = scene.check_param(param)
+        owner, _, rest = param.partition(".")
+        kind, _, axis = rest.partition(".")
+        if owner != s.name or kind not in ("translate", "rotate", "scale"):
+            raise ValidationError(
+                "param", f"must move the triangle ({s.name}.translate/rotate/scale), got {param!r}"
+            )
+        basis = np.eye(3)[AXES.index(axis)] if axis else None
+        if kind == "translate":
+            translate = translate + basis * theta
+        elif kind == "rotate":
+            rotate = rotate + basis * theta
+        else:
+            scale = scale * (1.0 + theta)
+    local = s.mesh.vertices[s.mesh.faces[0]]
+    return translate + (local * scale) @ np.swapaxes(euler_matrix(rotate), -1, -2)
+
+
+@dataclass(frozen=True)
+class TriangleImage:
+    """The exact image of a black triangle against the sky, and its θ-derivative, shape (height, width).
+
+    ``coverage`` is ∫_T k per pixel; ``value = sky (1 - coverage)``; ``derivative`` its θ-derivative
+    (zeros without a parameter); ``vertices`` the projected triangle (3, 2) in pixel coordinates.
+    """
+
+    value: np.ndarray
+    derivative: np.ndarray
+    coverage: np.ndarray
+    vertices: np.ndarray
+
+
+def triangle_image(scene: Any, param: str | None = None, theta: float = 0.0) -> TriangleImage:
+    """The image ``I(p) = sky (1 - ∫_T k(x - c_p) dx)`` of a one-triangle scene, and dI/dθ.
+
+    Parameters
+    ----------
+    scene : scene source
+        One black triangle (a ``mesh`` shape with one face, albedo 0, emission 0) in front
+        of the camera, a constant ``sky``.
+    param : str, optional
+        A translate, rotate or scale parameter of the triangle.
+    theta : float
+        The parameter's offset at which to evaluate (finite differences of this closed form
+        take ±h).
+
+    Returns
+    -------
+    TriangleImage
+
+    Notes
+    -----
+    The vertices' film velocities come from the projection evaluated on Duals
+    (:func:`project`, :func:`triangle_vertices`): ȧ = d(pixel coordinates)/dθ exactly.
+    The pixel integral sees radiance 0 on the triangle from either side (albedo and
+    emission 0) and ``sky`` elsewhere; the derivative is ``-sky d/dθ ∫_T k`` by
+    :func:`polygon_filter_derivative`.
+    """
+    scene = load_scene(scene)
+    theta = float(check_vector("theta", [theta], 1)[0])
+    dual = variable(theta) if param is not None else theta
+    x, y = project(scene.camera, triangle_vertices(scene, param, dual))
+    film = np.stack([np.asarray(detach(x)), np.asarray(detach(y))], axis=-1)
+    velocity = np.stack([np.asarray(tangent(x)), np.asarray(tangent(y))], axis=-1) * (param is not None)
+    cam = scene.camera
+    rows, cols = np.divmod(np.arange(cam.width * cam.height), cam.width)
+    centres = np.stack([cols + 0.5, rows + 0.5], axis=-1)  # pixel (i, j) is centred at (j + ½, i + ½)
+    coverage = polygon_filter_integral(film, centres, cam.filter).reshape(cam.height, cam.width)
+    derivative = -scene.sky * polygon_filter_derivative(film, velocity, centres, cam.filter)
+    return TriangleImage(
+        value=scene.sky * (1.0 - coverage),
+        derivative=derivative.reshape(cam.height, cam.width) + 0.0,
+        coverage=coverage,
+        vertices=film,
+    )
+
+
+# ------------------------------------------------------------ Lambert's formula
+def projected_solid_angle(point: Any, normal: Any, vertices: Any) -> Any:
+    """Φ = ∫_{Ω(T)} n·ω dω, the projected solid angle of a polygon above the horizon (Lambert 1760).
+
+    With u_i the unit directions from the point to the vertices, the irradiance vector
+    of the cone over the polygon is ½ Σ γ_i m_i (Lambert; Arvo 1995, "Applications of
+    irradiance tensors"): each edge spans with the point a plane of unit normal m_i and
+    subtends the great arc u_i → u_{i+1} of angle γ_i, and by Stokes' theorem on the
+    sphere the cosine-weighted solid angle is the sum of those arcs' contributions:
+
+        Φ = ½ Σ_i γ_i n·m_i,    γ_i = atan2(|u_i × u_{i+1}|, u_i·u_{i+1}),
+                                m_i = (u_i × u_{i+1}) / |u_i × u_{i+1}|.
+
+    The sum is positive when the vertices wind counter-clockwise about n (seen from
+    the tip of n); the absolute value is returned. Dual-aware in all arguments.
+
+    Parameters
+    ----------
+    point, normal : array_like or Dual, shape (3,)
+        The shading point and its unit normal.
+    vertices : array_like or Dual, shape (V, 3)
+
+    Raises
+    ------
+    ValidationError
+        If a vertex is not strictly above the horizon (n·(v - x) <= 0): the formula needs
+        the polygon clipped there, which is not implemented.
+    """
+    d = vertices - point
+    height = d @ normal
+    if not np.all(np.asarray(detach(height)) > 0.0):
+        raise ValidationError(
+            "vertices",
+            f"must lie strictly above the horizon of the point, got heights {np.asarray(detach(height))}",
+        )
+    u = d / np.linalg.norm(d, axis=-1)[:, None]
+    v = u[np.roll(np.arange(len(u)), -1)]
+    c = np.cross(u, v)
+    sine = np.linalg.norm(c, axis=-1)
+    gamma = np.arctan2(sine, np.sum(u * v, axis=-1))  # the arc's angle, accurate near 0 and π
+    # a zero-length edge (two vertices in one direction) subtends no arc: γ = 0, no term (not 0/0)
+    safe = np.where(np.asarray(detach(sine)) > 0.0, sine, 1.0)
+    return np.abs(0.5 * np.sum(gamma * (c @ normal) / safe))
+
+
+def polygon_irradiance(point: Any, normal: Any, vertices: Any, radiance: Any) -> Any:
+    """Irradiance from a uniform one-sided polygonal emitter: E = L Φ if its front faces the point, else 0.
+
+    The front side is the one its normal (v1 - v0) × (v2 - v0) points to (as
+    :mod:`sphere3d.shapes` orients emitters); Φ from :func:`projected_solid_angle`. Dual-aware.
+    """
+    m = np.cross(vertices[1] - vertices[0], vertices[2] - vertices[0])
+    facing = float(np.asarray(detach(np.sum(m * (point - vertices[0]))))) > 0.0
+    return radiance * projected_solid_angle(point, normal, vertices) * facing
+
+
+def occluded_sky_irradiance(
+    scene: Any, point: Any, normal: Any, param: str | None = None, theta: float = 0.0
+) -> tuple[float, float]:
+    """E = sky (π - Φ(T)) at a point under a constant sky with the scene's black triangle above it, and dE/dθ.
+
+    The open sky gives ∫_H L cos θ dω = π L; the triangle (black, so nothing of it adds
+    light) removes L Φ. Returns (value, derivative) at the parameter offset ``theta``;
+    the derivative flows through Lambert's formula with a Dual θ (derivative 0 without
+    ``param``).
+    """
+    scene = load_scene(scene)
+    point = np.array(check_vector("point", point))
+    normal = np.array(check_vector("normal", normal))
+    length = float(np.linalg.norm(normal))
+    if length == 0.0:
+        raise ValidationError("normal", f"must not be zero, got {list(normal)}")
+    theta = float(check_vector("theta", [theta], 1)[0])
+    dual = variable(theta) if param is not None else theta
+    e = scene.sky * (
+        np.pi - projected_solid_angle(point, normal / length, triangle_vertices(scene, param, dual))
+    )
+    return float(np.asarray(detach(e))), float(np.asarray(tangent(e))) if param is not None else 0.0
+
+
+# ------------------------------------------------------------------ test scenes
+PIXEL = 0.1
+"""World size of one pixel at the depth of :func:`pinhole_triangle_scene`'s triangle (distance 4)."""
+TRIANGLE_SHAPE = ((-0.5, -0.4, 0.0), (0.55, -0.3, 0.0), (0.05, 0.5, 0.0))
+"""Local vertices of the test triangle, in units of its size: 1.05 × 0.9 across, no right angle."""
+
+
+def pinhole_triangle_scene(size: float, width: int = 16, filter: str = "gaussian", sky: float = 1.0) -> dict:
+    """A black triangle about ``size`` px across, centred in a ``width`` × ``width`` image, under the sky.
+
+    The camera sits at (0, 0, -4) looking at the origin (up +y, so ``translate.x`` moves the
+    triangle sideways, ``translate.z`` away from the camera); its fov makes a pixel
+    :data:`PIXEL` = 0.1 wide at the triangle's depth whatever ``width``
+    (tan(fov/2) = width · PIXEL / (2 · 4)). The triangle's centre is offset by (0.13, -0.21)
+    px from the optical axis, so no edge or vertex lines up with the pixel grid.
+    """
+    tan_half = width * PIXEL / 8.0
+    local = np.array(TRIANGLE_SHAPE) * size * PIXEL
+    return {
+        "name": f"triangle_{size:g}px",
+        "camera": {
+            "position": [0.0, 0.0, -4.0],
+            "look_at": [0.0, 0.0, 0.0],
+            "up": [0.0, 1.0, 0.0],
+            "fov": 2.0 * math.atan(tan_half),
+            "width": width,
+            "height": width,
+            "filter": filter,
+        },
+        "sky": sky,
+        "shapes": [
+            {
+                "name": "tri",
+                "type": "mesh",
+                "vertices": local.tolist(),
+                "faces": [[0, 1, 2]],
+                "albedo": 0.0,
+                "translate": [0.013, -0.021, 0.0],
+            }
+        ],
+    }
+
+
+def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:
+    """A black triangle with world ``vertices`` (3, 3) under a constant sky, centred on their centroid.
+
+    Rotate and scale parameters act about the centroid. The camera is a placeholder (the
+    irradiance at a point does not use it).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    centre = v.mean(axis=0)
+    return {
+        "name": "sky_triangle",
+        "camera": {
+            "position": [0.0, -3.0, 1.0],
+            "look_at": [0.0, 0.0, 0.0],
+            "fov": 0.8,
+            "width": 8,
+            "height": 8,
+        },
+        "sky": sky,
+        "shapes": [
+            {
+                "name": "tri",
+                "type": "mesh",
+                "vertices": (v - centre).tolist(),
+                "faces": [[0, 1, 2]],
+                "albedo": 0.0,
+                "translate": centre.tolist(),
+            }
+        ],
+    }
+
+
+@dataclass(frozen=True)
+class ShareLost:
+    """The share of an exact derivative an estimator misses, from its independent batches.
+
+    ``mean`` = 1 - mean over batches of Σ sign(g) d_b / Σ |g| (g the exact derivative, d_b a batch's
+    estimate; for a scalar 1 - d_b / g); ``stderr`` its standard error; ``batches`` the count.
+    Positive: the estimate is short of the exact derivative, as a missed boundary term makes it.
+    """
+
+    mean: float
+    stderr: float
+    batches: int
+
+
+def share_lost(batch_estimates: Any, exact: Any) -> ShareLost:
+    """:class:`ShareLost` of per-batch derivative estimates (B, ...) against the exact derivative (...).
+
+    Summing over the film with the sign of the exact derivative weighs every pixel by the
+    silhouette term's own direction, so a sideways motion (whose film sum is about 0: the
+    triangle's area does not change) is measured like a motion in depth (whose derivative
+    has one sign everywhere, so the weighted sum is the film sum itself).
+    """
+    d = np.asarray(batch_estimates, dtype=np.float64)
+    g = np.asarray(exact, dtype=np.float64)
+    if d.ndim != g.ndim + 1 or d.shape[1:] != g.shape or len(d) < 2:
+        raise ValidationError("batch_estimates", f"must be (batches >= 2, *{g.shape}), got shape {d.shape}")
+    total = float(np.sum(np.abs(g)))
+    if total == 0.0:
+        raise ValidationError("exact", "is zero everywhere: no share of it can be lost")
+    kept = np.sum((np.sign(g) * d).reshape(len(d), -1), axis=1) / total
+    lost = 1.0 - kept
+    return ShareLost(float(lost.mean()), float(lost.std(ddof=1) / math.sqrt(len(d))), len(d))

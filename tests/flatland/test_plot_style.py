@@ -1,0 +1,233 @@
+"""One style for every figure: a fixed colour per method, bands that state their coverage, no backend.
+
+The figure modules (the demo panel and study files, the textbook and tutorial figures)
+take their colours from :mod:`flatland.plotting.style` and draw estimates with bands
+through :func:`flatland.plotting.bands.draw_estimate`. The tests read the colours and
+legend texts back from the artists of figures the modules produce, so a figure that
+picks its own colour, or a band whose legend does not say its coverage, fails here.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.colors import same_color
+from matplotlib.container import ErrorbarContainer
+
+from flatland.__main__ import PACKAGE
+from flatland.app.study import run_study
+from flatland.app.study_config import StudyConfig
+from flatland.core.image import GradientImage
+from flatland.plotting import films, study
+from flatland.plotting import textbook as pt
+from flatland.plotting import tutorials as ptu
+from flatland.plotting.style import (
+    METHOD_COLOURS,
+    OTHER_COLOURS,
+    coverage_label,
+    method_colour,
+    method_of,
+    series_styles,
+    symmetric_limit,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+SHARED = ("naive", "boundary", "reparam")
+"""Methods drawn by the demo, study, textbook and tutorial figures of the tests below."""
+
+
+def _capture(monkeypatch, module):
+    """Figures a file-writing module saves, in order (they are written as usual)."""
+    figures = []
+    original = films.save_png
+
+    def keep(fig, path):
+        figures.append(fig)
+        return original(fig, path)
+
+    monkeypatch.setattr(module, "save_png", keep)
+    return figures
+
+
+def _line_colours(ax):
+    """Colour of each labelled curve on ``ax``, by the method its label names."""
+    return {method_of(line.get_label()): line.get_color() for line in ax.lines if method_of(line.get_label())}
+
+
+def _errorbar_colours(ax):
+    """Colour of each error-bar container's markers on ``ax``, by the method its x tick names."""
+    ticks = [t.get_text() for t in ax.get_xticklabels()]
+    bars = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+    return {method_of(tick): bar.lines[0].get_color() for tick, bar in zip(ticks, bars, strict=True)}
+
+
+def _legend_texts(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def _gradient(derivative, method):
+    derivative = np.asarray(derivative, dtype=np.float64)
+    return GradientImage(
+        value=np.abs(derivative) + 0.5,
+        derivative=derivative,
+        value_stderr=np.full(derivative.shape, 0.01),
+        derivative_stderr=np.full(derivative.shape, 0.02),
+        param="p",
+        method=method,
+        spp=4,
+        seed=0,
+        batches=4,
+        scene="t",
+    )
+
+
+@pytest.fixture(scope="module")
+def small_study():
+    """A tiny study of the three shared methods on the textbook step (a few seconds)."""
+    config = StudyConfig.from_dict(
+        {
+            "name": "colours",
+            "problem": {"integral": "two_steps"},
+            "methods": [
+                {"method": "naive"},
+                {"method": "boundary"},
+                {"method": "reparam", "kappa": [1, 10]},
+            ],
+            "n": 500,
+            "trials": 3,
+        },
+        package=PACKAGE,
+    )
+    return run_study(config, progress=False)
+
+
+def test01_every_method_of_every_table_has_its_own_fixed_colour():
+    tables = [PACKAGE.methods, PACKAGE.estimators]
+    if _has_embree():
+        from sphere3d.__main__ import PACKAGE as SPHERE
+
+        tables.append(SPHERE.methods)
+    names = {name for table in tables for name in table.names}
+    assert {"naive", "finite_difference", "boundary", "reparam"} <= names
+    for name in names:
+        assert method_of(name) == name and method_colour(name) == METHOD_COLOURS[name], name
+    colours = list(METHOD_COLOURS.values())
+    assert len(set(colours)) == len(colours)  # one colour per method
+    assert not set(colours) & set(OTHER_COLOURS)  # and none of them is used for other series
+    # variants and the spellings figures use name their method; other labels name none
+    assert method_of("reparam kappa=10 paired") == "reparam" and method_of("reparam, κ × 4") == "reparam"
+    assert method_of("finite differences") == method_of("fd h=0.01") == "finite_difference"
+    assert method_of("closed form I_j(θ)") == method_of("reference") == "reference"
+    assert method_of("reparameterized") is None and method_of("θ = 1") is None
+    assert method_colour("θ = 1", "k") == "k"
+
+
+def _has_embree():
+    try:
+        import embreex  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def test02_a_method_has_the_same_colour_in_demo_study_textbook_and_tutorial_figures(
+    tmp_path, monkeypatch, small_study
+):
+    x = np.linspace(-1.0, 1.0, 32)
+    shapes = {"naive": 0 * x, "boundary": np.exp(-20 * x**2), "reparam": np.exp(-20 * x**2) + 0.05 * x}
+    seen = {}  # figure -> {method: colour}
+
+    saved = _capture(monkeypatch, films)
+    primal = _gradient(1 + x**2, "naive")
+    columns = {m: _gradient(d, m) for m, d in shapes.items()} | {"finite differences": _gradient(x, "fd")}
+    films.plot_panel(primal, columns, tmp_path / "panel.png")
+    curves = next(ax for ax in saved[-1].axes if ax.lines and not ax.images)
+    seen["demo panel"] = _line_colours(curves)
+
+    saved = _capture(monkeypatch, study)
+    study.plot_error_time(small_study, tmp_path / "et.png")
+    seen["study error/time"] = _line_colours(saved[-1].axes[0])
+    study.plot_efficiency(small_study, tmp_path / "eff.png")
+    left, right = saved[-1].axes[:2]
+    ticks = [t.get_text() for t in left.get_yticklabels()]  # one RMSE bar per row on the right
+    seen["study efficiency"] = {
+        method_of(t): bar.get_facecolor() for t, bar in zip(ticks, right.patches, strict=True)
+    }
+
+    seen["textbook estimates"] = _errorbar_colours(
+        pt.plot_estimates({m: (1.0, 0.1) for m in SHARED}, reference=1.0).axes[0]
+    )
+    seen["textbook curves"] = _line_colours(pt.plot_curves(x, shapes).axes[0])
+    seen["tutorial film"] = _line_colours(
+        ptu.plot_film({m: (d, 0.1 + 0 * d) for m, d in shapes.items()}).axes[0]
+    )
+    panel = ptu.plot_gradient_panel(1 + x**2, {m: _gradient(d, m) for m, d in shapes.items()})
+    seen["tutorial panel"] = _line_colours(next(ax for ax in panel.axes if ax.lines and not ax.images))
+    descent = ptu.plot_descent({m: [1.0, 0.5] for m in SHARED}, {m: [0.0, 0.1] for m in SHARED})
+    seen["tutorial descent"] = _line_colours(descent.axes[0])
+
+    for figure, colours in seen.items():
+        for method in SHARED:
+            assert method in colours, (figure, method)
+            assert same_color(colours[method], METHOD_COLOURS[method]), (figure, method, colours[method])
+    assert "finite_difference" in seen["demo panel"]
+
+
+def test03_bands_state_their_coverage_in_the_legend(tmp_path, monkeypatch, small_study):
+    x = np.linspace(-1.0, 1.0, 16)
+    film = ptu.plot_film({"reparam": (x, np.full(16, 0.1)), "bare": x}, level=0.99).axes[0]
+    assert _legend_texts(film) == ["reparam ± 99 % interval", "bare"]
+
+    saved = _capture(monkeypatch, films)
+    films.plot_panel(_gradient(1 + x**2, "naive"), {"boundary": _gradient(x, "boundary")}, tmp_path / "p.png")
+    curves = next(ax for ax in saved[-1].axes if ax.lines and not ax.images)
+    assert _legend_texts(curves) == ["boundary ± 95.45 % interval"]  # ± 2 standard errors
+
+    estimates = pt.plot_estimates({"naive": (1.0, 0.1)}, 1.0, level=0.999).axes[0]
+    assert "estimate ± 99.9 % interval" in _legend_texts(estimates)
+    tradeoff = pt.plot_kappa_tradeoff([1, 10], [0.1, 0.0], [0.01, 0.02], [1.0, 3.0], level=0.999)
+    assert "measured bias ± 99.9 % interval" in _legend_texts(tradeoff.axes[0])
+
+    saved = _capture(monkeypatch, study)
+    study.plot_kappa(small_study, tmp_path / "k.png")
+    level = coverage_label(small_study.rows[0].level)
+    texts = _legend_texts(saved[-1].axes[0])
+    assert texts and all(text.endswith(f"± {level}") for text in texts), texts
+
+
+def test04_importing_the_plotting_modules_leaves_the_backend_alone():
+    """A notebook's backend must survive ``import flatland.plotting...``: run in a fresh interpreter
+    with the svg backend selected, import every figure module, and read the backend back."""
+    code = (
+        "import sys, matplotlib\n"
+        "matplotlib.use('svg')\n"
+        "import flatland.plotting, flatland.plotting.style, flatland.plotting.bands\n"
+        "import flatland.plotting.films, flatland.plotting.study, flatland.plotting.textbook\n"
+        "import flatland.plotting.tutorials, flatland.plot, sphere3d.plot\n"
+        "print(matplotlib.get_backend(), 'matplotlib.pyplot' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["svg", "False"]
+
+
+def test05_limits_labels_and_variant_styles():
+    a = np.array([-3.0, 1.0, np.inf, np.nan])
+    assert symmetric_limit([a], percentile=100.0) == 3.0  # the largest finite |a|
+    assert symmetric_limit([np.zeros(3), np.array([np.nan])]) == 1.0
+    sparse = np.zeros(1000)
+    sparse[0] = -2.0  # non-zero on fewer pixels than the percentile skips
+    assert symmetric_limit([sparse]) == 2.0
+    assert coverage_label(0.99) == "99 % interval" and coverage_label(0.999) == "99.9 % interval"
+    assert coverage_label(0.99999) == "99.999 % interval"
+    styles = series_styles(["reparam kappa=1", "reparam kappa=10", "naive", "uniform"])
+    assert (
+        styles["reparam kappa=1"]["color"] == styles["reparam kappa=10"]["color"] == METHOD_COLOURS["reparam"]
+    )
+    assert styles["reparam kappa=1"]["marker"] != styles["reparam kappa=10"]["marker"]
+    assert styles["uniform"]["color"] == OTHER_COLOURS[0]
+    lines = series_styles(["reparam", "reparam paired", "other"], vary="linestyle", others=False)
+    assert lines["reparam"]["linestyle"] != lines["reparam paired"]["linestyle"] and lines["other"] == {}
