@@ -201,11 +201,13 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     normal = cross(qa, qb)
     normal = normal / norm(normal)[:, None]  # m: the arc's normal on S²
     # the point of the edge seen along w: qa + t (qb - qa) parallel to w
-    t = -dot(cross(qa, w), normal) / dot(cross(qb - qa, w), normal)
+    den = dot(cross(qb - qa, w), normal)  # 0 only for an arc of zero angle, never drawn (rounding aside)
+    t = -dot(cross(qa, w), normal) / np.where(den != 0.0, den, 1.0)
     s = s0 + np.clip(t, 0.0, 1.0) * (s1 - s0)
     a, b = edges.endpoints(state.triangles)
     point = a[k] + s[:, None] * (b[k] - a[k])
     x = shading.x[live]
+    # from the ray origin o = x + ε n (value), moving with x (tangent)
     seen = point - (x + Dual(o[live] - detach(x)) if isinstance(x, Dual) else o[live])
     omega = seen / norm(seen)[..., None]
     speed = dot(tangent(omega), normal)  # m·ω̇: the arc's normal velocity
