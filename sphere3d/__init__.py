@@ -4,7 +4,7 @@ The same API as flatland's renderer, in 3D: triangle meshes traced with Embree a
 re-attached to θ with forward-mode Duals (:mod:`sphere3d.tracing`), rotations as the
 change of variables (:mod:`sphere3d.rotation`), von Mises–Fisher kernels
 (:mod:`sphere3d.sampling`), and the gradient methods ``naive``,
-``finite_difference`` and ``reparam`` (:mod:`sphere3d.methods`)::
+``finite_difference``, ``reparam`` and ``boundary`` (:mod:`sphere3d.methods`)::
 
     import sphere3d as s3
 

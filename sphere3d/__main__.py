@@ -2,8 +2,9 @@
 
 The same verbs, options and error behaviour as ``python -m flatland``. The demo's
 reference is a finite-difference image (step h = 0.05: less variance than the
-default step for an O(h²) bias) at 8 × the demo's samples per pixel; sphere3d has no
-boundary method.
+default step for an O(h²) bias) at 8 × the demo's samples per pixel. The panel shows
+``naive``, ``reparam`` and ``finite_difference``; ``boundary`` (edge sampling) is offered by
+``gradient --method`` and studies.
 """
 
 from __future__ import annotations
@@ -55,6 +56,8 @@ PACKAGE = Package(
     demo_spp=32,
     reference_factor=8,
     reference_options=(("h", 0.05),),
+    demo_methods=("naive", "reparam", "finite_difference"),
+    reference_method="finite_difference",
     studies=STUDIES,
     integrals=_INTEGRALS,  # study problems {"integral": ...}: flatland's textbook, as before
     estimate=_estimate,

@@ -63,6 +63,7 @@ __all__ = [
     "PixelSamples",
     "Shading",
     "Transforms",
+    "camera_radiance",
     "irradiance_samples",
     "pixel_samples",
 ]
@@ -260,7 +261,6 @@ def pixel_samples(
     carries tangents. ``draws`` keys the samples' further random numbers on their indices.
     """
     cam = state.camera
-    n = len(rows)
     offsets = sample_filter(u[:, 0:2], cam.filter)
     weight = filter_value(offsets, cam.filter) / pdf_filter(offsets, cam.filter)  # k / p, θ-free
     cx, cy = cols + 0.5, rows + 0.5
@@ -276,7 +276,29 @@ def pixel_samples(
         weight = weight * unit_weight(log_kj)
     else:
         rotated = d
-    hits = state.tracer.intersect(detach(cam.origin), d)
+    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight)
+
+
+def camera_radiance(
+    state: SceneState,
+    transforms: Transforms,
+    d: np.ndarray,
+    rotated: Any,
+    u: np.ndarray,
+    draws: Draws,
+    hits: Hits | None = None,
+) -> Any:
+    """Radiance arriving at the camera along unit directions ``d`` (plain), re-attached along ``rotated``.
+
+    Emission of the first hit's front side plus ``ρ/π E`` at diffuse hits, E estimated
+    with the shading uniforms ``u`` (n, 5) under ``transforms``; the sky where a ray misses.
+    ``hits``: the rays' hits if the caller knows them (only ``shape`` and ``triangle`` are
+    read), else they are traced.
+    """
+    n = len(d)
+    cam = state.camera
+    if hits is None:
+        hits = state.tracer.intersect(detach(cam.origin), d)
     hit = np.flatnonzero(hits.hit)
     miss = np.flatnonzero(~hits.hit)
     radiance = scatter(n, miss, state.sky, state.dual)
@@ -293,7 +315,7 @@ def pixel_samples(
         s = np.flatnonzero(diffuse)
         if s.size:
             shading = Shading.at(state, it.point[s], shade_n[s], draws.take(hit[s]))
-            e = irradiance_samples(shading, u[hit[s], 2:7], transforms)
+            e = irradiance_samples(shading, u[hit[s]], transforms)
             value = value + scatter(hit.size, s, albedo[s] * INV_PI * e, state.dual)
         radiance[hit] = value
-    return PixelSamples(radiance, weight)
+    return radiance

@@ -3,7 +3,7 @@
 A sphere3d film is a (height, width) image. Images are drawn in grey; derivatives on
 the diverging map ``RdBu_r`` centred on zero, one symmetric scale shared by all
 methods of a figure. The panel puts "primal | naive | reparam | finite differences"
-side by side (sphere3d has no boundary method). Study figures: RMSE against
+side by side (the demo's methods, :mod:`sphere3d.__main__`). Study figures: RMSE against
 wall time per estimate (log-log, a biased method's floor next to the 1/√t fall of
 the unbiased ones), bias ± CI and standard deviation against κ, and equal-time
 efficiency bars (unbiased cells only). The drawing code is shared with flatland

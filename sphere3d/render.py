@@ -4,7 +4,7 @@ The same entry points as flatland's renderer. Every pixel is the integral of its
 filter times the radiance through the film (:mod:`sphere3d.integrator`); standard
 errors come from ``batches`` independent batches of ``spp / batches`` samples. The
 gradient methods are in :data:`GRADIENT_METHODS` (``naive``, ``finite_difference``,
-``reparam``); given the same seed they all see the same primary samples.
+``reparam``, ``boundary``); given the same seed they all see the same primary samples.
 """
 
 from __future__ import annotations
@@ -86,13 +86,14 @@ def render_gradient(
     ----------
     param : str
         A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
-    method : {"naive", "finite_difference", "reparam"}
+    method : {"naive", "finite_difference", "reparam", "boundary"}
     spp, seed, batches
         As in :func:`render`.
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
-        see :func:`sphere3d.methods.reparam.reparam`).
+        see :func:`sphere3d.methods.reparam.reparam`); ``rate``
+        (boundary: edge points per pixel of projected edge length and sample).
 
     Returns
     -------

@@ -92,7 +92,7 @@ def test01_api_names(package):
 def test02_method_and_option_names(package):
     table = importlib.import_module(f"{package}.render").GRADIENT_METHODS
     assert set(SHARED_METHODS) <= set(table.names)
-    assert ("boundary" in table.names) == (package == "flatland")  # sphere3d has no boundary method
+    assert "boundary" in table.names  # both packages have one (sphere3d's samples mesh edges)
     assert {"kappa", "probes", "paired"} <= set(table.get("reparam").options)
     assert "h" in table.get("finite_difference").options
     assert not table.get("naive").options
@@ -319,7 +319,7 @@ def test11_help_lists_the_builtin_scenes_and_only_the_package_methods(package, c
         assert all(re.search(rf"\b{name}\b", words) for name in scenes), (verb, words)
     words = " ".join(_help(main, ["gradient"], capsys))
     assert "--method {" + ",".join(methods) + "}" in words
-    assert ("boundary" in words) == ("boundary" in methods)  # sphere3d's help does not offer boundary
+    assert ("boundary" in words) == ("boundary" in methods)  # the help offers exactly the package's methods
 
 
 def test12_a_method_the_package_lacks_is_a_usage_error_listing_the_choices(package, tmp_path, capsys):

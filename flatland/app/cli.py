@@ -83,6 +83,12 @@ class Package:
     reference_options : tuple of (name, value) pairs
         Options of the reference method (e.g. a larger finite-difference step ``h``,
         trading an O(h²) bias for less variance).
+    demo_methods : tuple of str, optional
+        The panel's gradient methods, in order; None: those of
+        :data:`~flatland.app.commands.DEMO_METHODS` the package has.
+    reference_method : str, optional
+        The method of the demo's reference and a study's default reference; None:
+        ``boundary`` if the package has it, else ``finite_difference``.
     demo_sections : tuple of callables
         Extra text sections printed by ``demo``, each called with the parsed arguments.
     studies : mapping
@@ -112,6 +118,8 @@ class Package:
     demo_spp: int = 64
     reference_factor: int = 16
     reference_options: tuple[tuple[str, Any], ...] = ()
+    demo_methods: tuple[str, ...] | None = None
+    reference_method: str | None = None
     demo_sections: tuple[Callable[[argparse.Namespace], str], ...] = ()
     studies: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     integrals: Mapping[str, Any] | None = None

@@ -345,7 +345,9 @@ def _parse_reference(
     table = _method_table(package, problem)
     count = problem.count_name
     options = {k: v for k, v in data.items() if k not in _REFERENCE_KEYS}
-    default_method = "boundary" if "boundary" in table.names else "finite_difference"
+    default_method = package.reference_method or (
+        "boundary" if "boundary" in table.names else "finite_difference"
+    )
     method, options = _resolve(table, "reference", data.get("method", default_method), options)
     _reject_other_count("reference", data, problem)
     n = check_int(f"reference.{count}", data.get(count, 16 * max(c.n for c in cells)))

@@ -16,16 +16,19 @@ module's docstring says which of these it changes; the guide
 ``reparam``               rotations chosen by probe rays, vMF convolution;
                           options ``kappa``, ``probes``, ``spread``,
                           ``refine``, ``paired``
+``boundary``              edge sampling (Li et al. 2018): naive plus the
+                          boundary terms of the pixel integrals
+                          (:mod:`sphere3d.camera_edges`) and of the shading
+                          integrals (:mod:`sphere3d.shading_edges`); option
+                          ``rate``
 ========================  =====================================================
-
-There is no ``boundary`` method on the sphere: sampling silhouette curves on S²
-(Li et al. 2018) is out of scope; the finite-difference reference plays its role.
 """
 
-# registration order is the order methods are listed in: naive, finite_difference, reparam
+# registration order is the order methods are listed in: naive, finite_difference, reparam, boundary
 from sphere3d.methods import naive as _naive  # noqa: F401, I001  (importing registers the method)
 from sphere3d.methods import finite_difference as _finite_difference  # noqa: F401
 from sphere3d.methods import reparam as _reparam  # noqa: F401
+from sphere3d.methods import boundary as _boundary  # noqa: F401
 from sphere3d.methods._common import GRADIENT_METHODS
 
 __all__ = ["GRADIENT_METHODS"]

@@ -43,7 +43,7 @@ def test01_demo_writes_the_panel_and_the_error_table(tmp_path):
     assert (tmp_path / "demo_panel.png").stat().st_size > 20_000
     for method in ("naive", "reparam", "finite_difference"):
         assert f"\n{method} " in result.stdout
-    assert "\nboundary " not in result.stdout  # sphere3d has no boundary method
+    assert "\nboundary " not in result.stdout  # the package lists its demo methods: boundary is not one
     # 8 × 4 spp, grown (up to 4 ×) until its stderr is <= 1/4 of the unbiased methods'
     ratio = re.search(
         r"reference: finite_difference h=0.05 at (\d+) spp.* method's = ([\d.]+)", result.stdout
@@ -92,16 +92,16 @@ def test03_study_on_a_scene_pixel(tmp_path, scene_file):
     assert (tmp_path / "s3_kappa.png").is_file() and (tmp_path / "s3_efficiency.png").is_file()
 
 
-def test04_help_offers_only_sphere3d_methods_and_boundary_is_a_usage_error(tmp_path, capsys):
-    """The help used to offer boundary, which sphere3d lacks; argparse now refuses it, naming the choices."""
+def test04_help_offers_the_sphere3d_methods_and_an_unknown_one_is_a_usage_error(tmp_path, capsys):
+    """The help offers sphere3d's methods (boundary among them); argparse refuses others, naming them."""
     assert main(["gradient", "--help"]) == 0
-    assert "--method {naive,finite_difference,reparam}" in capsys.readouterr().out
-    argv = ["gradient", "shadow", "--param", "occluder.translate.x", "--method", "boundary"]
+    assert "--method {naive,finite_difference,reparam,boundary}" in capsys.readouterr().out
+    argv = ["gradient", "shadow", "--param", "occluder.translate.x", "--method", "textbook"]
     assert main([*argv, "--out", str(tmp_path)]) == 2
     captured = capsys.readouterr()
     assert captured.err == (
-        "error: gradient: argument --method: invalid choice: 'boundary' "
-        "(choose from 'naive', 'finite_difference', 'reparam')\n"
+        "error: gradient: argument --method: invalid choice: 'textbook' "
+        "(choose from 'naive', 'finite_difference', 'reparam', 'boundary')\n"
     )
 
 

@@ -23,7 +23,7 @@ def _small(name: str, size: int = 12, **camera) -> dict:
 
 
 def test01_api_exports_and_methods():
-    assert s3.GRADIENT_METHODS.names == ("naive", "finite_difference", "reparam")
+    assert s3.GRADIENT_METHODS.names == ("naive", "finite_difference", "reparam", "boundary")
     for name in ("Dual", "detach", "variable", "Image", "GradientImage", "Estimate", "relative_error"):
         assert hasattr(s3, name)
     image = s3.render(_small("shadow"), spp=4, seed=3)
@@ -95,7 +95,7 @@ def test06_finite_difference_agrees_with_naive_where_nothing_is_discontinuous():
 
 
 BAD = [
-    (dict(method="boundary"), "'boundary'; choose from naive, finite_difference, reparam"),
+    (dict(method="textbook"), "'textbook'; choose from naive, finite_difference, reparam, boundary"),
     (dict(kappa=0.0), "kappa: must be > 0, got 0.0"),
     (dict(kappa=float("nan")), "kappa: must be finite"),
     (dict(probes=0), "probes: must be an integer >= 1, got 0"),

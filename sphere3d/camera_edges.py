@@ -1,0 +1,209 @@
+"""The boundary term of the pixel integrals: edge sampling on the film (primary edges).
+
+Pixel p integrates ``I_p = ∫ k(x - p) L(x) dx`` over film positions x (pixels). Where
+L jumps along a curve C(θ) that moves with θ, the Leibniz (Reynolds) rule adds to the
+interior derivative ``∫ k ∂L/∂θ dx`` (the ``naive`` estimator) the term
+
+    ∫_C k(x - p) [L(x⁻) - L(x⁺)] (v · n) dl,
+
+n the curve's unit normal on the film, x∓ the points just before and after x along
+n, v = dx/dθ the velocity of the curve point (Loubet et al. 2019, Sec. 3.2; Li et
+al. 2018, Sec. 3). The filter k is static on the film and adds no term, even the box.
+
+The curves are the projections of mesh edges (:mod:`sphere3d.edges`): every
+boundary, non-manifold and crease edge (a crease between faces of a shape with zero
+albedo has no jump and is skipped). An edge is clipped to the part in front of the
+camera (depth > ε) and its projection to the film widened by the filter radius;
+points are drawn *stratified along the total projected length* Λ, ``N =
+ceil(rate · spp/batches · Λ)`` per batch (``rate`` points per pixel of projected
+length per camera sample per pixel), each weighted Λ/N. At each point:
+
+- its 3D position on the edge, P = A + s (B - A) with A, B the edge's Dual vertices
+  and s fixed, projected to the film with Duals: the tangent of the film position
+  is v (the component along the edge, which s-fixed points also carry, does not
+  matter: only v · n enters);
+- the edge point must be seen by the camera: a shadow ray to it, blocked more than
+  2ε before it, makes the point contribute 0;
+- L(x ∓ δn) by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
+  with the same shading uniforms on both sides (common random numbers), δ =
+  :data:`EPS_FILM` pixels;
+- the contribution ``Λ/N [L⁻ - L⁺] (v · n)`` goes to every pixel whose filter
+  support covers the point, weighted by k(x - p).
+
+Unbiased for these curves; the side rays are δ off the curve (a bias of O(δ) in the
+shading, and where two curves come within δ of each other).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flatland.core.dual import detach, tangent
+from flatland.core.rng import Draws, stream
+from sphere3d.edges import Edges
+from sphere3d.integrator import Identity, camera_radiance
+from sphere3d.sampling import filter_radius, filter_value
+from sphere3d.state import SceneState
+from sphere3d.tracing import Hits
+from sphere3d.vector import cross, dot, norm
+
+__all__ = ["EPS_FILM", "camera_edge_term"]
+
+EPS_FILM = 1e-3
+"""Offset (pixels) of the two camera rays traced beside an edge point, along the edge's film normal."""
+SHADING_UNIFORMS = 5
+"""Uniforms of the shading at a side point (3 emitter + 2 cosine), the same on both sides."""
+
+
+def _liang_barsky(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Parameter range [t0, t1] of the segments p0 → p1 (n, 2) inside the box [lo, hi] (empty: t0 >= t1)."""
+    d = p1 - p0
+    t0, t1 = np.zeros(len(p0)), np.ones(len(p0))
+    for k in range(2):  # the two axes; each bounds t from both sides
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = (lo[k] - p0[:, k]) / d[:, k]
+            tb = (hi[k] - p0[:, k]) / d[:, k]
+        flat = d[:, k] == 0.0
+        inside = (p0[:, k] >= lo[k]) & (p0[:, k] <= hi[k])
+        t0 = np.where(flat, np.where(inside, t0, 1.0), np.maximum(t0, np.minimum(ta, tb)))
+        t1 = np.where(flat, np.where(inside, t1, 0.0), np.minimum(t1, np.maximum(ta, tb)))
+    return t0, t1
+
+
+def _side_hits(plain: SceneState, edges: Edges, d: np.ndarray) -> Hits:
+    """What the camera sees along ``d`` (2n, 3), the rays just beside the n edge points (minus side
+    first): on a side where one of the edge's own faces lies, the nearest such face; elsewhere the
+    traced first hit.
+
+    Tracing alone fails beside a face seen almost edge-on, whose image can be thinner than
+    :data:`EPS_FILM`: the ray beside a crease would pass it and report the background. A face
+    lies on the side of its centroid with respect to the plane through the camera and the edge
+    (the edge's vertices lie in that plane); the nearer face along the ray (plane intersection
+    in float64) is the one seen. Non-manifold edges are traced on both sides.
+    """
+    n = len(edges)
+    o0 = np.asarray(plain.camera.origin)
+    tri = np.asarray(plain.triangles)
+    traced = plain.tracer.intersect(o0, d)
+    shape, triangle = traced.shape.copy(), traced.triangle.copy()
+    plane = cross(edges.a - o0, edges.b - o0)
+    ray_side = np.sign(dot(np.concatenate([plane, plane]), d))
+    best = np.full(2 * n, np.inf)
+    for f, usable in ((edges.face, edges.count <= 2), (edges.other, edges.other >= 0)):
+        t3 = tri[np.maximum(f, 0)]
+        face_side = np.sign(dot(plane, t3.mean(axis=1) - o0))
+        normal = cross(t3[:, 1] - t3[:, 0], t3[:, 2] - t3[:, 0])
+        t3, normal = np.concatenate([t3, t3]), np.concatenate([normal, normal])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = dot(normal, t3[:, 0] - o0) / dot(normal, d)  # the ray meets the face's plane
+        ok = np.tile(usable & (face_side != 0.0), 2) & (np.tile(face_side, 2) == ray_side) & (t > 0.0)
+        nearer = ok & (t < best)
+        best = np.where(nearer, t, best)
+        f2 = np.tile(f, 2)
+        triangle = np.where(nearer, f2, triangle)
+        shape = np.where(nearer, plain.shape_of[np.maximum(f2, 0)], shape)
+    return Hits(shape, triangle, traced.t, traced.u, traced.v)
+
+
+def camera_candidates(state: SceneState, edges: Edges) -> np.ndarray:
+    """Edges that may carry a jump of the camera's radiance: silhouettes, boundaries, and creases of
+    shapes that reflect (albedo > 0, or the albedo is the parameter)."""
+    origin = np.asarray(detach(state.camera.origin))
+    albedo = np.asarray(detach(state.albedo))
+    reflects = albedo > 0.0
+    if state.param is not None and state.param.endswith(".albedo"):
+        reflects = np.ones_like(reflects)
+    shading_jump = edges.crease & reflects[state.shape_of[edges.face]]
+    return edges.silhouette(origin) | shading_jump
+
+
+def camera_edge_term(
+    state: SceneState, plain: SceneState, edges: Edges, seed: int, batch: int, points_per_pixel: float
+) -> np.ndarray:
+    """One batch's boundary term of every pixel, shape (height, width) (see the module docstring).
+
+    Parameters
+    ----------
+    state : SceneState
+        The state with θ as a Dual (velocities); ``plain`` the same at θ0 without tangents
+        (visibility and the radiance beside the edges).
+    edges : Edges
+        The scene's edges (:func:`~sphere3d.edges.mesh_edges`).
+    seed, batch : int
+        The batch's points come from ``stream(seed, "boundary.camera", batch)``.
+    points_per_pixel : float
+        Expected edge points per pixel of projected edge length.
+    """
+    cam = state.camera
+    height, width = cam.height, cam.width
+    out = np.zeros(height * width)
+    edges = edges.take(np.flatnonzero(camera_candidates(state, edges)))
+    if len(edges) == 0:
+        return out.reshape(height, width)
+    o0 = plain.camera.origin
+    # clip each edge in 3D to depth > ε (depth is linear in the edge parameter s)
+    za, zb = dot(edges.a - o0, cam.forward), dot(edges.b - o0, cam.forward)
+    near = plain.epsilon
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_cross = (near - za) / (zb - za)
+    s0 = np.where(za >= near, 0.0, np.where(zb > za, s_cross, 1.0))
+    s1 = np.where(zb >= near, 1.0, np.where(za > zb, s_cross, 0.0))
+    front = s1 > s0
+    edges, s0, s1 = edges.take(front), s0[front], s1[front]
+    p3a = edges.a + s0[:, None] * (edges.b - edges.a)
+    p3b = edges.a + s1[:, None] * (edges.b - edges.a)
+    fa = np.stack(cam.film(p3a - o0), axis=-1)
+    fb = np.stack(cam.film(p3b - o0), axis=-1)
+    r = filter_radius(cam.filter)
+    t0, t1 = _liang_barsky(fa, fb, np.array([-r, -r]), np.array([width + r, height + r]))
+    length = norm(fb - fa) * np.maximum(t1 - t0, 0.0)
+    total = float(length.sum())
+    if total <= 0.0:
+        return out.reshape(height, width)
+    n = max(1, math.ceil(points_per_pixel * total))
+    rng = stream(seed, "boundary.camera", batch)
+    # stratified along the concatenated projected lengths: point i in [i, i + 1) Λ / N
+    at = (np.arange(n) + rng.random(n)) * (total / n)
+    cdf = np.cumsum(length)
+    k = np.minimum(np.searchsorted(cdf, at, side="right"), len(length) - 1)
+    t = t0[k] + (at - (cdf[k] - length[k])) / np.where(length[k] > 0.0, length[k], 1.0) * (t1[k] - t0[k])
+    t = np.clip(t, 0.0, 1.0)
+    # film fraction t -> fraction σ of the clipped 3D segment (perspective: x = lerp weighted by depth)
+    da, db = dot(p3a[k] - o0, cam.forward), dot(p3b[k] - o0, cam.forward)
+    sigma = t * da / ((1.0 - t) * db + t * da)
+    s = s0[k] + sigma * (s1[k] - s0[k])
+    a, b = edges.endpoints(state.triangles)
+    point = a[k] + s[:, None] * (b[k] - a[k])  # Dual: moves with θ at fixed s
+    fx, fy = cam.film(point - cam.origin)
+    x = np.stack([detach(fx), detach(fy)], axis=-1)
+    v = np.stack([tangent(fx), tangent(fy)], axis=-1)
+    seg = fb[k] - fa[k]
+    seg_length = norm(seg)
+    # a zero-length image is never drawn (rounding aside: its weight is then 0, not 0/0)
+    normal = np.stack([-seg[:, 1], seg[:, 0]], axis=-1) / np.where(seg_length > 0.0, seg_length, 1.0)[:, None]
+    # the edge point itself must be the camera's first hit (up to 2ε before it)
+    p0 = edges.a[k] + s[:, None] * (edges.b[k] - edges.a[k])
+    to = p0 - o0
+    dist = norm(to)
+    seen = ~plain.tracer.occluded(o0, to / dist[:, None], np.maximum(dist - 2.0 * plain.epsilon, 0.0))
+    # radiance just beside the curve, the same shading uniforms on both sides
+    side = np.concatenate([x - EPS_FILM * normal, x + EPS_FILM * normal])
+    d = cam.directions(side[:, 0], side[:, 1])
+    u = rng.random((n, SHADING_UNIFORMS))
+    draws = Draws.of(seed, np.arange(n)).tile(2)
+    hits = _side_hits(plain, edges.take(k), d)
+    radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits))
+    jump = radiance[:n] - radiance[n:]
+    # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2)
+    weight = jump * np.sum(v * normal, axis=1) * (total / n) * seen
+    reach = math.ceil(r + 0.5)
+    base = np.floor(x).astype(np.int64)
+    for dy in range(-reach, reach + 1):  # splat to every pixel whose filter support covers x
+        for dx in range(-reach, reach + 1):
+            col, row = base[:, 0] + dx, base[:, 1] + dy
+            inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
+            kx = filter_value(np.stack([x[:, 0] - col - 0.5, x[:, 1] - row - 0.5], axis=-1), cam.filter)
+            np.add.at(out, (row * width + col)[inside], (kx * weight)[inside])
+    return out.reshape(height, width)
