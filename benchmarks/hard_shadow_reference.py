@@ -37,8 +37,8 @@ estimate of R(0.02)'s residual; R(0.01), the stored one, is closer. Its noise is
 1.5 × that of D(0.005) alone; at 64 passes of 1024 spp, about 0.016 (sphere) and
 0.023 (cube) rms per pixel.
 
-The file is rewritten whenever the number of passes done is a power of two, so a run
-cut short leaves the largest power-of-two sample count it completed.
+The file is rewritten after every pass, so a run cut short keeps what it completed,
+and ``--resume`` adds passes to a stored file.
 """
 
 from __future__ import annotations
@@ -82,16 +82,16 @@ def load_reference(scene_name: str) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
-def _write(scene_name: str, passes: list[np.ndarray], seconds: float) -> None:
-    r = np.stack(passes)  # (passes, 3, height, width)
-    n = len(passes)
+def _write(scene_name: str, n: int, sums: np.ndarray, m2: np.ndarray, seconds: float) -> None:
+    """Store the means of ``n`` passes (``sums``: D(h), D(h/2), R summed) and R's standard error
+    (``m2``: the sum of R's squared deviations from its mean)."""
     DIRECTORY.mkdir(exist_ok=True)
     np.savez_compressed(
         path_of(scene_name),
-        derivative=r[:, 2].mean(axis=0),
-        stderr=r[:, 2].std(axis=0, ddof=1) / np.sqrt(n),
-        d_h=r[:, 0].mean(axis=0),
-        d_h2=r[:, 1].mean(axis=0),
+        derivative=sums[2] / n,
+        stderr=np.sqrt(m2 / (n - 1) / n),
+        d_h=sums[0] / n,
+        d_h2=sums[1] / n,
         scene=scene_name,
         param=PARAM,
         h=H,
@@ -103,34 +103,53 @@ def _write(scene_name: str, passes: list[np.ndarray], seconds: float) -> None:
     )
 
 
-def generate(scene_name: str, passes: int = PASSES, budget: float = float("inf")) -> int:
-    """Run up to ``passes`` passes (seeds SEED, SEED + 1, ...) within ``budget`` seconds; returns the
-    number of passes stored."""
-    start = time.perf_counter()
-    done: list[np.ndarray] = []
-    stored = 0
-    for k in range(passes):
-        done.append(richardson_pass(scene_name, SEED + k))
+def generate(
+    scene_name: str, passes: int = PASSES, budget: float = float("inf"), resume: bool = False
+) -> int:
+    """Run passes (seeds SEED + k) until ``passes`` are stored or ``budget`` seconds are spent; returns
+    the number of passes stored. The file is rewritten after every pass (from the second on); with
+    ``resume`` the passes already stored are kept (their sums and squared deviations are recovered
+    from the stored means and standard error) and the run continues with the next seed."""
+    n, seconds = 0, 0.0
+    sums = m2 = None
+    if resume and path_of(scene_name).exists():
+        ref = load_reference(scene_name)
+        n, seconds = int(ref["batches"]), float(ref["seconds"])
+        sums = n * np.stack([ref["d_h"], ref["d_h2"], ref["derivative"]])
+        m2 = ref["stderr"] ** 2 * n * (n - 1)
+    start = time.perf_counter() - seconds
+    run_start, run_passes = time.perf_counter(), 0
+    while n < passes:
+        r = richardson_pass(scene_name, SEED + n)
+        run_passes += 1
+        if sums is None:
+            sums, m2 = r.copy(), np.zeros_like(r[2])
+        else:
+            # Welford / Chan update of R's squared deviations with one more pass
+            m2 = m2 + (r[2] - sums[2] / n) ** 2 * n / (n + 1)
+            sums = sums + r
+        n += 1
         elapsed = time.perf_counter() - start
-        print(f"{scene_name}: pass {k + 1}/{passes}, {elapsed:.0f} s", flush=True)
-        if (k + 1) & k == 0 and k >= 1:  # a power of two (>= 2 passes: a standard error needs two)
-            _write(scene_name, done, elapsed)
-            stored = k + 1
-        if elapsed / (k + 1) * (k + 2) > budget:
+        print(f"{scene_name}: pass {n}/{passes}, {elapsed:.0f} s", flush=True)
+        if n >= 2:
+            _write(scene_name, n, sums, m2, elapsed)
+        spent = time.perf_counter() - run_start
+        if spent / run_passes * (run_passes + 1) > budget and n >= 2:  # the next pass would not fit
             break
-    return stored
+    return n
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.hard_shadow_reference", description=__doc__)
     parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
     parser.add_argument("--passes", type=int, default=PASSES)
-    parser.add_argument("--budget", type=float, default=float("inf"), help="seconds per scene")
+    parser.add_argument("--budget", type=float, default=float("inf"), help="seconds per scene (this run)")
+    parser.add_argument("--resume", action="store_true", help="add passes to the stored ones")
     args = parser.parse_args(argv)
     tasks.WORKERS = 1  # one core: the reference runs beside other work
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     for name in args.scenes:
-        stored = generate(name, args.passes, args.budget)
+        stored = generate(name, args.passes, args.budget, args.resume)
         print(f"{name}: stored {stored} passes ({stored * SPP_PER_PASS} spp) in {path_of(name)}", flush=True)
     return 0
 
