@@ -227,11 +227,14 @@ def test03_finite_differences_match_the_reference_in_every_region(name, masks):
     events = SPP * ref["derivative"] ** 2 / np.where(per_sample > 0.0, per_sample, np.inf)
     for key in REGIONS:
         mask = masks[name][key]
-        assert np.all(error[mask & (se == 0.0)] == 0.0)  # no sample of the reference moved: none here
+        if key in ("umbra", "lit"):  # nothing moves there (closed forms, with margins > h)
+            assert np.all(error[mask & (se == 0.0)] == 0.0)
         single = mask & (events >= EVENTS)
-        pooled = mask & ~single & (se > 0.0)
+        # the rest, with the pixels where the reference never saw a sample move (se = 0): a change
+        # the test sees there only adds to the pooled error, whose noise is that of the others
+        pooled = mask & ~single & ((se > 0.0) | (key not in ("umbra", "lit")))
         z = list(error[single] / se[single])
-        if pooled.any():
+        if pooled.any() and np.any(se[pooled] > 0.0):
             z.append(np.sum(error[pooled]) / np.sqrt(np.sum(se[pooled] ** 2)))
         if z:
             assert np.max(np.abs(z)) < sidak_quantile(len(z), dof), (key, len(z), np.max(np.abs(z)))
