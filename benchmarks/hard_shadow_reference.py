@@ -39,6 +39,11 @@ estimate of R(0.02)'s residual; R(0.01), the stored one, is closer. Its noise is
 
 The file is rewritten after every pass, so a run cut short keeps what it completed,
 and ``--resume`` adds passes to a stored file.
+
+Stored: ``hard_shadow`` 43 passes (44 032 spp; on one core of a shared machine a pass
+took 25-110 s and the time budget ended the run before 64), rms standard error 0.020;
+``hard_shadow_cube`` 64 passes (65 536 spp), rms standard error 0.024; 44 and 32
+minutes of wall time on one core (``tasks.WORKERS = 1``).
 """
 
 from __future__ import annotations
