@@ -75,10 +75,10 @@ INV_PI = 1.0 / np.pi
 
 @dataclass(frozen=True)
 class Shading:
-    """Shading points: position x and normal n (θ-dependent), and the detached ray origin.
+    """Shading points: position x and shading normal n (θ-dependent), and the detached ray origin.
 
-    ``origin = detach(x) + ε n`` keeps rays from re-hitting the surface they leave;
-    re-attached quantities use x itself.
+    ``origin = detach(x) + ε n_g`` (n_g: the geometric normal, n itself unless given)
+    keeps rays from re-hitting the surface they leave; re-attached quantities use x itself.
     """
 
     state: SceneState
@@ -88,9 +88,11 @@ class Shading:
     draws: Draws
 
     @staticmethod
-    def at(state: SceneState, x: Any, n: Any, draws: Draws) -> Shading:
-        """Shading points ``x``, normals ``n``; ``draws`` keys their random numbers on their samples."""
-        return Shading(state, x, n, detach(x) + state.epsilon * detach(n), draws)
+    def at(state: SceneState, x: Any, n: Any, draws: Draws, geometric: Any = None) -> Shading:
+        """Shading points ``x``, shading normals ``n`` (offset along the ``geometric`` normals when
+        given); ``draws`` keys their random numbers on their samples."""
+        offset = detach(n if geometric is None else geometric)
+        return Shading(state, x, n, detach(x) + state.epsilon * offset, draws)
 
     def __len__(self) -> int:
         return len(self.origin)
@@ -307,14 +309,18 @@ def camera_radiance(
         it = intersect_triangles(cam.origin, rotated[hit], state.triangles[tri])
         facing = dot(it.normal, rotated[hit])
         front = detach(facing) < 0.0  # the ray arrives on the side the normal faces
-        shade_n = np.where(front[:, None], it.normal, -it.normal)
+        side = np.where(front[:, None], 1.0, -1.0)
+        geometric = it.normal * side
+        # smooth shapes shade with interpolated vertex normals; face normals otherwise (the same object)
+        normal = state.shading_normals(tri, it.b1, it.b2, it.normal)
+        shade_n = geometric if normal is it.normal else normal * side
         shape = state.shape_of[tri]
         value = state.emitted(tri, it.b1, it.b2) * front
         albedo = state.albedo[shape]
         diffuse = (detach(albedo) > 0.0) | (state.param is not None and state.param.endswith(".albedo"))
         s = np.flatnonzero(diffuse)
         if s.size:
-            shading = Shading.at(state, it.point[s], shade_n[s], draws.take(hit[s]))
+            shading = Shading.at(state, it.point[s], shade_n[s], draws.take(hit[s]), geometric[s])
             e = irradiance_samples(shading, u[hit[s]], transforms)
             value = value + scatter(hit.size, s, albedo[s] * INV_PI * e, state.dual)
         radiance[hit] = value

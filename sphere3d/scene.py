@@ -14,9 +14,13 @@ A scene is a dict (or a JSON file of the same shape)::
 Every shape has ``translate`` (position of its centre), ``rotate`` (radians about x,
 then y, then z, acting about the centre), ``scale`` (uniform, about the centre),
 ``albedo`` (diffuse reflectance in [0, 1]), ``emission`` (radiance of its front side,
-the side its normals face) and ``fade`` (emitter border fade, rectangle and disk
-only); type-specific keys are listed in :data:`SHAPE_KEYS`. ``fov`` is the
-horizontal field of view in radians; ``sky`` the constant environment radiance.
+the side its normals face), ``fade`` (emitter border fade, rectangle and disk
+only) and ``smooth`` (false, the default: shade with the face normals; true: with
+the vertex normals of :mod:`sphere3d.shapes` interpolated over each triangle, e.g.
+an OBJ file's ``vn``; rays still leave along the face normal); a mesh also takes
+inline ``normals``, one per vertex. Type-specific keys are listed in
+:data:`SHAPE_KEYS`. ``fov`` is the horizontal field of view in radians; ``sky`` the
+constant environment radiance.
 
 Parameters bind a scalar θ to one scene quantity, as in flatland: θ is an offset
 applied to the scene as loaded, and gradients are taken at θ = 0:
@@ -50,6 +54,7 @@ import numpy as np
 
 from flatland.core.validate import (
     ValidationError,
+    check_bool,
     check_choice,
     check_depth,
     check_finite,
@@ -73,13 +78,13 @@ __all__ = [
 ]
 
 SHAPE_TYPES = ("rectangle", "box", "icosphere", "disk", "mesh")
-COMMON_KEYS = ("name", "type", "translate", "rotate", "scale", "albedo", "emission", "fade")
+COMMON_KEYS = ("name", "type", "translate", "rotate", "scale", "albedo", "emission", "fade", "smooth")
 SHAPE_KEYS: Mapping[str, tuple[str, ...]] = {
     "rectangle": ("size",),
     "box": ("size",),
     "icosphere": ("radius", "subdivisions"),
     "disk": ("radius", "segments"),
-    "mesh": ("path", "vertices", "faces"),
+    "mesh": ("path", "vertices", "faces", "normals"),
 }
 """Type-specific keys of each shape type (besides :data:`COMMON_KEYS`)."""
 DEFAULTS: Mapping[str, Any] = {
@@ -89,6 +94,7 @@ DEFAULTS: Mapping[str, Any] = {
     "albedo": 0.5,
     "emission": 0.0,
     "fade": 0.0,
+    "smooth": False,
     "subdivisions": 2,
     "segments": 32,
 }
@@ -196,6 +202,7 @@ class Shape:
     albedo: float
     emission: float
     fade: float
+    smooth: bool
     geometry: tuple[tuple[str, Any], ...]
     mesh: shp.LocalMesh = dataclass_field(compare=False, repr=False)
 
@@ -228,6 +235,7 @@ class Shape:
             albedo=_unit_interval(f"{field}.albedo", d["albedo"]),
             emission=check_positive(f"{field}.emission", d["emission"], allow_zero=True),
             fade=fade,
+            smooth=check_bool(f"{field}.smooth", d["smooth"]),
             geometry=geometry,
             mesh=mesh,
         )
@@ -264,23 +272,7 @@ def _geometry(
         radius = check_positive(f"{field}.radius", d.get("radius", 1.0))
         segments = check_int(f"{field}.segments", d["segments"], minimum=3)
         return (("radius", radius), ("segments", segments)), shp.disk(radius, segments)
-    # mesh: a file, or inline vertices and faces
-    if "path" in d:
-        if "vertices" in d or "faces" in d:
-            raise ValidationError(f"{field}.path", "give either path or vertices/faces, not both")
-        if not isinstance(d["path"], str):
-            raise ValidationError(f"{field}.path", f"must be a file path string, got {d['path']!r}")
-        path = Path(d["path"])
-        if not path.is_absolute() and base_dir is not None:
-            path = base_dir / path
-        path = path.resolve()
-        return (("path", str(path)),), shp.load_mesh_file(f"{field}.path", path)
-    if "vertices" not in d or "faces" not in d:
-        raise ValidationError(f"{field}.path", "a mesh needs a path or both vertices and faces")
-    mesh = shp.inline_mesh(field, d["vertices"], d["faces"])
-    vertices = tuple(tuple(float(x) for x in row) for row in mesh.vertices)
-    faces = tuple(tuple(int(i) for i in row) for row in mesh.faces)
-    return (("vertices", [list(r) for r in vertices]), ("faces", [list(r) for r in faces])), mesh
+    return shp.mesh_geometry(field, d, base_dir)
 
 
 # ---------------------------------------------------------------------- scene

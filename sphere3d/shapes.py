@@ -16,6 +16,12 @@ icosphere     ``radius``, ``subdivisions``              none
 mesh          OBJ / PLY file or inline arrays           none
 ============  ========================================  ==================================
 
+Every mesh also has unit vertex normals, used for shading when the shape is
+``smooth`` (:mod:`sphere3d.scene`): the exact sphere normal at an icosphere's
+vertices, +z on rectangles and disks, the file's normals (OBJ ``vn``, PLY
+``nx ny nz``) or inline ``normals`` for a mesh, and otherwise the angle-weighted
+mean of the adjacent face normals (:func:`vertex_normals`).
+
 The fade multiplies the radiance by a smoothstep S(t) = t²(3 - 2t) of the distance to
 the border divided by ``fade``, so the emitter's own edge is not a discontinuity of
 the integrand (it becomes continuous, zero at the edge).
@@ -23,6 +29,7 @@ the integrand (it becomes continuous, zero at the edge).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,11 +44,14 @@ __all__ = [
     "FADE_RECTANGLE",
     "LocalMesh",
     "box",
+    "check_normals",
     "disk",
     "fade_weight",
     "icosphere",
     "load_mesh_file",
+    "mesh_geometry",
     "rectangle",
+    "vertex_normals",
 ]
 
 FADE_NONE, FADE_RECTANGLE, FADE_RADIAL = 0, 1, 2
@@ -60,12 +70,42 @@ class LocalMesh:
         Fade coordinates (see the module table).
     fade_kind : int
         ``FADE_NONE``, ``FADE_RECTANGLE`` or ``FADE_RADIAL``.
+    normals : ndarray, shape (V, 3)
+        Unit vertex normals for smooth shading (see the module docstring).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     uv: np.ndarray
     fade_kind: int
+    normals: np.ndarray
+
+
+def _plus_z(n: int) -> np.ndarray:
+    return np.tile([0.0, 0.0, 1.0], (n, 1))
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit vertex normals: the mean of the adjacent faces' unit normals weighted by the corner angles.
+
+    The angle weights (Thürmer and Wüthrich 1998) make the result independent of how a
+    face is split into triangles. A vertex whose weighted sum vanishes (no face, or
+    faces that cancel) gets the normal of its first adjacent face, else +z.
+    """
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    out = np.zeros_like(vertices, dtype=np.float64)
+    fallback = np.tile([0.0, 0.0, 1.0], (len(vertices), 1))
+    for k in range(3):  # the three corners of every face (not a loop over faces)
+        a = tri[:, (k + 1) % 3] - tri[:, k]
+        b = tri[:, (k + 2) % 3] - tri[:, k]
+        cos = np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+        np.add.at(out, faces[:, k], np.arccos(np.clip(cos, -1.0, 1.0))[:, None] * n)
+    fallback[faces[::-1].ravel()] = np.repeat(n[::-1], 3, axis=0)  # first adjacent face wins
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    ok = length > 1e-12
+    return np.where(ok, out / np.where(ok, length, 1.0), fallback)
 
 
 def rectangle(sx: float, sy: float) -> LocalMesh:
@@ -74,7 +114,7 @@ def rectangle(sx: float, sy: float) -> LocalMesh:
     vertices = np.array([[-x, -y, 0.0], [x, -y, 0.0], [x, y, 0.0], [-x, y, 0.0]])
     faces = np.array([[0, 1, 2], [0, 2, 3]])
     uv = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-    return LocalMesh(vertices, faces, uv, FADE_RECTANGLE)
+    return LocalMesh(vertices, faces, uv, FADE_RECTANGLE, _plus_z(len(vertices)))
 
 
 def disk(radius: float, segments: int) -> LocalMesh:
@@ -86,7 +126,7 @@ def disk(radius: float, segments: int) -> LocalMesh:
     faces = np.stack([np.zeros(segments, dtype=int), 1 + i, 1 + (i + 1) % segments], axis=-1)
     uv = np.zeros((segments + 1, 2))
     uv[1:, 0] = 1.0
-    return LocalMesh(vertices, faces, uv, FADE_RADIAL)
+    return LocalMesh(vertices, faces, uv, FADE_RADIAL, _plus_z(len(vertices)))
 
 
 def box(sx: float, sy: float, sz: float) -> LocalMesh:
@@ -96,7 +136,7 @@ def box(sx: float, sy: float, sz: float) -> LocalMesh:
     # corner index = 4 z + 2 y + x; two triangles per face, counter-clockwise from outside
     quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
     faces = np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))])
-    return LocalMesh(vertices, faces, np.zeros((8, 2)), FADE_NONE)
+    return LocalMesh(vertices, faces, np.zeros((8, 2)), FADE_NONE, vertex_normals(vertices, faces))
 
 
 def icosphere(radius: float, subdivisions: int) -> LocalMesh:
@@ -130,11 +170,16 @@ def icosphere(radius: float, subdivisions: int) -> LocalMesh:
             ]
         )
         v = np.vstack([v, mid])
-    return LocalMesh(radius * v, faces, np.zeros((len(v), 2)), FADE_NONE)
+    # v is on the unit sphere: the exact sphere normal at each vertex
+    return LocalMesh(radius * v, faces, np.zeros((len(v), 2)), FADE_NONE, v.copy())
 
 
-def inline_mesh(field: str, vertices: Any, faces: Any) -> LocalMesh:
-    """A mesh from inline vertex and face lists, validated (errors name ``field``)."""
+def inline_mesh(field: str, vertices: Any, faces: Any, normals: Any = None) -> LocalMesh:
+    """A mesh from inline vertex, face and (optional) vertex normal lists, validated (errors name ``field``).
+
+    ``normals`` (one nonzero [nx, ny, nz] row per vertex) are normalized; without them the
+    vertex normals are :func:`vertex_normals`.
+    """
     try:
         v = np.asarray(vertices, dtype=np.float64)
     except (TypeError, ValueError):
@@ -159,11 +204,34 @@ def inline_mesh(field: str, vertices: Any, faces: Any) -> LocalMesh:
     area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     if np.any(area2 <= 0.0):
         raise ValidationError(f"{field}.faces", f"triangle {int(np.argmin(area2))} is degenerate (zero area)")
-    return LocalMesh(v, f.astype(np.int64), np.zeros((len(v), 2)), FADE_NONE)
+    f = f.astype(np.int64)
+    n = vertex_normals(v, f) if normals is None else check_normals(f"{field}.normals", normals, len(v))
+    return LocalMesh(v, f, np.zeros((len(v), 2)), FADE_NONE, n)
+
+
+def check_normals(field: str, normals: Any, count: int) -> np.ndarray:
+    """``normals`` as ``count`` unit rows; one ValidationError naming ``field`` if one is bad or zero."""
+    try:
+        n = np.asarray(normals, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValidationError(field, "must be a list of [nx, ny, nz] numbers") from None
+    if n.shape != (count, 3) or not np.all(np.isfinite(n)):
+        raise ValidationError(
+            field, f"must be {count} finite [nx, ny, nz] rows (one per vertex), got shape {n.shape}"
+        )
+    length = np.linalg.norm(n, axis=1)
+    if np.any(length < 1e-12):
+        i = int(np.argmin(length))
+        raise ValidationError(field, f"normal {i} has zero length, got {n[i].tolist()}")
+    return n / length[:, None]
 
 
 def load_mesh_file(field: str, path: Path) -> LocalMesh:
-    """A triangle mesh from an OBJ or PLY file (parsed by ``trimesh``), as stored: no re-centring."""
+    """A triangle mesh from an OBJ or PLY file (parsed by ``trimesh``), as stored: no re-centring.
+
+    The file's vertex normals (OBJ ``vn``, PLY ``nx ny nz``) become the mesh's normals
+    when it has them for every vertex; a zero one is refused (naming ``field``).
+    """
     if path.suffix.lower() not in (".obj", ".ply"):
         raise ValidationError(field, f"must be an .obj or .ply file, got {str(path)!r}")
     if not path.is_file():
@@ -171,13 +239,21 @@ def load_mesh_file(field: str, path: Path) -> LocalMesh:
     import trimesh
 
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
+        mesh = trimesh.load(str(path), process=False)
+        if not isinstance(mesh, trimesh.Trimesh):  # several objects: merged, as force="mesh" does
+            mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds of errors on malformed files
         raise ValidationError(field, f"cannot read {str(path)!r}: {exc}") from None
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))))
     if faces.size == 0:
         raise ValidationError(field, f"{str(path)!r} contains no triangles")
-    return inline_mesh(field, np.asarray(mesh.vertices, dtype=np.float64), faces.astype(np.int64))
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    # trimesh keeps a file's normals in its cache and computes its own when asked for them otherwise
+    stored = mesh._cache.cache.get("vertex_normals") if hasattr(mesh, "_cache") else None
+    normals = None if stored is None or np.shape(stored) != vertices.shape else np.array(stored)
+    if normals is not None:
+        normals = check_normals(f"{field} (vertex normals)", normals, len(vertices))
+    return inline_mesh(field, vertices, faces.astype(np.int64), normals)
 
 
 def _smoothstep(t: Any) -> Any:
@@ -204,3 +280,31 @@ def fade_weight(uv: Any, kind: np.ndarray, width: np.ndarray) -> Any:
     radial = _smoothstep(tu)
     faded = np.where(kind == FADE_RECTANGLE, rect, radial)
     return np.where(active & (kind != FADE_NONE), faded, 1.0 + 0.0 * tu)
+
+
+def mesh_geometry(field: str, d: Mapping[str, Any], base_dir: Path | None) -> tuple[tuple, LocalMesh]:
+    """A ``mesh`` shape's keys (validated, file paths made absolute) and its local mesh.
+
+    The mesh comes from a file (``path``, relative to ``base_dir``) or inline ``vertices``,
+    ``faces`` and optional per-vertex ``normals``; bad input raises one ValidationError
+    naming ``field``'s key.
+    """
+    if "path" in d:
+        if "vertices" in d or "faces" in d:
+            raise ValidationError(f"{field}.path", "give either path or vertices/faces, not both")
+        if not isinstance(d["path"], str):
+            raise ValidationError(f"{field}.path", f"must be a file path string, got {d['path']!r}")
+        path = Path(d["path"])
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+        path = path.resolve()
+        return (("path", str(path)),), load_mesh_file(f"{field}.path", path)
+    if "vertices" not in d or "faces" not in d:
+        raise ValidationError(f"{field}.path", "a mesh needs a path or both vertices and faces")
+    mesh = inline_mesh(field, d["vertices"], d["faces"], d.get("normals"))
+    vertices = tuple(tuple(float(x) for x in row) for row in mesh.vertices)
+    faces = tuple(tuple(int(i) for i in row) for row in mesh.faces)
+    geometry = (("vertices", [list(r) for r in vertices]), ("faces", [list(r) for r in faces]))
+    if d.get("normals") is not None:
+        geometry += (("normals", [[float(x) for x in row] for row in mesh.normals]),)
+    return geometry, mesh

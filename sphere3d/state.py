@@ -102,6 +102,10 @@ class SceneState:
     shape_of : ndarray of int, shape (T,)
     uv : ndarray, shape (T, 3, 2)
         Per-vertex fade coordinates; ``fade_kind``, ``fade``: per triangle.
+    normals : Dual or ndarray, shape (T, 3, 3)
+        World-space unit vertex normals of every triangle's corners (rotating with the shape).
+    smooth : ndarray of bool, shape (T,)
+        Triangles of smooth shapes, shaded with the interpolated ``normals``.
     albedo, emission : Dual or ndarray, shape (S,)
         Per shape. ``sky``: the environment radiance.
     emitters : ndarray of int
@@ -122,6 +126,8 @@ class SceneState:
     uv: np.ndarray
     fade_kind: np.ndarray
     fade: np.ndarray
+    normals: Any
+    smooth: np.ndarray
     albedo: Any
     emission: Any
     sky: Any
@@ -143,6 +149,28 @@ class SceneState:
         point_uv = (1.0 - b1 - b2) * uv[..., 0, :] + b1 * uv[..., 1, :] + b2 * uv[..., 2, :]
         fade = shp.fade_weight(point_uv, self.fade_kind[triangle], self.fade[triangle])
         return self.emission[self.shape_of[triangle]] * fade
+
+    def shading_normals(self, triangle: np.ndarray, b1: Any, b2: Any, geometric: Any) -> Any:
+        """Unit shading normals at barycentrics (b1, b2) of ``triangle``; Dual-aware.
+
+        On smooth shapes the vertex normals interpolated with the hit's barycentrics and
+        normalized (Phong 1975): they carry θ-tangents from the sliding barycentrics and
+        the rotating vertex normals, as positions do. Elsewhere, and where the
+        interpolated vector vanishes, the ``geometric`` (face) normal itself is returned.
+        """
+        smooth = self.smooth[triangle]
+        if not smooth.any():
+            return geometric
+        s = np.flatnonzero(smooth)
+        n = self.normals[triangle[s]]
+        w1, w2 = b1[s][..., None], b2[s][..., None]
+        mixed = (1.0 - w1 - w2) * n[..., 0, :] + w1 * n[..., 1, :] + w2 * n[..., 2, :]
+        length = norm(mixed)
+        ok = detach(length) > 1e-9
+        unit = mixed / np.where(ok, length, 1.0)[..., None]
+        out = geometric * 1.0  # a copy, Dual or plain like the geometric normals
+        out[s] = np.where(ok[:, None], unit, geometric[s])
+        return out
 
 
 def _offset(values: tuple[float, ...], index: int, theta: Any) -> Any:
@@ -218,6 +246,7 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         axis = AXES.index(axis_name) if axis_name else None
 
     triangles, shape_of, uv, fade_kind, fade, albedo, emission = [], [], [], [], [], [], []
+    normals, smooth = [], []
     for index, s in enumerate(scene.shapes):
         mine = owner == s.name
         translate = (
@@ -226,8 +255,11 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         rotate = _offset(s.rotate, axis, theta) if mine and kind == "rotate" else np.array(s.rotate)
         scale = s.scale * (1.0 + theta) if mine and kind == "scale" else s.scale
         # world = translate + R (scale · local): rotation and scale act about the centre
-        world = translate + (scale * s.mesh.vertices) @ np.swapaxes(euler_matrix(rotate), -1, -2)
+        rotation_t = np.swapaxes(euler_matrix(rotate), -1, -2)
+        world = translate + (scale * s.mesh.vertices) @ rotation_t
         triangles.append(world[s.mesh.faces])
+        normals.append((s.mesh.normals @ rotation_t)[s.mesh.faces])  # a uniform scale leaves them unit
+        smooth.append(np.full(len(s.mesh.faces), s.smooth))
         n = len(s.mesh.faces)
         shape_of.append(np.full(n, index))
         uv.append(s.mesh.uv[s.mesh.faces])
@@ -237,14 +269,15 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         emission.append(s.emission + theta if mine and kind == "emission" else s.emission)
 
     triangles = np.concatenate(triangles)
+    normals = np.concatenate(normals)
     shape_of = np.concatenate(shape_of)
     albedo = np.stack(albedo)
     emission = np.stack(emission)
     sky = scene.sky + theta if owner == "sky" else np.float64(scene.sky)
     if isinstance(theta, Dual):
         # one code path: with a Dual θ every scene quantity is a Dual (most with zero tangent)
-        triangles, albedo, emission, sky = (
-            x if isinstance(x, Dual) else Dual(x) for x in (triangles, albedo, emission, sky)
+        triangles, normals, albedo, emission, sky = (
+            x if isinstance(x, Dual) else Dual(x) for x in (triangles, normals, albedo, emission, sky)
         )
 
     emitting = [
@@ -275,6 +308,8 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         uv=np.concatenate(uv),
         fade_kind=np.concatenate(fade_kind),
         fade=np.concatenate(fade),
+        normals=normals,
+        smooth=np.concatenate(smooth),
         albedo=albedo,
         emission=emission,
         sky=sky,

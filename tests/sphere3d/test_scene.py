@@ -66,7 +66,14 @@ def test02_fade_is_zero_on_the_border_one_inside_and_smooth():
 
 
 def test03_builtin_scenes_load_and_round_trip():
-    assert list_scenes() == ("shadow", "silhouette", "sky", "two_occluders")
+    assert list_scenes() == (
+        "hard_shadow",
+        "hard_shadow_cube",
+        "shadow",
+        "silhouette",
+        "sky",
+        "two_occluders",
+    )
     for name in list_scenes():
         scene = load_scene(name)
         assert scene.name == name
@@ -172,6 +179,31 @@ BAD = [
         lambda d: d["shapes"].append({"name": "m", "type": "icosphere", "subdivisions": 9}),
         "shapes[3].subdivisions: must be <= 6",
     ),
+    (lambda d: d["shapes"][1].update(smooth=1), "shapes[1].smooth: must be True or False, got 1"),
+    (
+        lambda d: d["shapes"].append(
+            {
+                "name": "m",
+                "type": "mesh",
+                "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                "faces": [[0, 1, 2]],
+                "normals": [[0, 0, 1], [0, 0, 0], [0, 0, 1]],
+            }
+        ),
+        "shapes[3].normals: normal 1 has zero length, got [0.0, 0.0, 0.0]",
+    ),
+    (
+        lambda d: d["shapes"].append(
+            {
+                "name": "m",
+                "type": "mesh",
+                "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                "faces": [[0, 1, 2]],
+                "normals": [[0, 0, 1]],
+            }
+        ),
+        "shapes[3].normals: must be 3 finite [nx, ny, nz] rows (one per vertex), got shape (1, 3)",
+    ),
 ]
 
 
@@ -185,7 +217,7 @@ def test06_bad_scenes_raise_one_error_naming_the_field(mutate, message):
 
 
 def test07_bad_sources_and_parameters():
-    with pytest.raises(ValidationError, match="unknown scene 'nope'; built-in scenes: shadow"):
+    with pytest.raises(ValidationError, match="unknown scene 'nope'; built-in scenes: hard_shadow"):
         load_scene("nope")
     with pytest.raises(ValidationError, match=r"scene file 'missing\.json': no such file"):
         load_scene("missing.json")
@@ -193,3 +225,133 @@ def test07_bad_sources_and_parameters():
         load_scene("shadow").check_param("occluder.spin")
     with pytest.raises(ValidationError, match="scene: must be a scene name"):
         load_scene(3)
+
+
+def _smooth_sphere(radius=0.3, centre=(0.1, 0.0, 0.8), rotate=(0.2, -0.1, 0.4)):
+    return {
+        "name": "ball",
+        "camera": {
+            "position": [0.6, -3.6, 2.6],
+            "look_at": list(centre),
+            "fov": 0.5,
+            "width": 8,
+            "height": 8,
+        },
+        "shapes": [
+            {
+                "name": "ball",
+                "type": "icosphere",
+                "radius": radius,
+                "subdivisions": 2,
+                "smooth": True,
+                "translate": list(centre),
+                "rotate": list(rotate),
+            }
+        ],
+    }
+
+
+def _ball_hits(state, n=400):
+    """Rays from the camera at random points of the ball: hit triangles and re-attached intersections."""
+    rng = np.random.default_rng(8)
+    origin = np.array([0.6, -3.6, 2.6])
+    aim = np.array([0.1, 0.0, 0.8]) + rng.uniform(-0.28, 0.28, (n, 3))
+    d = aim - origin
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    hits = state.tracer.intersect(origin, d)
+    assert hits.hit.mean() > 0.5
+    keep = np.flatnonzero(hits.hit)
+    return origin, d[keep], hits.triangle[keep]
+
+
+def test08_smooth_icosphere_normals_approach_the_sphere_and_move_with_it():
+    from sphere3d.tracing import intersect_triangles
+
+    scene = load_scene(_smooth_sphere())
+    state = scene.state()
+    origin, d, tri = _ball_hits(state)
+    it = intersect_triangles(origin, d, state.triangles[tri])
+    n = state.shading_normals(tri, it.b1, it.b2, it.normal)
+    exact = (it.point - [0.1, 0.0, 0.8]) / np.linalg.norm(it.point - [0.1, 0.0, 0.8], axis=1, keepdims=True)
+    # the vertex normals are exact and the interpolation error is second order in the edge
+    # angle (0.32 rad at 2 subdivisions): sin(angle) <= 0.01 here, where the face normal is off
+    # by up to half the edge angle (about 0.2 rad)
+    smooth_err = np.linalg.norm(np.cross(n, exact), axis=1)
+    face_err = np.linalg.norm(np.cross(it.normal, exact), axis=1)
+    assert smooth_err.max() < 0.01 and face_err.max() > 0.1
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, rtol=1e-14)
+    # a flat shape keeps its face normal, the very same object
+    faceted = _smooth_sphere()
+    faceted["shapes"][0]["smooth"] = False
+    flat = load_scene(faceted).state()
+    assert flat.shading_normals(tri, it.b1, it.b2, it.normal) is it.normal
+    # derivative under translation and rotation: the Dual tangent against a central difference
+    # with the same rays and triangles (h = 1e-6: truncation ~1e-12, rounding ~1e-10)
+    h = 1e-6
+    for param in ("ball.translate.x", "ball.rotate.z", "ball.rotate.x", "ball.scale"):
+        dual = scene.state(param, variable(0.0))
+        it_d = intersect_triangles(origin, d, dual.triangles[tri])
+        nd = dual.shading_normals(tri, it_d.b1, it_d.b2, it_d.normal)
+        np.testing.assert_array_equal(detach(nd), n)
+        fd = []
+        for theta in (h, -h):
+            s = scene.state(param, theta)
+            it_s = intersect_triangles(origin, d, s.triangles[tri])
+            fd.append(s.shading_normals(tri, it_s.b1, it_s.b2, it_s.normal))
+        np.testing.assert_allclose(tangent(nd), (fd[0] - fd[1]) / (2 * h), atol=1e-7)
+        assert np.abs(tangent(nd)).max() > 0.1 or param == "ball.scale", param
+
+
+def test09_mesh_vertex_normals_from_files_inline_and_faces(tmp_path):
+    obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.5\n"
+    obj += "vn 0 0.6 0.8\nvn 0 0 2\nvn 0.6 0 0.8\nvn 0 0 1\nf 1//1 2//2 3//3\nf 2//2 4//4 3//3\n"
+    (tmp_path / "normals.obj").write_text(obj)
+    (tmp_path / "zero.obj").write_text(obj.replace("vn 0 0 1\n", "vn 0 0 0\n"))
+    (tmp_path / "plain.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.5\nf 1 2 3\nf 2 4 3\n")
+    base = {"name": "m", "camera": load_scene("shadow").to_dict()["camera"]}
+    scene = load_scene(
+        base
+        | {"shapes": [{"name": "m", "type": "mesh", "path": str(tmp_path / "normals.obj"), "smooth": True}]}
+    )
+    # the file's normals, normalized (vn 0 0 2 -> 0 0 1), not the ones trimesh would compute
+    np.testing.assert_allclose(
+        scene.shapes[0].mesh.normals, [[0, 0.6, 0.8], [0, 0, 1], [0.6, 0, 0.8], [0, 0, 1]]
+    )
+    state = scene.state()
+    assert state.smooth.all()
+    # at barycentrics (1/3, 1/3) of face 0: the normalized mean of its three vertex normals
+    n = state.shading_normals(
+        np.array([0]), np.array([1 / 3]), np.array([1 / 3]), np.array([[0.0, 0.0, 1.0]])
+    )
+    mean = np.array([0.6, 0.6, 2.6]) / np.linalg.norm([0.6, 0.6, 2.6])
+    np.testing.assert_allclose(n[0], mean, rtol=1e-14)
+    with pytest.raises(
+        ValidationError, match=r"shapes\[0\]\.path \(vertex normals\): normal 3 has zero length"
+    ):
+        load_scene(base | {"shapes": [{"name": "m", "type": "mesh", "path": str(tmp_path / "zero.obj")}]})
+    # no vn: the angle-weighted face normals; a lone face's vertices get its normal
+    plain = load_scene(
+        base | {"shapes": [{"name": "m", "type": "mesh", "path": str(tmp_path / "plain.obj")}]}
+    )
+    assert not plain.state().smooth.any()  # smooth is off unless asked for
+    face = np.array([-0.5, -0.5, 1.0]) / np.sqrt(1.5)  # (v4 - v2) x (v3 - v2), the only face at v4
+    np.testing.assert_allclose(plain.shapes[0].mesh.normals[3], face, rtol=1e-14)
+    np.testing.assert_allclose(plain.shapes[0].mesh.normals[0], [0, 0, 1], atol=1e-15)
+    # inline normals round-trip through to_dict
+    inline = load_scene(
+        base
+        | {
+            "shapes": [
+                {
+                    "name": "m",
+                    "type": "mesh",
+                    "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                    "faces": [[0, 1, 2]],
+                    "normals": [[0, 0, 3], [0, 0.6, 0.8], [0, 0, 1]],
+                    "smooth": True,
+                }
+            ]
+        }
+    )
+    assert load_scene(inline.to_dict()) == inline
+    np.testing.assert_allclose(inline.shapes[0].mesh.normals[0], [0, 0, 1])
