@@ -12,8 +12,9 @@ al. 2018, Sec. 3). The filter k is static on the film and adds no term, even the
 
 The curves are the projections of mesh edges (:mod:`sphere3d.edges`): every
 boundary, non-manifold and crease edge (a crease between faces of a shape with zero
-albedo has no jump and is skipped). An edge is clipped to the part in front of the
-camera (depth > ε) and its projection to the film widened by the filter radius;
+albedo, or of a smooth-shaded shape, has no jump and is skipped). An edge is clipped
+to the part in front of the camera (depth > ε) and its projection to the film
+widened by the filter radius;
 points are drawn *stratified along the total projected length* Λ, ``N =
 ceil(rate · spp/batches · Λ)`` per batch (``rate`` points per pixel of projected
 length per camera sample per pixel), each weighted Λ/N. At each point:
@@ -109,13 +110,21 @@ def _side_hits(plain: SceneState, edges: Edges, d: np.ndarray) -> Hits:
 
 def camera_candidates(state: SceneState, edges: Edges) -> np.ndarray:
     """Edges that may carry a jump of the camera's radiance: silhouettes, boundaries, and creases of
-    shapes that reflect (albedo > 0, or the albedo is the parameter)."""
+    flat-shaded shapes that reflect (albedo > 0, or the albedo is the parameter).
+
+    A crease of a smooth shape (``smooth: true``) is skipped: the interpolated vertex normals
+    agree on both sides, so L is continuous there and the side rays would only measure an
+    O(EPS_FILM) difference, a bias of that order and wasted points (480 of the 490 edges of
+    the ``hard_shadow`` icosphere, most of its projected edge length).
+    """
     origin = np.asarray(detach(state.camera.origin))
     albedo = np.asarray(detach(state.albedo))
     reflects = albedo > 0.0
     if state.param is not None and state.param.endswith(".albedo"):
         reflects = np.ones_like(reflects)
-    shading_jump = edges.crease & reflects[state.shape_of[edges.face]]
+    # a smooth shape's vertex normals are shared by its faces: its shading is continuous across creases
+    flat = ~np.asarray(state.smooth)[edges.face]
+    shading_jump = edges.crease & reflects[state.shape_of[edges.face]] & flat
     return edges.silhouette(origin) | shading_jump
 
 

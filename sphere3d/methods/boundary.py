@@ -65,7 +65,7 @@ def boundary(task: ImageTask | PointTask, rate: float) -> Tally:
     are included:
 
     - **pixel integrals** (:mod:`sphere3d.camera_edges`): the film images of silhouette,
-      boundary and crease edges, ``rate · spp/batches`` points per pixel of projected
+      boundary and crease edges (of flat-shaded shapes), ``rate · spp/batches`` points per pixel of projected
       edge length per batch, each splatted to the pixels whose filter covers it;
     - **shading integrals** (:mod:`sphere3d.shading_edges`): at every shading point one
       silhouette edge seen from it (occluders' outlines, emitters' borders), drawn ∝
