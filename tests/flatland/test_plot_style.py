@@ -21,7 +21,6 @@ from matplotlib.container import ErrorbarContainer
 from flatland.__main__ import PACKAGE
 from flatland.app.study import run_study
 from flatland.app.study_config import StudyConfig
-from flatland.core.image import GradientImage
 from flatland.plotting import films, study
 from flatland.plotting import textbook as pt
 from flatland.plotting import tutorials as ptu
@@ -34,6 +33,7 @@ from flatland.plotting.style import (
     series_styles,
     symmetric_limit,
 )
+from tests.flatland.test_plot import _grad
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ("naive", "boundary", "reparam")
@@ -70,19 +70,8 @@ def _legend_texts(ax):
 
 
 def _gradient(derivative, method):
-    derivative = np.asarray(derivative, dtype=np.float64)
-    return GradientImage(
-        value=np.abs(derivative) + 0.5,
-        derivative=derivative,
-        value_stderr=np.full(derivative.shape, 0.01),
-        derivative_stderr=np.full(derivative.shape, 0.02),
-        param="p",
-        method=method,
-        spp=4,
-        seed=0,
-        batches=4,
-        scene="t",
-    )
+    """A small gradient image of one method (the figures' input), as in test_plot."""
+    return _grad(derivative, method)
 
 
 @pytest.fixture(scope="module")
