@@ -14,7 +14,6 @@ from flatland.core.dual import detach, tangent, variable
 from flatland.core.validate import ValidationError, check_choice
 from sphere3d.sampling import FILTERS, GAUSSIAN_RADIUS, GAUSSIAN_SIGMA
 from sphere3d.scene import AXES, Camera, Scene, check_vector, load_scene
-from sphere3d.state import euler_matrix
 
 __all__ = [
     "QUADRATURE_NODES",
@@ -286,7 +285,20 @@ def triangle_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) 
         else:
             scale = scale * (1.0 + theta)
     local = s.mesh.vertices[s.mesh.faces[0]]
-    return translate + (local * scale) @ np.swapaxes(euler_matrix(rotate), -1, -2)
+    return translate + _rotate_xyz(local * scale, rotate)
+
+
+def _rotate_xyz(points: Any, angles: Any) -> Any:
+    """Rotate points (n, 3) by ``angles`` radians about x, then y, then z (the scene format's
+    convention, :mod:`sphere3d.scene`), one coordinate plane at a time. Written apart from the
+    renderer's rotation matrices (:func:`sphere3d.state.euler_matrix`), so that a mistake there
+    shows against this closed form instead of being shared by it."""
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    a, b, c = angles[0], angles[1], angles[2]
+    y, z = y * np.cos(a) - z * np.sin(a), y * np.sin(a) + z * np.cos(a)  # about x: y -> z
+    z, x = z * np.cos(b) - x * np.sin(b), z * np.sin(b) + x * np.cos(b)  # about y: z -> x
+    x, y = x * np.cos(c) - y * np.sin(c), x * np.sin(c) + y * np.cos(c)  # about z: x -> y
+    return np.stack([x, y, z], axis=-1)
 
 
 @dataclass(frozen=True)
