@@ -205,7 +205,7 @@ pt.plot_terms(
 # every other point the jump term is invisible. The library's `naive` estimator does exactly
 # that; its `boundary` estimator adds the discontinuity term computed from the list of jumps, as
 # above. On the seed example the first returns $0$ and the second $2$, both with zero variance:
-# every sample's derivative is $0$. Tutorial 3 takes this failure apart.
+# every sample's derivative is $0$. Tutorial 4 takes this failure apart.
 
 # %%
 naive = estimate("leibniz_seed", theta0, method="naive", n=10_000, seed=SEED)

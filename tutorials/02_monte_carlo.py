@@ -300,9 +300,9 @@ pt.plot_estimates(
 # %% [markdown]
 # ## Where this returns
 #
-# The same two tools reappear in the gradient estimators. Reparameterization (tutorial 5) is
+# The same two tools reappear in the gradient estimators. Reparameterization (tutorial 6) is
 # importance sampling with a proposal that moves with $\theta$: the samples
 # $x_i(\theta) = y_i + \theta - \theta_0$ follow the discontinuity. The authors' paired samples
-# (`docs/theory/kernels.md`, tutorial 6) are a control variate: the derivative of a kernel weight
+# (`docs/theory/kernels.md`, tutorial 7) are a control variate: the derivative of a kernel weight
 # $w = k/\operatorname{detach}(k)$ has zero mean, so subtracting a multiple of it changes the
 # variance and not the expectation.

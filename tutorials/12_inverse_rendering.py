@@ -15,7 +15,7 @@
 # ---
 
 # %% [markdown]
-# # 9. Inverse rendering: recovering an occluder's position
+# # 12. Inverse rendering: recovering an occluder's position
 #
 # The point of differentiable rendering: given a photograph, find the scene that produced it.
 # Here the scene is known except for one number, the horizontal position $\theta$ of an occluder,
@@ -30,8 +30,8 @@
 #
 # by gradient descent, with $dI_j/d\theta$ from `render_gradient`. The occluder's position enters
 # the image only through visibility: its silhouette and its shadow. The naive derivative, which
-# misses moving discontinuities (tutorial 3), is zero there, so the descent never starts; the
-# reparameterized one (tutorial 5) converges. We run the same code in flatland and on the sphere.
+# misses moving discontinuities (tutorial 4), is zero there, so the descent never starts; the
+# reparameterized one (tutorial 6) converges. We run the same code in flatland and on the sphere.
 
 # %%
 # %matplotlib inline

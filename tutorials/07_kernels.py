@@ -15,11 +15,11 @@
 # ---
 
 # %% [markdown]
-# # 6. Large support: convolution kernels and the bias/variance trade-off over κ
+# # 7. Large support: convolution kernels and the bias/variance trade-off over κ
 #
 # Reparameterization removes a moving discontinuity by moving the samples with it: a
 # translation $T(y, \theta) = y + c(\theta) - c(\theta_0)$ makes a jump at $c(\theta)$ static
-# (tutorial 5). One translation follows one velocity. When an integrand has two jumps moving at
+# (tutorial 6). One translation follows one velocity. When an integrand has two jumps moving at
 # different speeds (two silhouette edges in one pixel, an occluder and its shadow) no single
 # translation makes both static, and the gradient is biased.
 #

@@ -15,10 +15,10 @@
 # ---
 
 # %% [markdown]
-# # 7. Pitfalls: box filters, overlapping occluders, hard-edged emitters
+# # 9. Pitfalls: box filters, overlapping occluders, hard-edged emitters
 #
 # Reparameterization is unbiased when, inside each kernel, one translation makes *every*
-# discontinuity static (tutorials 5 and 6). Three ordinary situations break that, and each
+# discontinuity static (tutorials 6 and 7). Three ordinary situations break that, and each
 # produces a bias that does not shrink with more samples:
 #
 # 1. **A box pixel filter.** Translating the film coordinate moves samples across the pixel's
@@ -31,7 +31,7 @@
 #    emitter's end along (`docs/theory/probes.md`).
 #
 # For each we measure the bias against an unbiased reference (a closed form or the `boundary`
-# method of tutorial 4), predict it, and apply the remedy. Standard errors of the renderer come
+# method of tutorial 5), predict it, and apply the remedy. Standard errors of the renderer come
 # from 16 independent batches, so the tolerances use Student's t with 15 degrees of freedom.
 
 # %%
@@ -62,7 +62,7 @@ t2 = t_quantile(2)
 # %% [markdown]
 # ## 1. The box pixel filter
 #
-# The black-bar scene of tutorials 3 and 5 (a black bar in front of an emitting backdrop), now
+# The black-bar scene of tutorials 4 and 6 (a black bar in front of an emitting backdrop), now
 # with a box filter: pixel $j$ averages $L$ uniformly over its width $w$. The closed form is as
 # before with $k_j = 1/w$ on the pixel: $dI_j/d\theta = [k_j(t_a) - k_j(t_b)]/2$, nonzero only in the
 # two pixels that contain the bar's ends. The library refuses the combination:
@@ -143,7 +143,7 @@ assert abs(box_reparam.sum() - closed.sum()) <= t2 * film_se
 # What happened: the film kernel around a sample near the bar's end reaches a little over two
 # pixels ($\pm 3\sigma$ with $\sigma = 0.28$ pixel), and the probes there find the edge, so those
 # samples are translated with it. In $y$ the bar's end is then static, and the derivative should
-# come from the filter's slope, $k_j'(y)\,\Delta'$ (tutorial 5). A box has no slope: its derivative
+# come from the filter's slope, $k_j'(y)\,\Delta'$ (tutorial 6). A box has no slope: its derivative
 # is concentrated at the pixel's borders, which in $y$ now move at $-\Delta'$, and automatic
 # differentiation drops their Leibniz terms. What remains is the derivative of the Gaussian
 # kernel weights, which spreads the edge's contribution over the pixels within the kernel's
@@ -152,7 +152,7 @@ assert abs(box_reparam.sum() - closed.sum()) <= t2 * film_se
 # shared by two neighbouring pixels and appears in them
 # with opposite signs, so the film as a whole keeps the right total: the gradient is blurred
 # sideways, not lost. A continuous filter (tent or Gaussian) has the slope the method needs;
-# tutorial 5 checked the tent version of this scene pixel by pixel against the closed form.
+# tutorial 6 checked the tent version of this scene pixel by pixel against the closed form.
 
 # %%
 ptu.plot_film(
@@ -210,7 +210,7 @@ assert np.all(np.abs(measured - predicted) <= t2 * np.hypot(measured_se, predict
 
 # %% [markdown]
 # The remedy within the method would be a narrower film kernel, so that fewer samples have both
-# edges within reach; every narrowing costs variance (tutorial 6). The probes span $\pm 3\sigma$
+# edges within reach; every narrowing costs variance (tutorial 7). The probes span $\pm 3\sigma$
 # around each kernel centre, and the heuristic follows the near edge whenever one of them sees it,
 # so the drag stops only once $3\sigma$ is smaller than the 0.06 pixel between the edges:
 # $\sigma < 0.02$ pixel, a kernel 14 times narrower than the default 0.28 pixel. We multiply the
@@ -247,10 +247,10 @@ assert std["kernel × 256"] > 2.5 * std["default kernel"] and std["kernel × 16"
 # × 64 and $+0.71 \pm 0.15$ at × 256. A single run shows it poorly: its per-sample derivatives are
 # now heavy-tailed (a few samples carry huge kernel-weight derivatives), and a standard error from
 # 16 batches is itself unreliable, so the number printed above for × 256 scatters from seed to seed
-# by more than its stated error. This is the trade-off of tutorial 6 in its least favourable form:
+# by more than its stated error. This is the trade-off of tutorial 7 in its least favourable form:
 # the kernel must shrink below the geometry's smallest gap before the bias goes, and the noise has
 # grown long before. Methods that drag nothing avoid it: the boundary term (exact in flatland,
-# tutorial 4) or the unbiased warped-area sampling of Bangaru et al. (2020).
+# tutorial 5) or the unbiased warped-area sampling of Bangaru et al. (2020).
 #
 # The films: the reference, the default reparameterization (which loses most of the edge pixels'
 # derivative) and the two narrower kernels.
@@ -270,13 +270,13 @@ ptu.plot_film(
 #
 # ## 3. Emitters with hard edges
 #
-# The hard shadow of tutorials 4 and 5: a segment emitter whose radiance stops abruptly at its
+# The hard shadow of tutorials 5 and 6: a segment emitter whose radiance stops abruptly at its
 # ends. Take a floor point where, seen from it, the occluder's right end and the light's right end
 # are $0.42°$ apart: a thin sliver of light in the penumbra. The von Mises kernel ($\kappa = 1000$,
 # $\sigma \approx 1.8°$) and its probes reach both ends, the occluder occludes the light, so the
 # translation follows the occluder and drags the light's end along: the sliver moves rigidly, and
 # AD returns the derivative of a rigid slide, almost zero, instead of the sliver's shrinking. The
-# prediction is the closed form of tutorial 5 with the light's ends dragged along. The remedy the
+# prediction is the closed form of tutorial 6 with the light's ends dragged along. The remedy the
 # authors use is an emitter whose radiance fades to zero at its ends (scene key `fade`,
 # `docs/theory/probes.md`): its end is then continuous, and dragging it costs nothing.
 

@@ -15,10 +15,10 @@
 # ---
 
 # %% [markdown]
-# # 5. Reparameterization by translation
+# # 6. Reparameterization by translation
 #
 # Naive differentiation fails because the samples stay put while the discontinuity moves
-# (tutorial 3). Loubet et al. (2019, Sec. 3.2) turn this around: change the variable
+# (tutorial 4). Loubet et al. (2019, Sec. 3.2) turn this around: change the variable
 # of integration so that the discontinuity does not move. With $x = T(y, \theta)$,
 #
 # $$
@@ -107,7 +107,7 @@ fig
 # %% [markdown]
 # ## 2. A pixel integral: translating the film coordinate
 #
-# The black-bar scene of tutorial 3: a black bar in front of an emitting backdrop, the bar's ends
+# The black-bar scene of tutorial 4: a black bar in front of an emitting backdrop, the bar's ends
 # at film coordinates $t_a = (-0.3 + \theta)/2$ and $t_b = (0.5 + \theta)/2$. Pixel $j$ integrates
 # $\int k_j(t)\, L(t, \theta)\, dt$ with $t \sim k_j$ (a tent of radius one pixel), so one sample
 # contributes $L(t)$. Translate the film coordinate with the bar's left end,
@@ -121,7 +121,7 @@ fig
 # $L(y + \Delta, \theta)$ jumps at $y = t_a(\theta_0)$ for every $\theta$: it is locally constant.
 # The derivative now comes from the *filter*, $k_j'(y)\,t_a'/k_j(y)$ per sample. Integrating by
 # parts, $\int k_j'\,L\,dy = k_j(t_a)\,[L(t_a^-) - L(t_a^+)]$: the boundary term, recovered from the
-# filter's slope. This is why the filter must be continuous (tutorial 7). By hand, for the pixel
+# filter's slope. This is why the filter must be continuous (tutorial 9). By hand, for the pixel
 # that contains $t_a$:
 
 
@@ -172,13 +172,13 @@ assert np.array_equal(detach(per_sample), radiance(y))
 # The library does this for every pixel, with two refinements (`flatland.methods.reparam`): it
 # finds the point to follow with probe rays around each sample instead of being told (Loubet
 # et al. 2019, Sec. 4.3), and it applies each translation inside a narrow Gaussian kernel on the film so that
-# samples far from any edge are left alone (Sec. 4.2, tutorial 6). Its image value is the
+# samples far from any edge are left alone (Sec. 4.2, tutorial 7). Its image value is the
 # naive one bit for bit, because at $\theta_0$ every translation is the identity.
 
 
 # %%
 def closed_form_image():
-    """dI_j/dθ = k_j(t_a) t_a' - k_j(t_b) t_b' for every pixel (tutorial 3)."""
+    """dI_j/dθ = k_j(t_a) t_a' - k_j(t_b) t_b' for every pixel (tutorial 4)."""
     k = lambda t: filter_value("tent", t, centres, width)  # noqa: E731
     return k(detach(t_a)) * tangent(t_a) - k(detach(t_b)) * tangent(t_b)
 
@@ -204,7 +204,7 @@ assert np.all(bar["reparam"].derivative[far] == 0.0)
 # %% [markdown]
 # ## 3. A shading integral: translating the angle
 #
-# The floor point $x = (0.5, 0)$ of tutorial 4's hard shadow, normal $(0, 1)$: an unfaded light of
+# The floor point $x = (0.5, 0)$ of tutorial 5's hard shadow, normal $(0, 1)$: an unfaded light of
 # radiance 4 seen between the angles $l_0 \approx 87°$ and $l_1 \approx 119°$, partly hidden by
 # the occluder whose right end is at $o_0(\theta) \approx 97°$. The integrand
 # $f(\varphi) = L_i(\varphi)\cos(\varphi - \varphi_n)$ jumps at two angles: $l_0$ (static) and
@@ -213,7 +213,7 @@ assert np.all(bar["reparam"].derivative[far] == 0.0)
 #
 # Now there are two discontinuities and one translation. Applied to the whole integral, it makes
 # $o_0$ static and sets $l_0$ moving (in $y$) at $-o_0'$: the sliver of light between them slides
-# rigidly, and AD differentiates that instead. Its expectation is the closed form of tutorial 4 with
+# rigidly, and AD differentiates that instead. Its expectation is the closed form of tutorial 5 with
 # the light's ends dragged along, which we can write down with `Dual`s as well. We sample
 # $\varphi$ from the cosine, as the renderer does ($\varphi - \varphi_n = \arcsin(2u - 1)$, density
 # $\cos/2$).
@@ -309,8 +309,8 @@ assert shading["reparam"].value == shading["naive"].value and shading["naive"].d
 #
 # A full image differentiates one pixel integral per pixel and one shading integral per film
 # sample, each reparameterized this way. The built-in `shadow` scene has a faded emitter (its
-# radiance falls to zero at its ends, so they are not discontinuities; tutorial 7 shows why that
-# matters). We compare `reparam` with the `boundary` reference of tutorial 4 at 32 pixels.
+# radiance falls to zero at its ends, so they are not discontinuities; tutorial 9 shows why that
+# matters). We compare `reparam` with the `boundary` reference of tutorial 5 at 32 pixels.
 
 # %%
 shadow = fl.load_scene("shadow").with_camera(pixels=32)
@@ -349,6 +349,6 @@ ptu.plot_gradient_panel(image, methods, title=f"shadow: d/d {PARAM}")
 # the same primal. The derivative moves from the jump into the smooth factors the translation
 # slides: $K$ for the step, the pixel filter on the film, the cosine and the other shapes'
 # silhouettes for shading. One translation follows one discontinuity, so it must be chosen per
-# neighbourhood (probe rays, Sec. 4.3) and confined by a kernel (tutorial 6); where two
+# neighbourhood (probe rays, Sec. 4.3) and confined by a kernel (tutorial 7); where two
 # discontinuities move differently within one neighbourhood, or the filter itself jumps, it fails
-# (tutorial 7).
+# (tutorial 9).

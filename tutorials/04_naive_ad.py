@@ -15,7 +15,7 @@
 # ---
 
 # %% [markdown]
-# # 3. Why naive automatic differentiation fails
+# # 4. Why naive automatic differentiation fails
 #
 # Forward-mode automatic differentiation of a Monte Carlo estimator is exact for smooth
 # integrands (Loubet et al. 2019, Sec. 3.1): the derivative of the estimator is an unbiased estimator of the
@@ -208,7 +208,7 @@ print("boundary there:         ", np.round(boundary_image.derivative[edge_pixels
 # from 16 batches, so t has 15 degrees of freedom; two-sided, family-wise 1e-3 Šidák-corrected over the
 # 32 pixels; pixels whose samples all agree have a zero standard error and must match exactly), the naive
 # derivative is exactly 0 at every pixel although four pixels have a derivative of 3.6 to 12.9, and the
-# boundary method (tutorial 4) recovers the closed form up to rounding
+# boundary method (tutorial 5) recovers the closed form up to rounding
 t32 = stats.t.ppf(1 - sidak(1e-3, 32) / 2, naive_image.batches - 1)
 assert np.all(np.abs(naive_image.value - value_cf) <= t32 * naive_image.value_stderr + 1e-12)
 assert np.all(naive_image.derivative == 0.0)
@@ -319,5 +319,5 @@ ptu.plot_gradient_panel(image, methods, title=f"silhouette: d/d {param}")
 # made of the estimator's steps, which sit where samples meet the discontinuity; no sample sits
 # there, so naive AD returns the interior term of the Leibniz rule (tutorial 1) and drops the rest,
 # here all of it. Finite differences see the steps only inside their window and trade bias for
-# variance. The two remedies: add the missing boundary term explicitly (tutorial 4), or change
-# variables so that the discontinuity no longer moves (tutorial 5).
+# variance. The two remedies: add the missing boundary term explicitly (tutorial 5), or change
+# variables so that the discontinuity no longer moves (tutorial 6).

@@ -15,7 +15,7 @@
 # ---
 
 # %% [markdown]
-# # 8. On the sphere: rotations, vMF kernels and Embree
+# # 10. On the sphere: rotations, vMF kernels and Embree
 #
 # Everything so far lived in flatland, where directions are angles on the circle $S^1$. A real
 # renderer integrates over the sphere of directions $S^2$ and traces rays against triangle meshes.
@@ -275,7 +275,7 @@ assert np.allclose(tangent(points), [1.0, 0.0, 0.0], rtol=0.0, atol=1e-12)
 #
 # The cosine-sampled integral is reparameterized inside a vMF kernel (`kappa`, default 1000);
 # `kappa=None` uses one rotation for the whole hemisphere, probes drawn from the cosine lobe,
-# which cannot follow all three edges of the triangle. As in tutorial 6 a wide kernel leaves bias
+# which cannot follow all three edges of the triangle. As in tutorial 7 a wide kernel leaves bias
 # and a narrow one adds variance. Each run uses $2^{17}$ samples.
 
 # %%

@@ -15,10 +15,10 @@
 # ---
 
 # %% [markdown]
-# # 4. Boundary terms: edge sampling in flatland
+# # 5. Boundary terms: edge sampling in flatland
 #
 # Naive differentiation returns the interior term of the Leibniz rule and drops the term of the
-# moving discontinuities (tutorials 1 and 3). The direct remedy is to compute that term and add
+# moving discontinuities (tutorials 1 and 4). The direct remedy is to compute that term and add
 # it (`docs/theory/leibniz.md`, `docs/theory/boundary.md`):
 #
 # $$
@@ -294,7 +294,7 @@ for _, vertices, circles, candidates, _ in rows:
 # clipped by whatever is in front of them. Edge sampling (Li et al. 2018) therefore samples
 # points on silhouette edges, with a density, per shading point: it needs a data structure to find
 # the silhouette edges seen from an arbitrary point, and its variance depends on how well that
-# density matches the jumps. Reparameterization (tutorial 5, and `sphere3d` in tutorial 8) avoids
+# density matches the jumps. Reparameterization (tutorial 6, and `sphere3d` in tutorial 10) avoids
 # finding the edges at all: it changes variables so that whatever edge is near a sample stops
 # moving, using only the ordinary ray tracing the renderer already does. In flatland, where the
 # enumeration is cheap and exact, `boundary` is the unbiased reference the other methods are
