@@ -17,7 +17,8 @@ The figures:
   packages' ``plot`` modules and the command line;
 * :mod:`flatland.plotting.textbook` (with
   :mod:`~flatland.plotting.textbook_estimates`) and
-  :mod:`flatland.plotting.tutorials`: figures returned to a notebook.
+  :mod:`flatland.plotting.tutorials`: figures returned to a notebook, with
+  :mod:`flatland.plotting.probe_rays` for the probe rays of tutorial 8.
 
 No module here imports pyplot or selects a matplotlib backend (figures are made as
 :class:`matplotlib.figure.Figure` objects), so importing any of them leaves a

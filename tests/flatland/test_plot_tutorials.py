@@ -19,7 +19,9 @@ from matplotlib.figure import Figure
 from flatland.core.image import GradientImage, Image
 from flatland.core.stats import normal_quantile
 from flatland.core.validate import ValidationError
+from flatland.plotting import probe_rays as prb
 from flatland.plotting import tutorials as ptu
+from flatland.plotting.style import METHOD_COLOURS
 
 RNG = np.random.default_rng(20191117)
 
@@ -179,3 +181,86 @@ def test11_figures_render_to_non_blank_pngs():
         fig.savefig(buffer, format="png")
         data = plt.imread(io.BytesIO(buffer.getvalue()))
         assert data.std() > 0.01
+
+
+# ------------------------------------------------------------------ the probe figure (tutorial 8)
+PROBE_SEGMENTS = np.array([[[-1.0, 1.0], [0.0, 1.0]], [[-2.0, 2.0], [2.0, 2.0]]])  # near, wall
+PROBE_ENDS = np.array([[-0.3, 1.0], [-0.1, 1.0], [0.2, 2.0], [1.5, 5.0]])  # the last one misses
+
+
+def _probe_figure(**kw):
+    return prb.plot_probes(PROBE_SEGMENTS, [0.0, 0.0], PROBE_ENDS, np.array([0, 0, 1, -1]), **kw)
+
+
+def _by_gid(ax, gid):
+    return [a for a in [*ax.lines, *ax.patches] if a.get_gid() == gid]
+
+
+def test12_plot_probes_draws_segments_probes_pair_bracket_tangents_and_the_point():
+    before = plt.get_fignums()
+    fig = _probe_figure(
+        pair=(0, 2), bracket=(1, 2), point=[-0.1, 1.0], tangents=[([-0.1, 1.0], [0.0, -1.0])], moving=[0]
+    )
+    assert isinstance(fig, Figure) and plt.get_fignums() == before
+    ax = fig.axes[0]
+    segments = _by_gid(ax, "segment")
+    assert len(segments) == 2
+    for line, (a, b), k in zip(segments, PROBE_SEGMENTS, range(2), strict=True):
+        np.testing.assert_array_equal(line.get_xydata(), [a, b])
+        assert line.get_color() == prb.SEGMENT_COLOURS[k]
+    assert segments[0].get_linewidth() > segments[1].get_linewidth()  # the moving one is thicker
+    probes = _by_gid(ax, "probe")
+    assert len(probes) == 4
+    for line, end in zip(probes, PROBE_ENDS, strict=True):
+        np.testing.assert_array_equal(line.get_xydata(), [[0.0, 0.0], end])
+    # a hit has the colour of what it hits; a miss is grey and dashed
+    assert [p.get_color() for p in probes] == [prb.SEGMENT_COLOURS[0]] * 2 + [
+        prb.SEGMENT_COLOURS[1],
+        prb.MISS_COLOUR,
+    ]
+    assert probes[3].get_linestyle() == "--" and probes[0].get_linestyle() == "-"
+    widths = [p.get_linewidth() for p in probes]
+    assert widths[0] == widths[2] == prb.THICK and widths[1] == widths[3] == prb.THIN  # the pair is thick
+    (wedge,) = _by_gid(ax, "bracket")
+    np.testing.assert_allclose(wedge.get_xy()[:3], [[0.0, 0.0], PROBE_ENDS[1], PROBE_ENDS[2]])
+    (tangent,) = _by_gid(ax, "tangent")
+    assert tangent.get_linestyle() == ":"
+    (point,) = _by_gid(ax, "point")
+    np.testing.assert_array_equal(point.get_xydata(), [[-0.1, 1.0]])
+    assert point.get_color() == prb.CHOSEN_COLOUR == METHOD_COLOURS["reparam"]
+    assert len(ax.get_legend().get_texts()) == 6
+    assert [t.get_text() for t in ax.texts] == ["0", "1", "2", "3"]  # probes numbered in order
+
+
+def test13_plot_probes_without_a_choice_draws_no_point_and_renders():
+    fig = _probe_figure(title="identity")
+    ax = fig.axes[0]
+    assert _by_gid(ax, "point") == [] and _by_gid(ax, "bracket") == [] and _by_gid(ax, "tangent") == []
+    assert ax.get_title() == "identity" and len(ax.get_legend().get_texts()) == 2
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    assert plt.imread(io.BytesIO(buffer.getvalue())).std() > 0.01
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"segments": np.zeros((2, 3))}, "segments"),
+        ({"ends": np.full((4, 2), np.nan)}, "ends"),
+        ({"hits": np.array([0, 0, 1])}, "hits"),
+        ({"hits": np.array([0, 0, 2, -1])}, "hits"),
+        ({"pair": (0, 4)}, "pair"),
+        ({"bracket": (1,)}, "bracket"),
+        ({"point": [1.0]}, "point"),
+    ],
+)
+def test14_plot_probes_rejects_bad_input_naming_the_field(change, field):
+    args = {
+        "segments": PROBE_SEGMENTS,
+        "origin": [0.0, 0.0],
+        "ends": PROBE_ENDS,
+        "hits": np.array([0, 0, 1, -1]),
+    }
+    args.update(change)
+    with pytest.raises(ValidationError, match=field):
+        prb.plot_probes(**args)
