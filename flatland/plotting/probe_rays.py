@@ -168,5 +168,5 @@ def plot_probes(
     if point is not None:
         legend.append(Line2D([], [], color=CHOSEN_COLOUR, marker="*", markersize=10, linestyle="none",
                              label="chosen point"))  # fmt: skip
-    ax.legend(handles=legend, loc="best", fontsize=7)
+    ax.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, fontsize=7)
     return ax.figure
