@@ -292,8 +292,9 @@ assert np.allclose(swapped.velocity, [1.0, 0.0], rtol=0.0, atol=TOL)
 # moving with $dp/d\theta = (1/2, 1/2)$ — the derivative of the intersection of two *moving*
 # lines, recomputed from the attached points and normals.
 #
-# Lines that are nearly parallel meet far away or at a badly conditioned point, so above
-# $|n_0\cdot n_1| > 0.99$ the rule falls back to probe 0's shape. `west` from $(-1, 3)$ to $(0, 3)$
+# Lines that are nearly parallel meet far away or at a badly conditioned point (a small error in
+# either normal moves it far along the lines), so above $|n_0\cdot n_1| > 0.99$ the rule falls back
+# to probe 0's shape. `west` from $(-1, 3)$ to $(0, 3)$
 # and `east` from $(0, 3)$ to $(1, 2.95)$ have $|n_0\cdot n_1| = 1/\sqrt{1 + 0.05^2} = 0.99875$; neither
 # occludes the other, so the point is `west`'s hit next to the switch, probe 1's
 # $(-0.1 \cdot 3, 3) = (-0.3, 3)$, moving with `west` (`west.translate.x`).
@@ -483,9 +484,8 @@ def pixel_estimates(point, ok):
 
 
 chosen = pixel_estimates(choice.point, choice.ok)
-wall_point = attached_points(geom, prim[:, -1], coord[:, -1])[
-    0
-]  # probe 3's hit: the wall where t_e is bracketed
+# probe 3's hit: on the wall wherever the probes bracket t_e
+wall_point, _ = attached_points(geom, prim[:, -1], coord[:, -1])
 wall = pixel_estimates(wall_point, choice.ok & (prim[:, -1] == 1))
 closed = -float(filter_value("gaussian", T_EDGE, centre, width))  # -k_4(t_e) t_e'
 epsilon = 2.0 * stats.norm.sf(3.0)
@@ -498,9 +498,10 @@ print(f"following the wall instead: {tangent(wall).mean():.4f}")
 
 # %%
 # check: following the chosen points, the derivative matches the predicted mean (1 - ε) · closed form within
-# z standard errors (i.i.d. samples, two-sided, level 1e-3; the bias ε · |closed| = 0.02 is below the
-# resolution z · stderr); the primal is L(t), the naive estimate, bit for bit; following the wall, which
-# does not move, gives exactly 0: the whole derivative is lost
+# z standard errors (i.i.d. samples, two-sided, level 1e-3). The bias ε · |closed| = 0.02 is below the
+# resolution z · stderr here; with 2·10^7 samples (40 seeds) the mean was -7.336 ± 0.006, 1.6 standard
+# errors from the prediction -7.346 and 4.8 from the closed form -7.365. The primal is L(t), the naive
+# estimate, bit for bit; following the wall, which does not move, gives exactly 0: the derivative is lost
 z = normal_quantile(1.0 - sidak(1e-3, 1))
 assert abs(mean - (1.0 - epsilon) * closed) <= z * stderr
 assert abs(epsilon * closed) < z * stderr
