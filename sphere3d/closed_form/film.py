@@ -214,7 +214,9 @@ def polygon_filter_derivative(polygon: Any, polygon_dot: Any, centres: Any, kind
 def project(camera: Camera, points: Any) -> tuple[Any, Any]:
     """Continuous pixel coordinates (x right, y down) of 3D points through the pinhole; Dual-aware.
 
-    With (f, r, u) the camera frame (:meth:`~sphere3d.scene.Camera.frame`) and
+    With (f, r, u) the camera frame built here from the scene format's convention
+    (f toward ``look_at``, r = f × up normalized, u = r × f; not with the renderer's
+    :meth:`~sphere3d.scene.Camera.frame`, so a mistake there cannot be shared) and
     q = P - position, the ray through P meets the film plane (distance 1 along f) at
     (q·r, q·u) / (q·f); the camera maps the film square [-t, t] (t = tan(fov/2)) to
     [0, width) and [-t h/w, t h/w] to [0, height) top to bottom (square pixels):
@@ -227,7 +229,17 @@ def project(camera: Camera, points: Any) -> tuple[Any, Any]:
         If a point is not strictly in front of the camera (q·f <= 0): behind the pinhole
         a straight edge does not project to a straight segment.
     """
-    f, r, u = camera.frame()
+    f = np.subtract(camera.look_at, camera.position)
+    f = f / math.sqrt(float(f @ f))
+    r = np.array(  # f × up, written out component by component
+        [
+            f[1] * camera.up[2] - f[2] * camera.up[1],
+            f[2] * camera.up[0] - f[0] * camera.up[2],
+            f[0] * camera.up[1] - f[1] * camera.up[0],
+        ]
+    )
+    r = r / math.sqrt(float(r @ r))
+    u = np.array([r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]])
     q = points - np.asarray(camera.position)
     depth = q @ f
     if not np.all(np.asarray(detach(depth)) > 0.0):
