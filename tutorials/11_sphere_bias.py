@@ -48,7 +48,7 @@ from flatland.plotting import tutorials as ptu
 from flatland.plotting.convergence import plot_error_time
 from sphere3d import closed_form as cf
 from sphere3d.methods import GRADIENT_METHODS
-from sphere3d.sampling import GAUSSIAN_RADIUS
+from sphere3d.sampling import filter_radius
 from sphere3d.tasks import ImageTask
 
 SEED = 20191117
@@ -148,7 +148,7 @@ assert np.all(np.isfinite(REF)) and np.all(REF_SE >= 0.0)
 # %%
 state = SCENE.state()
 camera = state.camera
-reach = GAUSSIAN_RADIUS + 0.5
+reach = filter_radius(SCENE.camera.filter) + 0.5  # the gaussian filter: 3σ = 1.5 px
 grid = np.arange(-reach, reach + 1e-9, 0.5)
 gx, gy = np.meshgrid(grid, grid)
 inside = gx**2 + gy**2 <= reach**2
