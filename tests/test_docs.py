@@ -27,6 +27,10 @@
    tests that exist.
 8. No file cites a document that is not shipped: a citation names the paper's section or a
    theory page, never "DESIGN" followed by a section number.
+9. The architecture page (docs/theory/architecture.md) names every module of both packages,
+   and every ``flatland``/``sphere3d`` name or path it writes in backticks exists.
+10. Docstring maths written ``$...$`` reaches the API pages as ``:math:`` roles (typeset by
+    MathJax), and no docstring keeps a stray dollar outside literals.
 """
 
 from __future__ import annotations
@@ -490,10 +494,11 @@ def _register_sphinx_markup() -> None:
 
 
 def _as_the_site_reads_it(doc: str, what: str, name: str, obj: Any) -> str:
-    """The docstring after the site's pipe escaping, napoleon and plain-type passes (docs/_ext)."""
+    """The docstring after the site's maths and pipe passes, napoleon and the plain-type pass (docs/_ext)."""
     from sphinx.ext.napoleon import Config, NumpyDocstring
 
-    lines = [project_docs._escape_pipes(line) for line in doc.splitlines()]
+    lines = doc.splitlines()
+    project_docs._process_docstring(None, what, name, obj, None, lines)
     config = Config(napoleon_google_docstring=False, napoleon_use_ivar=False, napoleon_use_param=False,
                     napoleon_use_rtype=False)  # fmt: skip
     lines = NumpyDocstring(lines, config, app=None, what=what, name=name, obj=obj).lines()
@@ -683,3 +688,59 @@ def test14_no_file_cites_a_document_that_is_not_shipped():
             if pattern.search(line):
                 hits.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()[:80]}")
     assert not hits, "citations of an unshipped document:\n" + "\n".join(hits)
+
+
+ARCHITECTURE = DOCS / "theory" / "architecture.md"
+DOTTED = re.compile(r"`~?((?:flatland|sphere3d)(?:\.\w+)*)`")
+"""A dotted project name in backticks, plain (```flatland.state```) or in a role (``{func}`~flatland.x```)."""
+PATH = re.compile(r"`((?:flatland|sphere3d)/[\w./]*)`")
+"""A project path in backticks: ```flatland/core/```, ```flatland/integrals.py```."""
+
+
+def all_modules(package: str) -> set[str]:
+    """``package`` and every module under it, private ones and ``__main__`` included (found, not imported)."""
+    pkg = importlib.import_module(package)
+    return {package} | {info.name for info in pkgutil.walk_packages(pkg.__path__, package + ".")}
+
+
+def test15_the_architecture_page_names_every_module_and_only_real_ones():
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    named = set(DOTTED.findall(text))
+    modules = set().union(*(all_modules(p) for p in AVAILABLE))
+    assert {"flatland.core.dual", "flatland.__main__"} <= modules  # the walk sees private modules
+    missing = sorted(modules - named)
+    assert not missing, f"modules missing from {ARCHITECTURE.name}: {missing}"
+    unknown = []
+    for name in sorted(named - modules):  # not a module: must be an attribute of one (a function, a class)
+        if name.split(".")[0] not in AVAILABLE:
+            continue
+        try:
+            resolve(name)
+        except (ImportError, AttributeError):
+            unknown.append(name)
+    unknown += [path for path in PATH.findall(text) if not (ROOT / path).exists()]
+    assert not unknown, f"{ARCHITECTURE.name} names what does not exist: {unknown}"
+
+
+def test16_docstring_maths_in_dollars_becomes_math_roles_and_no_dollar_is_left():
+    convert = project_docs.dollar_math
+    assert convert("bias $h^2 I'''(θ)/6$ at $|x|$") == "bias :math:`h^2 I'''(θ)/6` at :math:`|x|`"
+    assert convert("``$x$`` and $a$") == "``$x$`` and :math:`a`"  # literals stay as written
+    assert convert("costs $5 and $6, or \\$3") == "costs $5 and $6, or $3"  # no formula: spaces inside
+    from flatland.textbook.finite_difference import finite_difference
+
+    lines = inspect.getdoc(finite_difference).splitlines()
+    project_docs._process_docstring(
+        None, "function", "flatland.textbook.finite_difference", None, None, lines
+    )
+    assert ":math:`I'(θ) + h^2 I'''(θ) / 6 + O(h^4)`" in "\n".join(lines)
+    stray = []
+    for package in AVAILABLE:
+        for what, name, obj in _documented(package):
+            lines = (inspect.getdoc(obj) or "").splitlines()
+            project_docs._process_docstring(None, what, name, obj, None, lines)
+            outside = [re.sub(r"``.+?``|:math:`[^`]*`", "", line) for line in lines]
+            stray += [f"{name}: {line.strip()}" for line in outside if "$" in line]
+    assert not stray, "dollars left as text (a formula split over lines, or a space inside):\n" + "\n".join(
+        stray
+    )

@@ -35,11 +35,16 @@ Re-exported names
 (``flatland.textbook.estimate``, ``flatland.core.dual.Dual``); a reference to the
 re-exported name resolves to that page.
 
-Plain-text mathematics in docstrings
-------------------------------------
-Docstrings write absolute values and determinants as ``|x|`` and ``|det J|``, which
-reStructuredText would read as substitution references. Pipes outside literals,
-roles and table lines are escaped before the docstring is parsed.
+Mathematics in docstrings
+-------------------------
+Docstrings write formulas as the theory pages do, between dollars:
+``$I'(θ) + h^2 I'''(θ) / 6$`` (TeX, with Unicode letters where they read better in
+``help()``; a formula stays on one line). Each ``$...$`` outside inline literals becomes
+a ``:math:`` role before the docstring is parsed, and MathJax typesets it as in the
+pages. A dollar sign that is not maths is written ``\\$`` or inside a literal.
+Plain-text absolute values and determinants, ``|x|`` and ``|det J|``, which
+reStructuredText would read as substitution references, are escaped outside literals,
+roles and table lines.
 
 Members outside ``__all__``
 ---------------------------
@@ -210,10 +215,28 @@ def _plain_types(app: Sphinx, what: str, name: str, obj: Any, options: Any, line
             lines[i] = f"{match.group(1)} *{match.group(2).strip()}*"
 
 
+_LITERAL = re.compile(r"(``.+?``)")
+_DOLLAR_MATH = re.compile(r"(?<![\\$\w])\$(?=[^\s$])((?:[^$\\]|\\.)+?)(?<=\S)\$(?![\w$])")
+"""Inline maths ``$...$`` as MyST's dollarmath reads it: no space just inside the dollars, no
+escaped dollar, not glued to a word on either side."""
+
+
+def dollar_math(line: str) -> str:
+    """``line`` with each ``$...$`` outside inline literals written as a ``:math:`` role; ``\\$`` as ``$``.
+
+    A formula containing a backquote (which would end the role) is left as written.
+    """
+    parts = _LITERAL.split(line)
+    for i in range(0, len(parts), 2):  # even parts are outside literals
+        text = _DOLLAR_MATH.sub(lambda m: m[0] if "`" in m[1] else f":math:`{m[1]}`", parts[i])
+        parts[i] = text.replace("\\$", "$")
+    return "".join(parts)
+
+
 def _process_docstring(app: Sphinx, what: str, name: str, obj: Any, options: Any, lines: list[str]) -> None:
-    """Escape plain-text pipes (``|x|``) in project docstrings, in place."""
+    """Project docstrings, in place: ``$...$`` as ``:math:`` roles, plain-text pipes (``|x|``) escaped."""
     if name.split(".")[0] in PROJECT_PACKAGES:
-        lines[:] = [_escape_pipes(line) for line in lines]
+        lines[:] = [_escape_pipes(dollar_math(line)) for line in lines]
 
 
 def _skip_outside_all(app: Sphinx, what: str, name: str, obj: Any, skip: bool, options: Any) -> bool | None:

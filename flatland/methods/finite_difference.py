@@ -22,15 +22,15 @@ __all__ = ["finite_difference"]
 
 @GRADIENT_METHODS.register("finite_difference", Option("h", 1e-3, check_positive))
 def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
-    """``[Î(θ0 + h) - Î(θ0 - h)] / 2h`` per pixel and batch, every estimate from the same samples.
+    """$[Î(θ_0 + h) - Î(θ_0 - h)] / 2h$ per pixel and batch, every estimate from the same samples.
 
     The three renders (at θ0 for the value, θ0 ± h for the difference) draw the same
     primary samples (the ``"samples"`` stream per batch) and differ only in the
     bound geometry: common random numbers, so the difference only sees samples
-    whose integrand changed, those within about ``h |c'|`` of a moving discontinuity.
+    whose integrand changed, those within about $h |c'|$ of a moving discontinuity.
 
     Assumes nothing about continuity. Biased by the truncation error: its
-    expectation is exactly ``[I(θ0 + h) - I(θ0 - h)] / 2h = I'(θ0) + h² I'''(θ0) / 6 + ...``,
+    expectation is exactly $[I(θ_0 + h) - I(θ_0 - h)] / 2h = I'(θ_0) + h^2 I'''(θ_0) / 6 + O(h^4)$,
     and where a pixel's I(θ) has a kink within h of θ0 (a discontinuity crossing the
     edge of a box filter) the error is O(1) in h. Its variance grows like 1 / h at
     discontinuities (like 1 / h² without common random numbers). Cost: three primal
@@ -40,15 +40,15 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     would be scaled by 1 - h <= 0, a point or a mirrored shape (a circle of radius <= 0).
 
     The default h = 1e-3 is ten times smaller than sphere3d's. The step trades the
-    truncation bias (h² I''' / 6, large where a pixel's I(θ) bends sharply, as when an
+    truncation bias ($h^2 I''' / 6$, large where a pixel's I(θ) bends sharply, as when an
     edge crosses a narrow filter; O(1) at a kink) against the variance, which grows
-    like 1 / h. The ``shadow`` image has 64 pixels here and 4096 in sphere3d, at about
+    like $1/h$. The ``shadow`` image has 64 pixels here and 4096 in sphere3d, at about
     the same cost per sample (4 µs), so flatland's pixels can be given the many
     samples a small step needs. Measured on ``silhouette`` (``ball.translate.y``,
     16384 samples per pixel, against ``boundary``): h = 0.1 was off by up to 2.6 (119
     standard errors) at the ball's edges, h = 1e-2 by at most 0.11 (2.7 standard
     errors), h = 1e-3 by up to 0.91 (9.8 standard errors): so few samples fall within
-    ``h |c'|`` of an edge that the batch standard errors (0.078 per pixel, against
+    $h |c'|$ of an edge that the batch standard errors (0.078 per pixel, against
     0.027 at h = 1e-2) are themselves unreliable. Use many samples with the default.
     """
     if task.param is not None and task.param.kind == "scale" and h >= 1.0:

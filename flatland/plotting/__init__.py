@@ -16,9 +16,9 @@ The figures:
   images, derivative images, the method panel and study results, behind the
   packages' ``plot`` modules and the command line;
 * :mod:`flatland.plotting.textbook` (with
-  :mod:`~flatland.plotting.textbook_estimates`) and
-  :mod:`flatland.plotting.tutorials`: figures returned to a notebook, with
-  :mod:`flatland.plotting.probe_rays` for the probe rays of tutorial 8.
+  :mod:`~flatland.plotting.textbook_estimates`), :mod:`flatland.plotting.tutorials` and
+  :mod:`flatland.plotting.convergence` (error against time): figures returned to a
+  notebook, with :mod:`flatland.plotting.probe_rays` for the probe rays of tutorial 8.
 
 No module here imports pyplot or selects a matplotlib backend (figures are made as
 :class:`matplotlib.figure.Figure` objects), so importing any of them leaves a

@@ -14,14 +14,14 @@ from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
 @METHODS.register("finite_difference", Option("h", 1e-2, check_positive))
 def finite_difference(integrand: Integrand, theta: float, n: int, seed: int, h: float) -> Estimate:
-    """Central difference ``[Î(θ + h) - Î(θ - h)] / 2h`` with the same samples at both ends.
+    """Central difference $[Î(θ + h) - Î(θ - h)] / 2h$ with the same samples at both ends.
 
     Common random numbers make the two estimates correlated, so their difference
     only sees the samples whose integrand changed: near a discontinuity, within
-    ``h |c'|`` of it. Assumes nothing about continuity, but is biased by the
-    truncation error: its expectation is exactly ``[I(θ + h) - I(θ - h)] / 2h =
-    I'(θ) + h² I'''(θ) / 6 + O(h⁴)``. Its variance grows like ``1 / h`` at a jump
-    (like ``1 / h²`` without common random numbers). Not part of the paper: the
+    $h |c'|$ of it. Assumes nothing about continuity, but is biased by the
+    truncation error: its expectation is exactly $[I(θ + h) - I(θ - h)] / 2h$, which is
+    $I'(θ) + h^2 I'''(θ) / 6 + O(h^4)$ where I is smooth. Its variance grows like $1/h$ at a
+    jump (like $1/h^2$ without common random numbers). Not part of the paper: the
     reference every gradient is checked against.
     """
     integrand.check_theta(theta - h, "theta - h")

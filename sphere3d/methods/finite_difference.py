@@ -18,19 +18,19 @@ from sphere3d.tasks import ImageTask, PointTask, Tally
 
 @GRADIENT_METHODS.register("finite_difference", Option("h", 1e-2, check_positive))
 def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
-    """``[Î(h) - Î(-h)] / 2h`` per batch (θ is the parameter's offset), the same samples at both ends.
+    """$[Î(h) - Î(-h)] / 2h$ per batch (θ is the parameter's offset), the same samples at both ends.
 
     Three plain renders (θ = 0 for the value, ±h for the difference), each with the
     primary samples of the same seed, so the difference only sees the samples whose
-    integrand changed: visibility flips within ``h |c'|`` of a moving edge, and the
+    integrand changed: visibility flips within $h |c'|$ of a moving edge, and the
     smooth change of everything else. Assumes nothing about continuity; biased by
-    the truncation error ``h² I'''/6 + O(h⁴)`` (per pixel), with a variance that grows
+    the truncation error $h^2 I'''/6 + O(h^4)$ (per pixel), with a variance that grows
     like 1/h at edges. Not part of the paper: the reference the other methods are
     checked against. For ``*.scale`` parameters (scale by 1 + θ) h must be < 1.
 
     The default h = 1e-2 is ten times flatland's: the step trades the truncation bias
     (O(1) in pixels whose I(θ) has a kink within h) against a variance that grows
-    like 1 / h, and the ``shadow`` image has 4096 pixels here and 64 in flatland, at
+    like $1/h$, and the ``shadow`` image has 4096 pixels here and 64 in flatland, at
     about the same cost per sample, so each pixel gets far fewer samples for the same
     time and the noise term dominates. Measured on ``shadow`` (``occluder.translate.x``, 256 samples per
     pixel): the per-pixel standard error was 0.040 at h = 1e-2 and 0.126 at h = 1e-3
