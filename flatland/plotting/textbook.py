@@ -12,19 +12,20 @@ leaks nothing. ``fig.savefig(path)`` writes one to a file. Colours come from
 :mod:`flatland.plotting.style`: a series whose label names a method has that
 method's colour.
 
-===========================  ==============================================
-:func:`plot_integrand`       f(x, θ) on a grid, discontinuities marked
-:func:`plot_curves`          named series y(x), optionally on log axes
-:func:`plot_histogram`       samples against the density they claim
-:func:`plot_terms`           the Leibniz terms of dI/dθ, stacked per case
-:func:`plot_estimates`       estimates ± confidence interval vs closed form
-:func:`plot_variance`        measured variance vs sample count, log-log
-:func:`plot_kappa_tradeoff`  bias ± interval and standard deviation vs κ
-===========================  ==============================================
+==================================  ================================================
+:func:`plot_integrand`              f(x, θ) on a grid, discontinuities marked
+:func:`plot_curves`                 named series y(x), optionally on log axes
+:func:`plot_histogram`              samples against the density they claim
+:func:`plot_terms`                  the Leibniz terms of dI/dθ, stacked per case
+:func:`plot_estimates`              estimates ± confidence interval vs closed form
+:func:`plot_variance`               measured variance vs sample count, log-log
+:func:`plot_kappa_tradeoff`         bias ± interval and standard deviation vs κ
+:func:`plot_histogram_vs_normal`    repeated estimates vs their predicted normal law
+==================================  ================================================
 
-The last three live in :mod:`flatland.plotting.textbook_estimates` and are
+The last four live in :mod:`flatland.plotting.textbook_estimates` and are
 importable from here, so ``from flatland.plotting import textbook as pt`` gives
-all seven.
+all eight.
 """
 
 from __future__ import annotations
@@ -46,7 +47,12 @@ from flatland.plotting.style import (
     same_length,
     series_styles,
 )
-from flatland.plotting.textbook_estimates import plot_estimates, plot_kappa_tradeoff, plot_variance
+from flatland.plotting.textbook_estimates import (
+    plot_estimates,
+    plot_histogram_vs_normal,
+    plot_kappa_tradeoff,
+    plot_variance,
+)
 
 __all__ = [
     "FIGSIZE",
@@ -54,6 +60,7 @@ __all__ = [
     "plot_curves",
     "plot_estimates",
     "plot_histogram",
+    "plot_histogram_vs_normal",
     "plot_integrand",
     "plot_kappa_tradeoff",
     "plot_terms",

@@ -1,4 +1,5 @@
-"""Figures of Monte Carlo estimates of the textbook integrals: intervals, variances, the κ trade-off.
+"""Figures of Monte Carlo estimates of the textbook integrals: intervals, variances, the κ trade-off, and
+the histogram of repeated estimates against their predicted normal law.
 
 Like :mod:`flatland.plotting.textbook` (which re-exports them), every function draws
 data computed elsewhere and returns a :class:`~matplotlib.figure.Figure` made without
@@ -17,18 +18,21 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from flatland.core.contract import Estimate
-from flatland.core.validate import ValidationError
+from flatland.core.stats import normal_quantile
+from flatland.core.validate import ValidationError, check_finite, check_int, check_positive
 from flatland.plotting.bands import draw_estimate
 from flatland.plotting.style import (
     FIGSIZE,
     METHOD_COLOURS,
+    OTHER_COLOURS,
     REFERENCE_STYLE,
+    coverage_label,
     method_colour,
     new_axes,
     same_length,
 )
 
-__all__ = ["plot_estimates", "plot_kappa_tradeoff", "plot_variance"]
+__all__ = ["plot_estimates", "plot_histogram_vs_normal", "plot_kappa_tradeoff", "plot_variance"]
 
 
 def _mean_stderr(name: str, item: Estimate | Sequence[float], of: str) -> tuple[float, float]:
@@ -218,3 +222,71 @@ def plot_kappa_tradeoff(
     if title:
         fig.suptitle(title)
     return fig
+
+
+def plot_histogram_vs_normal(
+    estimates: Any,
+    mean: float,
+    stderr: float,
+    *,
+    bins: int = 41,
+    width: float = 4.0,
+    level: float = 0.99,
+    label: str = "estimates",
+    ax: Axes | None = None,
+    title: str | None = None,
+    xlabel: str = "estimate",
+) -> Figure:
+    """Draw repeated independent estimates as a histogram over the normal density predicted for them.
+
+    By the central limit theorem a mean of N i.i.d. terms of variance σ² is nearly
+    N(mean, stderr²) with ``stderr = σ/√N`` (theory/monte_carlo): the bars should follow the curve.
+
+    Parameters
+    ----------
+    estimates : array_like
+        The repeated estimates, one per independent run, all finite.
+    mean, stderr : float
+        The predicted mean and standard error (closed forms, not fitted to ``estimates``).
+    bins : int
+        Equal-width bins over ``mean ± width · stderr``. The bars are densities over all
+        estimates, so their area is the fraction of estimates inside that range.
+    width : float
+        Half-width of the histogram range, in standard errors.
+    level : float
+        The interval ``mean ± z · stderr`` (z the two-sided normal quantile of ``level``),
+        which one estimate falls in with probability ``level``, is marked by two dotted
+        lines; the legend states its coverage.
+    label : str
+        Legend entry of the bars; a label naming a method (``"naive dI/dθ"``) gives the
+        bars the method's colour.
+    ax, title, xlabel
+        As in :func:`~flatland.plotting.textbook.plot_integrand`.
+
+    Returns
+    -------
+    Figure
+    """
+    values = np.asarray(estimates, dtype=np.float64).ravel()
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        raise ValidationError("estimates", f"must be non-empty and finite, got {values.size} entries")
+    mean, stderr = check_finite("mean", mean), check_positive("stderr", stderr)
+    bins, width = check_int("bins", bins), check_positive("width", width)
+    if not 0.0 < level < 1.0:
+        raise ValidationError("level", f"must lie in (0, 1), got {level!r}")
+    low, high = mean - width * stderr, mean + width * stderr
+    ax = new_axes(ax, title)
+    counts, edges = np.histogram(values, bins=bins, range=(low, high))
+    colour = method_colour(label, OTHER_COLOURS[0])  # a method's bars in its colour
+    ax.bar(edges[:-1], counts / (values.size * np.diff(edges)), width=np.diff(edges), align="edge",
+           alpha=0.5, color=colour, label=f"{label}, {values.size} runs")  # fmt: skip
+    x = np.linspace(low, high, 401)
+    density = np.exp(-0.5 * ((x - mean) / stderr) ** 2) / (stderr * np.sqrt(2.0 * np.pi))
+    ax.plot(x, density, label="normal, predicted mean and stderr", **REFERENCE_STYLE)
+    z = normal_quantile(level)
+    for text, side in ((f"mean ± {z:.2f} stderr, {coverage_label(level)}", -1.0), (None, 1.0)):
+        ax.axvline(mean + side * z * stderr, color="gray", linestyle=":", linewidth=1.0, label=text)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("density")
+    ax.legend(loc="best", fontsize=8)
+    return ax.figure

@@ -15,6 +15,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from matplotlib.collections import LineCollection
+from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 
 from flatland import estimate
@@ -22,6 +23,7 @@ from flatland.core.dual import variable
 from flatland.core.stats import normal_quantile
 from flatland.integrals import INTEGRALS
 from flatland.plotting import textbook as pt
+from flatland.plotting.style import METHOD_COLOURS, OTHER_COLOURS
 
 
 def segments_of(ax):
@@ -44,6 +46,7 @@ def test01_helpers_return_figures_outside_pyplot():
         pt.plot_estimates({"a": (1.0, 0.1)}, 1.0),
         pt.plot_variance([10, 100], {"v": [1.0, 0.1]}),
         pt.plot_kappa_tradeoff([1, 10], [0.1, 0.0], [0.01, 0.02], [1.0, 3.0], level=0.99),
+        pt.plot_histogram_vs_normal([0.9, 1.0, 1.1], 1.0, 0.1),
     ]
     assert all(isinstance(f, Figure) for f in figs)
     assert plt.get_fignums() == before
@@ -163,6 +166,10 @@ def test09_plot_curves_and_histogram_draw_what_they_are_given():
         (lambda: pt.plot_estimates({"a": (1.0, 2.0)}, of="bias"), "of"),
         (lambda: pt.plot_variance([1, 2], {"v": [1.0]}), "variances['v']"),
         (lambda: pt.plot_kappa_tradeoff([1, 2], [0.1], [0.1, 0.1], [1, 1], level=0.99), "bias"),
+        (lambda: pt.plot_histogram_vs_normal([1.0, np.nan], 1.0, 0.1), "estimates"),
+        (lambda: pt.plot_histogram_vs_normal([1.0], 1.0, 0.0), "stderr"),
+        (lambda: pt.plot_histogram_vs_normal([1.0], np.inf, 0.1), "mean"),
+        (lambda: pt.plot_histogram_vs_normal([1.0], 1.0, 0.1, level=1.0), "level"),
     ],
 )
 def test10_mismatched_input_raises_one_value_error_naming_the_field(call, field):
@@ -178,3 +185,32 @@ def test11_a_figure_renders_to_a_non_blank_png():
     fig.savefig(buffer, format="png")
     image = plt.imread(io.BytesIO(buffer.getvalue()))
     assert image.shape[0] > 100 and image.std() > 0.01
+
+
+def test12_plot_histogram_vs_normal_draws_the_densities_the_predicted_normal_and_its_interval():
+    mean, stderr, level = 2.0, 0.5, 0.99
+    estimates = np.array([1.0, 1.9, 2.0, 2.1, 2.2, 3.9, 9.0])  # 9.0 lies outside mean ± 4 stderr
+    fig = pt.plot_histogram_vs_normal(estimates, mean, stderr, bins=8, level=level, label="naive dI/dθ")
+    ax = fig.axes[0]
+    bars = ax.patches
+    assert len(bars) == 8
+    assert bars[0].get_x() == pytest.approx(mean - 4 * stderr) and bars[0].get_width() == pytest.approx(0.5)
+    area = sum(b.get_height() * b.get_width() for b in bars)
+    assert area == pytest.approx(6 / 7)  # densities over all estimates: the area is the fraction inside
+    assert bars[2].get_height() == pytest.approx(1 / (7 * 0.5))  # 1.0 falls into [1.0, 1.5)
+    assert bars[0].get_facecolor()[:3] == pytest.approx(to_rgb(METHOD_COLOURS["naive"]))
+    curve = ax.lines[0]
+    x, y = curve.get_xdata(), curve.get_ydata()
+    np.testing.assert_allclose(y, np.exp(-0.5 * ((x - mean) / stderr) ** 2) / (stderr * np.sqrt(2 * np.pi)))
+    assert curve.get_color() == "#000000" and curve.get_linestyle() == "--"
+    z = normal_quantile(level)
+    marks = sorted(line.get_xdata()[0] for line in ax.lines[1:])
+    np.testing.assert_allclose(marks, [mean - z * stderr, mean + z * stderr])
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend == [
+        "normal, predicted mean and stderr",
+        "mean ± 2.58 stderr, 99 % interval",
+        "naive dI/dθ, 7 runs",
+    ]
+    other = pt.plot_histogram_vs_normal(estimates, mean, stderr, label="plain")
+    assert other.axes[0].patches[0].get_facecolor()[:3] == pytest.approx(to_rgb(OTHER_COLOURS[0]))
