@@ -29,7 +29,7 @@ def projected_solid_angle(point: Any, normal: Any, vertices: Any) -> Any:
     subtends the great arc $u_i → u_{i+1}$ of angle $γ_i$, and by Stokes' theorem on the
     sphere the cosine-weighted solid angle is the sum of those arcs' contributions:
 
-        $Φ = ½ Σ_i γ_i n·m_i$,    $γ_i = \operatorname{atan2}(|u_i × u_{i+1}|, u_i·u_{i+1})$,
+        $Φ = ½ Σ_i γ_i n·m_i$,    $γ_i = \mathrm{atan2}(|u_i × u_{i+1}|, u_i·u_{i+1})$,
         $m_i = (u_i × u_{i+1}) / |u_i × u_{i+1}|$.
 
     The sum is positive when the vertices wind counter-clockwise about n (seen from
