@@ -190,7 +190,7 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
     Parameters
     ----------
     u : ndarray, shape (..., 3)
-        Uniforms: u₀ picks the triangle (inverse CDF of the areas), (u₁, u₂) the point.
+        Uniforms: $u_0$ picks the triangle (inverse CDF of the areas), $(u_1, u_2)$ the point.
     triangles : ndarray, shape (T, 3, 3)
         Vertex positions.
 
@@ -254,7 +254,7 @@ def _filter_1d(x, kind: str):
 def filter_value(s, kind: str):
     """The pixel filter k(s) at offsets ``s`` (..., 2) from the pixel centre (integrates to 1).
 
-    ``box``: 1 on [-½, ½]²; ``tent``: $(1 - |x|)(1 - |y|)$ on [-1, 1]²; ``gaussian``:
+    ``box``: 1 on $[-½, ½]^2$; ``tent``: $(1 - |x|)(1 - |y|)$ on $[-1, 1]^2$; ``gaussian``:
     the product of $(e^{-x^2/2σ^2} - e^{-R^2/2σ^2}) / Z$ with σ = ½, R = 3σ, continuous at R.
     Tent and gaussian are continuous, which the reparameterized pixel integral needs
     (theory/pixel_filters); a Dual ``s`` gives the filter's derivative.
