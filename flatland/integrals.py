@@ -3,11 +3,11 @@
 Each integrand f(x, θ) lives on a domain (the real line or the circle S¹), comes
 with a θ-independent proposal density to sample x from, the closed forms I(θ) and
 dI/dθ, and the list of its discontinuities: where f jumps (a :class:`Dual` whose
-tangent is dc/dθ) and by how much (``f(c⁻) - f(c⁺)``). Moving integration limits
+tangent is dc/dθ) and by how much ($f(c^-) - f(c^+)$). Moving integration limits
 are written as indicator discontinuities of an integrand on the whole domain, so
 the Leibniz rule (theory/leibniz) reads
 
-    dI/dθ = ∫ ∂f/∂θ dx + Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ).
+    $dI/dθ = ∫ ∂f/∂θ dx + Σ_i [f(c_i^-) - f(c_i^+)] c_i'(θ)$.
 
 ``f`` accepts a Dual ``x`` (a reparameterized sample) and a Dual ``θ``: indicators
 are evaluated on values (their derivative is zero wherever it exists) and the
@@ -56,23 +56,23 @@ __all__ = [
 
 # ------------------------------------------------------------------ domains
 class Line:
-    """The real line. Its convolution kernel is the Gaussian of variance 1/κ."""
+    """The real line. Its convolution kernel is the Gaussian of variance $1/κ$."""
 
     name = "line"
 
     @staticmethod
     def distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """|a - b|."""
+        """$|a - b|$."""
         return np.abs(a - b)
 
     @staticmethod
     def sample_kernel(u: np.ndarray, center: np.ndarray, kappa: float) -> np.ndarray:
-        """Kernel sample around ``center``: N(center, 1/κ)."""
+        """Kernel sample around ``center``: $N(center, 1/κ)$."""
         return sample_gaussian(u, 0.0, 1.0 / np.sqrt(kappa)) + center
 
     @staticmethod
     def log_kernel(x: Any, center: np.ndarray, kappa: float) -> Any:
-        """log k(x, center), the log density of N(center, 1/κ) at ``x`` (a Dual welcome)."""
+        r"""$\log k(x, center)$, the log density of $N(center, 1/κ)$ at ``x`` (a Dual welcome)."""
         return log_pdf_gaussian(x, center, 1.0 / np.sqrt(kappa))
 
 
@@ -93,13 +93,13 @@ class Circle:
 
     @staticmethod
     def log_kernel(x: Any, center: np.ndarray, kappa: float) -> Any:
-        """log k(x, center), the log von Mises density at ``x`` (a Dual welcome)."""
+        r"""$\log k(x, center)$, the log von Mises density at ``x`` (a Dual welcome)."""
         return log_pdf_von_mises(x, center, kappa)
 
 
 @dataclass(frozen=True)
 class Discontinuity:
-    """A point where f jumps: location c(θ) as a Dual (tangent dc/dθ) and jump f(c⁻) - f(c⁺)."""
+    """A point where f jumps: location c(θ) as a Dual (tangent dc/dθ) and jump $f(c^-) - f(c^+)$."""
 
     location: Dual
     jump: float
@@ -162,7 +162,7 @@ class Integrand(ABC):
         return t
 
     def discontinuity_term(self, theta: float) -> float:
-        """Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ): what naive differentiation drops (theory/leibniz)."""
+        """$Σ_i [f(c_i^-) - f(c_i^+)] c_i'(θ)$: what naive differentiation drops (theory/leibniz)."""
         return float(sum(d.jump * float(d.location.tangent) for d in self.discontinuities(variable(theta))))
 
     def __repr__(self) -> str:
@@ -193,10 +193,10 @@ class _UniformCircleProposal:
 
 
 class LeibnizSeed(_GaussianProposal, Integrand):
-    """The seed example: f = 1 for x > 2θ, 0 below, integrated over [0, 4θ]; I = 2θ, dI/dθ = 2.
+    """The seed example: $f = 1$ for $x > 2θ$, 0 below, integrated over $[0, 4θ]$; $I = 2θ$, $dI/dθ = 2$.
 
-    On the whole line f = 1_{2θ < x < 4θ}. Interior term 0, moving limit 1·4, moving
-    step (0 - 1)·2: dI/dθ = 2 (Leibniz rule, theory/leibniz). Two discontinuities moving at different
+    On the whole line $f = 1_{2θ < x < 4θ}$. Interior term 0, moving limit $1·4$, moving
+    step $(0 - 1)·2$: $dI/dθ = 2$ (Leibniz rule, theory/leibniz). Two discontinuities moving at different
     speeds, so one translation per sample cannot follow both.
     """
 
@@ -223,9 +223,10 @@ class LeibnizSeed(_GaussianProposal, Integrand):
 
 
 class Step(_GaussianProposal, Integrand):
-    """The paper's example (Loubet et al. 2019, Sec. 3.2): f = 1_{x > θ} K(x), K the standard normal density.
+    """The paper's example (Loubet et al. 2019, Sec. 3.2): $f = 1_{x > θ} K(x)$, K the standard normal
+    density.
 
-    I = 1 - Φ(θ), dI/dθ = -K(θ); naive differentiation returns 0.
+    $I = 1 - Φ(θ)$, $dI/dθ = -K(θ)$; naive differentiation returns 0.
     """
 
     name = "step"
@@ -249,9 +250,9 @@ class Step(_GaussianProposal, Integrand):
 
 
 class TwoSteps(_GaussianProposal, Integrand):
-    """Two steps moving at different speeds: f = 1_{θ < x < 2θ} K(x).
+    """Two steps moving at different speeds: $f = 1_{θ < x < 2θ} K(x)$.
 
-    I = Φ(2θ) - Φ(θ), dI/dθ = 2K(2θ) - K(θ). One translation cannot follow both
+    $I = Φ(2θ) - Φ(θ)$, $dI/dθ = 2K(2θ) - K(θ)$. One translation cannot follow both
     ends (Loubet et al. 2019, Sec. 4.2): the case for convolution kernels.
     """
 
@@ -280,7 +281,7 @@ class TwoSteps(_GaussianProposal, Integrand):
 
 
 class SmoothBump(_GaussianProposal, Integrand):
-    """A smooth integrand: f = K(x - θ) (1 + x²); I = 2 + θ², dI/dθ = 2θ. Naive AD is right here."""
+    """A smooth integrand: $f = K(x - θ) (1 + x^2)$; $I = 2 + θ^2$, $dI/dθ = 2θ$. Naive AD is right here."""
 
     name = "smooth"
     title = "K(x − θ)(1 + x²)"
@@ -303,10 +304,10 @@ class SmoothBump(_GaussianProposal, Integrand):
 
 
 class Arc(_UniformCircleProposal, Integrand):
-    """An arc indicator on S¹ times a smooth function: f = 1_{φ ∈ [θ, θ + w]} (1 + a cos φ).
+    r"""An arc indicator on S¹ times a smooth function: $f = 1_{φ ∈ [θ, θ + w]} (1 + a \cos φ)$.
 
-    The angular domain flatland renders on. I = w + a (sin(θ + w) - sin θ),
-    dI/dθ = a (cos(θ + w) - cos θ). Both ends move at speed 1: one rotation
+    The angular domain flatland renders on. $I = w + a (\sin(θ + w) - \sin θ)$,
+    $dI/dθ = a (\cos(θ + w) - \cos θ)$. Both ends move at speed 1: one rotation
     (a translation of the angle) follows both.
     """
 
@@ -334,9 +335,9 @@ class Arc(_UniformCircleProposal, Integrand):
 
 
 class ArcStretch(_UniformCircleProposal, Integrand):
-    """An arc whose ends move at different speeds: f = 1_{φ ∈ [θ, 2θ]} (1 + a cos φ).
+    r"""An arc whose ends move at different speeds: $f = 1_{φ ∈ [θ, 2θ]} (1 + a \cos φ)$.
 
-    I = θ + a (sin 2θ - sin θ), dI/dθ = 1 + a (2 cos 2θ - cos θ): the circle's
+    $I = θ + a (\sin 2θ - \sin θ)$, $dI/dθ = 1 + a (2 \cos 2θ - \cos θ)$: the circle's
     version of :class:`TwoSteps`.
     """
 

@@ -1,13 +1,13 @@
 """Emitter sampling for the shading integral: which emitter, which direction, and its density.
 
-The light-sampling technique picks an emitter e with probability P(e) proportional
+The light-sampling technique picks an emitter e with probability $P(e)$ proportional
 to its power (radiance × length × (1 - fade) for segments, radiance × diameter
 for circles) and a direction toward it: a point uniform on a segment
 (:func:`~flatland.sampling.sample_segment_direction`), or a direction uniform in
 the cone a circle subtends (:func:`~flatland.sampling.sample_circle_direction`).
 The technique only *proposes* directions: the renderer traces the ray and takes
 whatever it hits, so the technique's density at a direction φ is the mixture
-p_l(φ) = Σ_e P(e) p_e(φ) over every emitter the ray from x would meet, occluded or
+$p_l(φ) = Σ_e P(e) p_e(φ)$ over every emitter the ray from x would meet, occluded or
 not (:meth:`Lights.pdf`). That is the density multiple importance sampling needs
 (Veach's balance heuristic), and it keeps the combined estimator unbiased when
 emitters overlap in angle.
@@ -92,7 +92,7 @@ class Lights:
         return phi, self.prims[choice]
 
     def pdf(self, phi: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Density p_l(φ) = Σ_e P(e) p_e(φ) of the light technique at directions ``phi`` from ``x``."""
+        """Density $p_l(φ) = Σ_e P(e) p_e(φ)$ of the light technique at directions ``phi`` from ``x``."""
         x = np.asarray(detach(x))
         out = np.zeros(np.shape(phi))
         for i, k in enumerate(self.prims):

@@ -9,8 +9,8 @@ Angles on the circle are in radians; circle densities are with respect to arc
 length (they integrate to 1 over any interval of length 2π).
 
 The pixel filters of the 1D film come last, with the names sphere3d uses for its 2D
-film: :func:`filter_value` (k_j, Dual-aware), :func:`sample_filter` /
-:func:`pdf_filter`, and the 2D-only :func:`filter_blurred` (k_j ⊛ N(0, σ²)).
+film: :func:`filter_value` ($k_j$, Dual-aware), :func:`sample_filter` /
+:func:`pdf_filter`, and the 2D-only :func:`filter_blurred` ($k_j ⊛ N(0, σ^2)$).
 """
 
 from __future__ import annotations
@@ -61,30 +61,30 @@ def wrap_angle(phi: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------ the line
 def sample_uniform(u: np.ndarray, a: float, b: float) -> np.ndarray:
-    """Uniform on [a, b): ``x = a + (b - a) u``."""
+    """Uniform on [a, b): $x = a + (b - a) u$."""
     return a + (b - a) * np.asarray(u)
 
 
 def pdf_uniform(x: np.ndarray, a: float, b: float) -> np.ndarray:
-    """``1 / (b - a)`` on [a, b], 0 elsewhere."""
+    """$1 / (b - a)$ on [a, b], 0 elsewhere."""
     x = np.asarray(x, dtype=np.float64)
     return np.where((x >= a) & (x <= b), 1.0 / (b - a), 0.0)
 
 
 def sample_gaussian(u: np.ndarray, mean: float, std: float) -> np.ndarray:
-    """Normal N(mean, std²) by the inverse CDF ``mean + std Φ⁻¹(u)``."""
+    r"""Normal $N(mean, std^2)$ by the inverse CDF $mean + std\, Φ^{-1}(u)$."""
     std = check_positive("std", std)
     return mean + std * special.ndtri(np.asarray(u))
 
 
 def log_pdf_gaussian(x: Any, mean: Any, std: float) -> Any:
-    """log of the normal density: ``-(x - mean)² / (2 std²) - log(std √(2π))``; ``x`` may be a Dual."""
+    r"""log of the normal density: $-(x - mean)^2 / (2 std^2) - \log(std \sqrt{2π})$; ``x`` may be a Dual."""
     z = (x - mean) / std
     return -0.5 * z * z - np.log(std * np.sqrt(TWO_PI))
 
 
 def pdf_gaussian(x: np.ndarray, mean: float, std: float) -> np.ndarray:
-    """Normal density ``exp(-(x - mean)² / (2 std²)) / (std √(2π))``."""
+    r"""Normal density $\exp(-(x - mean)^2 / (2 std^2)) / (std \sqrt{2π})$."""
     return np.exp(log_pdf_gaussian(np.asarray(x, dtype=np.float64), mean, std))
 
 
@@ -98,7 +98,7 @@ def sample_tent(u: np.ndarray, center: float, radius: float) -> np.ndarray:
 
 
 def pdf_tent(x: np.ndarray, center: float, radius: float) -> np.ndarray:
-    """``max(0, 1 - |x - center| / radius) / radius``."""
+    r"""$\max(0, 1 - |x - center| / radius) / radius$."""
     x = np.asarray(x, dtype=np.float64)
     return np.maximum(0.0, 1.0 - np.abs(x - center) / radius) / radius
 
@@ -144,25 +144,26 @@ def sample_uniform_circle(u: np.ndarray) -> np.ndarray:
 
 
 def pdf_uniform_circle(phi: np.ndarray) -> np.ndarray:
-    """``1 / (2π)``."""
+    """$1 / (2π)$."""
     return np.full(np.shape(phi), 1.0 / TWO_PI)
 
 
 def sample_cosine_half_circle(u: np.ndarray, normal_angle: float | np.ndarray = 0.0) -> np.ndarray:
-    """Cosine-weighted direction about ``normal_angle``: ``φ - φn = arcsin(2u - 1)`` (theory/radiometry)."""
+    r"""Cosine-weighted direction about ``normal_angle``: $φ - φ_n = \arcsin(2u - 1)$ (theory/radiometry)."""
     return normal_angle + np.arcsin(2.0 * np.asarray(u) - 1.0)
 
 
 def pdf_cosine_half_circle(phi: np.ndarray, normal_angle: float | np.ndarray = 0.0) -> np.ndarray:
-    """``cos(φ - φn) / 2`` on the half circle around the normal, 0 behind it."""
+    r"""$\cos(φ - φ_n) / 2$ on the half circle around the normal, 0 behind it."""
     c = np.cos(np.asarray(phi) - normal_angle)
     return np.where(c > 0.0, 0.5 * c, 0.0)
 
 
 def log_pdf_von_mises(phi: Any, mu: Any, kappa: float) -> Any:
-    """log of the von Mises density, ``κ (cos(φ - μ) - 1) - log(2π i0e(κ))``; ``phi`` may be a Dual.
+    r"""log of the von Mises density, $κ (\cos(φ - μ) - 1) - \log(2π\, \mathrm{i0e}(κ))$;
+    ``phi`` may be a Dual.
 
-    ``I0(κ) = i0e(κ) e^κ`` (the scaled Bessel function), so nothing overflows for κ
+    $I_0(κ) = \mathrm{i0e}(κ) e^κ$ (the scaled Bessel function), so nothing overflows for κ
     up to 1e6 and beyond.
     """
     kappa = check_positive("kappa", kappa)
@@ -170,7 +171,7 @@ def log_pdf_von_mises(phi: Any, mu: Any, kappa: float) -> Any:
 
 
 def pdf_von_mises(phi: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
-    """Von Mises density ``exp(κ cos(φ - μ)) / (2π I0(κ))``, stable for large κ (theory/kernels)."""
+    r"""Von Mises density $\exp(κ \cos(φ - μ)) / (2π I_0(κ))$, stable for large κ (theory/kernels)."""
     return np.exp(log_pdf_von_mises(np.asarray(phi, dtype=np.float64), mu, kappa))
 
 
@@ -219,7 +220,7 @@ def sample_segment_direction(u: np.ndarray, x: np.ndarray, a: np.ndarray, b: np.
     """Direction from ``x`` to a point uniform (per unit length) on the segment a → b (emitter sampling).
 
     ``x``, ``a``, ``b`` broadcast against ``u`` with a trailing axis of 2. Returns the
-    angle of y - x with y = a + u (b - a).
+    angle of $y - x$ with $y = a + u (b - a)$.
     """
     u = np.asarray(u, dtype=np.float64)
     a, b, x = (np.asarray(v, dtype=np.float64) for v in (a, b, x))
@@ -228,11 +229,11 @@ def sample_segment_direction(u: np.ndarray, x: np.ndarray, a: np.ndarray, b: np.
 
 
 def pdf_segment_direction(phi: np.ndarray, x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angular density of :func:`sample_segment_direction`: ``|x - y| / (ℓ |cos θ_y|)`` (theory/radiometry).
+    r"""Angular density of :func:`sample_segment_direction`: $|x - y| / (ℓ |\cos θ_y|)$ (theory/radiometry).
 
-    With d = (cos φ, sin φ), e = b - a, w = a - x, the ray x + s d meets the segment at
-    s = (w × e) / (d × e), and dφ = |cos θ_y| dℓ / s in 2D, so the density per radian
-    of a point uniform on the length ℓ = |e| is s / |d × e| = |w × e| / (d × e)². Zero
+    With $d = (\cos φ, \sin φ)$, $e = b - a$, $w = a - x$, the ray $x + s d$ meets the segment at
+    $s = (w × e) / (d × e)$, and $dφ = |\cos θ_y| dℓ / s$ in 2D, so the density per radian
+    of a point uniform on the length $ℓ = |e|$ is $s / |d × e| = |w × e| / (d × e)^2$. Zero
     where the ray from ``x`` misses the segment.
     """
     phi = np.asarray(phi, dtype=np.float64)
@@ -250,7 +251,7 @@ def pdf_segment_direction(phi: np.ndarray, x: np.ndarray, a: np.ndarray, b: np.n
 
 
 def _circle_cone(x: np.ndarray, c: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Angle of c - x and the half-angle arcsin(min(r / |c - x|, 1)) the circle subtends from x."""
+    r"""Angle of $c - x$ and the half-angle $\arcsin(\min(r / |c - x|, 1))$ the circle subtends from x."""
     vx, vy = c[..., 0] - x[..., 0], c[..., 1] - x[..., 1]
     dist = np.hypot(vx, vy)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -259,9 +260,9 @@ def _circle_cone(x: np.ndarray, c: np.ndarray, r: np.ndarray) -> tuple[np.ndarra
 
 
 def sample_circle_direction(u: np.ndarray, x: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Direction uniform in the cone of angles a circle (centre ``c``, radius ``r``) subtends from ``x``.
+    r"""Direction uniform in the cone of angles a circle (centre ``c``, radius ``r``) subtends from ``x``.
 
-    φ = angle(c - x) + β (2u - 1) with β = arcsin(r / |c - x|) (β = π/2 from on or
+    $φ = \mathrm{angle}(c - x) + β (2u - 1)$ with $β = \arcsin(r / |c - x|)$ ($β = π/2$ from on or
     inside the circle).
     """
     u = np.asarray(u, dtype=np.float64)
@@ -271,7 +272,7 @@ def sample_circle_direction(u: np.ndarray, x: np.ndarray, c: np.ndarray, r: np.n
 
 
 def pdf_circle_direction(phi: np.ndarray, x: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """``1 / (2β)`` inside the cone of :func:`sample_circle_direction`, 0 outside."""
+    """$1 / (2β)$ inside the cone of :func:`sample_circle_direction`, 0 outside."""
     phi = np.asarray(phi, dtype=np.float64)
     x, c, r = np.asarray(x, np.float64), np.asarray(c, np.float64), np.asarray(r, np.float64)
     base, beta = _circle_cone(x, c, r)
@@ -281,7 +282,7 @@ def pdf_circle_direction(phi: np.ndarray, x: np.ndarray, c: np.ndarray, r: np.nd
 
 # ------------------------------------------------------------------ pixel filters (the film line)
 def filter_value(kind: str, t: Any, center: Any, width: float) -> Any:
-    """Pixel filter k_j(t) for pixel centres ``center`` and pixel width Δt (``t`` may be a Dual)."""
+    """Pixel filter $k_j(t)$ for pixel centres ``center`` and pixel width Δt (``t`` may be a Dual)."""
     x = t - center
     if kind == "box":
         return np.where(np.abs(detach(x)) <= 0.5 * width, 1.0 / width, 0.0)
@@ -292,11 +293,12 @@ def filter_value(kind: str, t: Any, center: Any, width: float) -> Any:
 
 
 def filter_blurred(kind: str, y: np.ndarray, width: float, sigma: float) -> np.ndarray:
-    """Density of t + σ z (t ~ pixel filter centred at 0, z ~ N(0, 1)) at offsets ``y``: k ⊛ N(0, σ²).
+    r"""Density of $t + σ z$ ($t \sim$ pixel filter centred at 0, $z \sim N(0, 1)$) at offsets ``y``:
+    $k ⊛ N(0, σ^2)$.
 
-    Tent of radius w: (R(y + w) - 2 R(y) + R(y - w)) / w² with R(y) = y Φ(y/σ) + σ φ(y/σ)
+    Tent of radius w: $(R(y + w) - 2 R(y) + R(y - w)) / w^2$ with $R(y) = y Φ(y/σ) + σ φ(y/σ)$
     (the tent is a sum of ramps, and R is a ramp blurred by the Gaussian); Gaussian
-    filter: N(0, (w/2)² + σ²).
+    filter: $N(0, (w/2)^2 + σ^2)$.
     """
     y = np.asarray(y, dtype=np.float64)
     if kind == "gaussian":
@@ -312,7 +314,9 @@ def filter_blurred(kind: str, y: np.ndarray, width: float, sigma: float) -> np.n
 
 
 def sample_filter(kind: str, u: np.ndarray, center: np.ndarray, width: float) -> np.ndarray:
-    """Film samples t ~ k_j from uniforms ``u`` (box: one pixel; tent: radius Δt; gaussian: σ = Δt/2)."""
+    r"""Film samples $t \sim k_j$ from uniforms ``u`` (box: one pixel; tent: radius Δt;
+    gaussian: $σ = Δt/2$).
+    """
     if kind == "box":
         return sample_uniform(u, center - 0.5 * width, center + 0.5 * width)
     if kind == "tent":
@@ -321,7 +325,7 @@ def sample_filter(kind: str, u: np.ndarray, center: np.ndarray, width: float) ->
 
 
 def pdf_filter(kind: str, t: np.ndarray, center: np.ndarray, width: float) -> np.ndarray:
-    """Density of :func:`sample_filter`'s samples ``t``: the filter k_j itself (plain floats).
+    """Density of :func:`sample_filter`'s samples ``t``: the filter $k_j$ itself (plain floats).
 
     Each pixel integral samples its own filter, so the density is :func:`filter_value`
     at the (θ-free) samples; the pair is checked by a chi-square test like every other.

@@ -1,24 +1,24 @@
-"""Differentiable rotations of the sphere S² (Loubet et al. 2019, Sec. 4.1).
+r"""Differentiable rotations of the sphere S² (Loubet et al. 2019, Sec. 4.1).
 
 On S² the change of variables that makes one moving silhouette static is a rotation
-R(θ): integrate ``f(R(θ) ω, θ)`` instead of ``f(ω, θ)`` (|det J| = 1). It must be the
+R(θ): integrate $f(R(θ) ω, θ)$ instead of $f(ω, θ)$ ($|\det J| = 1$). It must be the
 identity at the parameter value θ0 where the gradient is taken, so that the primal
-estimate is unchanged sample for sample, and it must move the direction ω_p of one
-chosen occluder point exactly: ``∂R/∂θ ω_p0 = ∂ω_p/∂θ``.
+estimate is unchanged sample for sample, and it must move the direction $ω_p$ of one
+chosen occluder point exactly: $∂R/∂θ\, ω_{p0} = ∂ω_p/∂θ$.
 
 Construction (the rotation taking the unit vector ``a`` to the unit vector ``b``,
-Rodrigues' formula written without trigonometry)::
+Rodrigues' formula written without trigonometry):
 
-    R(a → b) = c I + [v]× + v vᵀ / (1 + c),     v = a × b,  c = a · b.
+    $R(a → b) = c I + [v]_× + v v^T / (1 + c)$,     $v = a × b$,  $c = a · b$.
 
-With ``a = detach(ω_p)`` and ``b = ω_p`` (a Dual), ``v = 0`` and ``c = 1`` in value,
-so R is the identity in value; its derivative is ``Ṙ = ċ I + [a × ḃ]×`` (the
-quadratic term has a double zero), and ``Ṙ a = ċ a + ḃ (a·a) - a (a·ḃ) = ḃ`` because
-``a·ḃ = ċ = 0`` for a unit vector. Samples are rotated as ``R · detach(ω)``: they are
+With $a = \mathrm{detach}(ω_p)$ and $b = ω_p$ (a Dual), $v = 0$ and $c = 1$ in value,
+so R is the identity in value; its derivative is $\dot R = \dot c I + [a × \dot b]_×$ (the
+quadratic term has a double zero), and $\dot R a = \dot c a + \dot b (a·a) - a (a·\dot b) = \dot b$ because
+$a·\dot b = \dot c = 0$ for a unit vector. Samples are rotated as $R · \mathrm{detach}(ω)$: they are
 drawn θ-independently, and only the rotation carries the tangent.
 
-Floating point: ``a × a`` is exactly 0 but ``a · a`` is 1 only to rounding, so
-:meth:`Rotation.apply` returns ``ω + (Rω - detach(Rω))``: value exactly ω (the
+Floating point: $a × a$ is exactly 0 but $a · a$ is 1 only to rounding, so
+:meth:`Rotation.apply` returns $ω + (Rω - \mathrm{detach}(Rω))$: value exactly ω (the
 primal stays bit-identical to the naive estimator), tangent exactly that of Rω.
 """
 
@@ -36,12 +36,12 @@ __all__ = ["Rotation", "rotate", "rotation_matrix"]
 
 
 def rotation_matrix(a: Any, b: Any) -> Any:
-    """The matrix R(a → b) = c I + [v]× + v vᵀ / (1 + c) of the rotation taking ``a`` to ``b``.
+    """The matrix $R(a → b) = c I + [v]_× + v v^T / (1 + c)$ of the rotation taking ``a`` to ``b``.
 
     Parameters
     ----------
     a, b : array_like, shape (..., 3)
-        Unit vectors (plain or Dual), not antiparallel (c = a·b > -1).
+        Unit vectors (plain or Dual), not antiparallel ($c = a·b > -1$).
 
     Returns
     -------
@@ -67,7 +67,7 @@ def rotation_matrix(a: Any, b: Any) -> Any:
 
 
 def rotate(a: Any, b: Any, omega: Any) -> Any:
-    """R(a → b) ω without forming the matrix: ``c ω + v × ω + v (v·ω) / (1 + c)``.
+    """$R(a → b) ω$ without forming the matrix: $c ω + v × ω + v (v·ω) / (1 + c)$.
 
     Broadcasts over leading axes; any argument may be a Dual.
     """
@@ -78,12 +78,12 @@ def rotate(a: Any, b: Any, omega: Any) -> Any:
 
 @dataclass(frozen=True)
 class Rotation:
-    """A rotation R(θ) that is the identity at θ0 and follows one direction ω_p(θ) exactly.
+    """A rotation R(θ) that is the identity at θ0 and follows one direction $ω_p(θ)$ exactly.
 
     Attributes
     ----------
     target : Dual, shape (..., 3)
-        ω_p(θ), unit directions; R takes ``detach(target)`` to ``target``.
+        $ω_p(θ)$, unit directions; R takes ``detach(target)`` to ``target``.
     active : ndarray of bool, shape (...)
         Where a point was found; elsewhere R is the identity (zero derivative).
     """
@@ -100,12 +100,13 @@ class Rotation:
 
     @staticmethod
     def following(omega_p: Any, active: np.ndarray | None = None) -> Rotation:
-        """The rotation whose derivative moves ``detach(ω_p)`` like ``ω_p`` (Loubet et al. 2019, Sec. 4.1).
+        r"""The rotation whose derivative moves $\mathrm{detach}(ω_p)$ like $ω_p$ (Loubet et al. 2019,
+        Sec. 4.1).
 
         ``omega_p`` need not be unit: it is normalized here, tangent included.
         Where ``active`` is False the direction is replaced by a constant, so the
         rotation there is the identity, also in derivative (and NaNs from an
-        undefined ω_p cannot leak).
+        undefined $ω_p$ cannot leak).
         """
         omega_p = omega_p if isinstance(omega_p, Dual) else Dual(omega_p)
         if active is None:
@@ -129,7 +130,8 @@ class Rotation:
         return Rotation(self.target[index], self.active[index])
 
     def apply(self, omega: np.ndarray) -> Dual:
-        """R(θ) · detach(ω): value exactly ``detach(ω)``, tangent Ṙ ω (Loubet et al. 2019, Sec. 4.1).
+        r"""$R(θ) · \mathrm{detach}(ω)$: value exactly $\mathrm{detach}(ω)$, tangent $\dot R ω$
+        (Loubet et al. 2019, Sec. 4.1).
 
         Parameters
         ----------

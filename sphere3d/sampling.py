@@ -64,7 +64,7 @@ def _from_frame(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------- sphere
 def sample_uniform_sphere(u: np.ndarray) -> np.ndarray:
-    """Uniform direction on S²: z = 1 - 2u₀, φ = 2π u₁."""
+    """Uniform direction on S²: $z = 1 - 2u_0$, $φ = 2π u_1$."""
     u = np.asarray(u, dtype=np.float64)
     z = 1.0 - 2.0 * u[..., 0]
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
@@ -73,7 +73,7 @@ def sample_uniform_sphere(u: np.ndarray) -> np.ndarray:
 
 
 def pdf_uniform_sphere(omega: np.ndarray) -> np.ndarray:
-    """``1 / 4π``."""
+    """$1 / 4π$."""
     return np.full(np.shape(omega)[:-1], 1.0 / FOUR_PI)
 
 
@@ -88,7 +88,7 @@ def sample_cosine_hemisphere(u: np.ndarray, normal: np.ndarray) -> np.ndarray:
 
 
 def pdf_cosine_hemisphere(omega: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """``max(0, n·ω) / π``."""
+    r"""$\max(0, n·ω) / π$."""
     return np.maximum(0.0, dot(omega, normal)) / np.pi
 
 
@@ -97,11 +97,11 @@ def _check_kappa(kappa: float) -> float:
 
 
 def sample_vmf(u: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:
-    """Von Mises–Fisher direction about the unit ``mu`` with concentration κ (Loubet et al. 2019, Sec. 4.2).
+    r"""Von Mises–Fisher direction about the unit ``mu`` with concentration κ (Loubet et al. 2019, Sec. 4.2).
 
-    ``cos θ = 1 + log(ξ + (1 - ξ) e^{-2κ}) / κ`` is evaluated as ``s = 1 - cos θ =
-    -log1p((1 - ξ) expm1(-2κ)) / κ`` and ``sin θ = sqrt(s (2 - s))``, which keeps full
-    relative precision of small angles: stable from κ → 0 to κ = 1e6 and beyond.
+    $\cos θ = 1 + \log(ξ + (1 - ξ) e^{-2κ}) / κ$ is evaluated as
+    $s = 1 - \cos θ = -\mathrm{log1p}((1 - ξ) \mathrm{expm1}(-2κ)) / κ$ and $\sin θ = \sqrt{s (2 - s)}$,
+    which keeps full relative precision of small angles: stable from κ → 0 to κ = 1e6 and beyond.
     """
     kappa = _check_kappa(kappa)
     u = np.asarray(u, dtype=np.float64)
@@ -115,7 +115,7 @@ def sample_vmf(u: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:
 
 
 def log_vmf(omega, mu, kappa: float):
-    """log of the vMF density, ``log(κ / (2π (1 - e^{-2κ}))) + κ (μ·ω - 1)``; Dual-aware in ω and μ."""
+    r"""log of the vMF density, $\log(κ / (2π (1 - e^{-2κ}))) + κ (μ·ω - 1)$; Dual-aware in ω and μ."""
     return math.log(kappa / (2.0 * np.pi * -math.expm1(-2.0 * kappa))) + kappa * (dot(omega, mu) - 1.0)
 
 
@@ -139,11 +139,11 @@ def _hemisphere_table(kappa: float, nodes: int = 512, grid: int = 2049) -> tuple
 
 
 def vmf_hemisphere_fraction(z, kappa: float):
-    """C(z) = P(n·ω > 0) for ω ~ vMF(y, κ) with z = n·y: the kernel's mass above a horizon.
+    r"""$C(z) = P(n·ω > 0)$ for $ω \sim \mathrm{vMF}(y, κ)$ with $z = n·y$: the kernel's mass above a horizon.
 
     A convolution whose kernel centres are restricted to a hemisphere (an outer
-    cosine sample) loses the mass ``1 - C`` of the kernel near the horizon; dividing by
-    C(n·μ) restores ``∫ k(μ, ω) dω = 1`` over the hemisphere (the authors tabulate the
+    cosine sample) loses the mass $1 - C$ of the kernel near the horizon; dividing by
+    $C(n·μ)$ restores $∫ k(μ, ω) dω = 1$ over the hemisphere (the authors tabulate the
     same correction). Tabulated per κ (Gauss–Legendre in the radial CDF, 2049 values
     of z) and interpolated linearly; ``z`` may be a Dual.
     """
@@ -152,14 +152,16 @@ def vmf_hemisphere_fraction(z, kappa: float):
 
 
 def pdf_vmf(omega: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:
-    """vMF density ``κ / (2π (1 - e^{-2κ})) e^{κ (μ·ω - 1)}``, without overflow for any κ."""
+    """vMF density $κ / (2π (1 - e^{-2κ})) e^{κ (μ·ω - 1)}$, without overflow for any κ."""
     kappa = _check_kappa(kappa)
     return np.exp(log_vmf(np.asarray(omega, dtype=np.float64), np.asarray(mu, dtype=np.float64), kappa))
 
 
 # ------------------------------------------------------------------ triangles
 def triangle_barycentrics(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Barycentrics (b1, b2) of v1, v2 of the uniform triangle sample: b1 = 1 - √u₀, b2 = u₁ √u₀."""
+    r"""Barycentrics (b1, b2) of v1, v2 of the uniform triangle sample:
+    $b1 = 1 - \sqrt{u_0}$, $b2 = u_1 \sqrt{u_0}$.
+    """
     u = np.asarray(u, dtype=np.float64)
     root = np.sqrt(u[..., 0])
     return 1.0 - root, u[..., 1] * root
@@ -173,12 +175,12 @@ def sample_triangle(u: np.ndarray, v0: np.ndarray, v1: np.ndarray, v2: np.ndarra
 
 
 def triangle_area(v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
-    """Area of each triangle, ``|(v1 - v0) × (v2 - v0)| / 2``."""
+    """Area of each triangle, $|(v1 - v0) × (v2 - v0)| / 2$."""
     return 0.5 * norm(cross(v1 - v0, v2 - v0))
 
 
 def pdf_triangle(x: np.ndarray, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
-    """``1 / area`` (per unit area, for points on the triangle)."""
+    """$1 / area$ (per unit area, for points on the triangle)."""
     return np.broadcast_to(1.0 / triangle_area(v0, v1, v2), np.shape(x)[:-1]).copy()
 
 
@@ -188,7 +190,7 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
     Parameters
     ----------
     u : ndarray, shape (..., 3)
-        Uniforms: u₀ picks the triangle (inverse CDF of the areas), (u₁, u₂) the point.
+        Uniforms: $u_0$ picks the triangle (inverse CDF of the areas), $(u_1, u_2)$ the point.
     triangles : ndarray, shape (T, 3, 3)
         Vertex positions.
 
@@ -208,14 +210,14 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def pdf_mesh(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """``1 / total area`` for points on the mesh."""
+    r"""$1 / \text{total area}$ for points on the mesh."""
     triangles = np.asarray(triangles, dtype=np.float64)
     total = triangle_area(triangles[:, 0], triangles[:, 1], triangles[:, 2]).sum()
     return np.full(np.shape(x)[:-1], 1.0 / total)
 
 
 def solid_angle_pdf(pdf_area, distance, cos_light):
-    """Area density to solid-angle density seen from a point: ``p_A d² / |cos θ_y|``."""
+    r"""Area density to solid-angle density seen from a point: $p_A d^2 / |\cos θ_y|$."""
     return pdf_area * distance * distance / np.abs(cos_light)
 
 
@@ -240,7 +242,7 @@ _Z_TRUNC = GAUSSIAN_SIGMA * math.sqrt(2.0 * math.pi) * (2.0 * _PHI_EDGE - 1.0)
 
 
 def _filter_1d(x, kind: str):
-    """The normalized 1D filter profile k₁ (k(x, y) = k₁(x) k₁(y)); Dual-aware."""
+    """The normalized 1D filter profile $k_1$ ($k(x, y) = k_1(x) k_1(y)$); Dual-aware."""
     if kind == "box":
         return np.where(np.abs(x) <= 0.5, 1.0, 0.0) + 0.0 * x
     if kind == "tent":
@@ -252,8 +254,8 @@ def _filter_1d(x, kind: str):
 def filter_value(s, kind: str):
     """The pixel filter k(s) at offsets ``s`` (..., 2) from the pixel centre (integrates to 1).
 
-    ``box``: 1 on [-½, ½]²; ``tent``: (1 - |x|)(1 - |y|) on [-1, 1]²; ``gaussian``:
-    the product of ``(e^{-x²/2σ²} - e^{-R²/2σ²}) / Z`` with σ = ½, R = 3σ, continuous at R.
+    ``box``: 1 on $[-½, ½]^2$; ``tent``: $(1 - |x|)(1 - |y|)$ on $[-1, 1]^2$; ``gaussian``:
+    the product of $(e^{-x^2/2σ^2} - e^{-R^2/2σ^2}) / Z$ with σ = ½, R = 3σ, continuous at R.
     Tent and gaussian are continuous, which the reparameterized pixel integral needs
     (theory/pixel_filters); a Dual ``s`` gives the filter's derivative.
     """
@@ -261,7 +263,7 @@ def filter_value(s, kind: str):
 
 
 def log_filter_value(s, kind: str):
-    """``log k(s)`` (finite inside the support); Dual-aware. Used for weights k / detach(k)."""
+    r"""$\log k(s)$ (finite inside the support); Dual-aware. Used for weights $k / \mathrm{detach}(k)$."""
     if kind == "box":
         return 0.0 * s[..., 0]
     if kind == "tent":
@@ -294,11 +296,11 @@ def _pdf_filter_1d(x: np.ndarray, kind: str) -> np.ndarray:
 
 
 def sample_filter(u: np.ndarray, kind: str) -> np.ndarray:
-    """Film offsets (..., 2) in pixels for the pixel filter ``kind``, by the inverse CDF per axis.
+    r"""Film offsets (..., 2) in pixels for the pixel filter ``kind``, by the inverse CDF per axis.
 
-    ``box`` samples k exactly; ``tent`` samples ∝ √k (see :func:`_sample_filter_1d`);
+    ``box`` samples k exactly; ``tent`` samples $∝ \sqrt{k}$ (see :func:`_sample_filter_1d`);
     ``gaussian`` samples the truncated normal. The estimator weights each sample by
-    k / p (:func:`filter_value` / :func:`pdf_filter`).
+    $k / p$ (:func:`filter_value` / :func:`pdf_filter`).
     """
     kind = check_choice("filter", kind, FILTERS)
     u = np.asarray(u, dtype=np.float64)

@@ -7,8 +7,8 @@ coordinates ``uv`` used by the radiance fade of area emitters (theory/probes):
 ============  ========================================  ==================================
 type          geometry                                  fade coordinate
 ============  ========================================  ==================================
-rectangle     ``size`` = [sx, sy] in the z = 0 plane,   uv = (2x / sx, 2y / sy)
-              normal +z                                 in [-1, 1]²
+rectangle     ``size`` = [sx, sy] in the z = 0 plane,   $uv = (2x / sx, 2y / sy)$
+              normal +z                                 in $[-1, 1]^2$
 disk          ``radius``, ``segments`` fan, normal +z   u = 0 at the centre, 1 on
                                                         the rim (exact on the polygon)
 box           ``size`` = [sx, sy, sz]                   none
@@ -22,7 +22,7 @@ vertices, +z on rectangles and disks, the file's normals (OBJ ``vn``, PLY
 ``nx ny nz``) or inline ``normals`` for a mesh, and otherwise the angle-weighted
 mean of the adjacent face normals (:func:`vertex_normals`).
 
-The fade multiplies the radiance by a smoothstep S(t) = t²(3 - 2t) of the distance to
+The fade multiplies the radiance by a smoothstep $S(t) = t^2(3 - 2t)$ of the distance to
 the border divided by ``fade``, so the emitter's own edge is not a discontinuity of
 the integrand (it becomes continuous, zero at the edge).
 """
@@ -109,7 +109,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def rectangle(sx: float, sy: float) -> LocalMesh:
-    """Two triangles spanning [-sx/2, sx/2] × [-sy/2, sy/2] at z = 0, normal +z."""
+    """Two triangles spanning $[-sx/2, sx/2] × [-sy/2, sy/2]$ at z = 0, normal +z."""
     x, y = 0.5 * sx, 0.5 * sy
     vertices = np.array([[-x, -y, 0.0], [x, -y, 0.0], [x, y, 0.0], [-x, y, 0.0]])
     faces = np.array([[0, 1, 2], [0, 2, 3]])
@@ -140,7 +140,7 @@ def box(sx: float, sy: float, sz: float) -> LocalMesh:
 
 
 def icosphere(radius: float, subdivisions: int) -> LocalMesh:
-    """A subdivided icosahedron with vertices on the sphere of ``radius`` (20·4^s triangles)."""
+    """A subdivided icosahedron with vertices on the sphere of ``radius`` ($20·4^s$ triangles)."""
     g = (1.0 + np.sqrt(5.0)) / 2.0
     v = np.array(
         [[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0], [0, -1, g], [0, 1, g],

@@ -35,7 +35,7 @@ def norm(a: Any) -> Any:
 
 
 def normalize(a: Any) -> Any:
-    """``a / |a|`` over the last axis (the caller guarantees |a| > 0)."""
+    """$a / |a|$ over the last axis (the caller guarantees $|a| > 0$)."""
     return a / norm(a)[..., None]
 
 

@@ -1,22 +1,22 @@
-"""Bias tests behind every error table: a method is flagged BIASED before its error or speed is shown.
+r"""Bias tests behind every error table: a method is flagged BIASED before its error or speed is shown.
 
 Two tests, both against a reference with its own standard error:
 
 film sum (the studies' functional)
-    z = (S - S_ref) / sqrt(se² + se_ref²), S the sum over the film (or the studied
+    $z = (S - S_{ref}) / \sqrt{se^2 + se_{ref}^2}$, S the sum over the film (or the studied
     scalar), computed by :func:`flatland.core.stats.z_score` (the project's one rounding
     policy); flagged when |z| > :data:`Z_FLAG` = 3.3 (two-sided normal level 99.9 %).
 per pixel (image outputs)
-    z_j = (g_j - r_j) / sqrt(se_j² + se_ref,j²) for each of the m pixels whose
+    $z_j = (g_j - r_j) / \sqrt{se_j^2 + se_{ref,j}^2}$ for each of the m pixels whose
     method standard error is positive (a pixel where every sample of the method
     gave the same value, often the zero of a rare event such as a finite
     difference straddling an edge, has no variance estimate to test against; an
     estimator that is exactly zero everywhere is caught by the film-sum test); a
-    pixel exceeds when |z_j| is above the two-sided Student-t quantile (``dof`` degrees of
+    pixel exceeds when $|z_j|$ is above the two-sided Student-t quantile (``dof`` degrees of
     freedom: the method's batches or trials minus one, its variance dominating the
-    reference's) at the Sidak-corrected level 1 - (1 - α)^(1/m), α =
+    reference's) at the Sidak-corrected level $1 - (1 - α)^{1/m}$, α =
     :data:`PIXEL_ALPHA` = 0.01. An unbiased method has no exceeding pixel with
-    probability 1 - α, i.e. m × level ≈ α = 0.01 exceeding pixels are expected.
+    probability $1 - α$, i.e. $m × level ≈ α = 0.01$ exceeding pixels are expected.
     The count is reported beside the film-sum flag but does not set it: the batch
     standard errors of pixels dominated by rare large samples (a finite difference
     straddling an edge, a boundary sample) are themselves noisy, and unbiased
@@ -142,9 +142,9 @@ def reference_spp_needed(
     margin: float = 1.25,
     multiple: int = DEFAULT_MAX_BATCHES,
 ) -> int:
-    """Samples per pixel (or n) that bring a reference's stderr to ``ratio`` × ``smallest_stderr``.
+    r"""Samples per pixel (or n) that bring a reference's stderr to ``ratio`` × ``smallest_stderr``.
 
-    The stderr falls as 1/sqrt(spp), so the count grows by (stderr / target)², times
+    The stderr falls as $1/\sqrt{spp}$, so the count grows by $(stderr / target)^2$, times
     ``margin`` for the scatter of the estimated standard errors, rounded up to a
     multiple of ``multiple`` so the reference keeps that many equal batches (a count
     without a divisor above 1 would leave one batch and an infinite standard error);

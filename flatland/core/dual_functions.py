@@ -24,7 +24,7 @@ def _any_dual(items: Sequence[Any]) -> bool:
 
 
 def _linear_single(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Rule for a function linear in its first argument: f(x)' = f(x')."""
+    """Rule for a function linear in its first argument: $f(x)' = f(x')$."""
 
     def rule(a: Any, *args: Any, **kwargs: Any) -> Dual:
         return Dual(func(detach(a), *args, **kwargs), func(tangent(a), *args, **kwargs))

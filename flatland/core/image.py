@@ -84,7 +84,7 @@ def summarize_batches(per_batch: np.ndarray) -> BatchSummary:
 
 
 def relative_error(g: np.ndarray, g_ref: np.ndarray) -> float:
-    """The gradient-image error metric ``mean|g - g_ref| / max|g_ref|``.
+    r"""The gradient-image error metric $\mathrm{mean}|g - g_{ref}| / \max|g_{ref}|$.
 
     Scale-free, so one bound can be stated per scene; 0 for a perfect match.
     """

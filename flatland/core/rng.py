@@ -123,7 +123,9 @@ def keyed_uniforms(seed: int, name: str, keys: np.ndarray, count: int) -> np.nda
 
 
 def keyed_normals(seed: int, name: str, keys: np.ndarray, count: int) -> np.ndarray:
-    """Standard normals, shape (n, count), keyed like :func:`keyed_bits` (inverse CDF of (k + 1/2) / 2^53)."""
+    """Standard normals, shape (n, count), keyed like :func:`keyed_bits` (inverse CDF of
+    $(k + 1/2) / 2^{53}$).
+    """
     u = ((keyed_bits(seed, name, keys, count) >> np.uint64(11)) + 0.5) * 2.0**-53  # in (0, 1): finite
     return special.ndtri(u)
 

@@ -1,7 +1,7 @@
 """Statistics for Monte Carlo results: standard errors, confidence intervals, chi-square tests.
 
 Tolerances in the test suite come from here: a Monte Carlo estimate ``m`` with
-standard error ``s`` agrees with a reference ``r`` when ``|m - r| <= z * s`` for a
+standard error ``s`` agrees with a reference ``r`` when $|m - r| ≤ z s$ for a
 stated two-sided normal quantile ``z`` (:func:`normal_quantile`); samplers are
 checked with a chi-square goodness-of-fit test (:func:`chi2_gof`) at a level
 corrected for the number of tests run (:func:`sidak`).
@@ -137,7 +137,7 @@ def summarize(samples: np.ndarray, axis: int = 0) -> SampleSummary:
 
 
 def normal_quantile(level: float) -> float:
-    """Two-sided standard-normal quantile: ``P(|Z| <= z) = level`` (0.99 -> 2.576)."""
+    """Two-sided standard-normal quantile: $P(|Z| ≤ z) = level$ (0.99 -> 2.576)."""
     return float(special.ndtri(0.5 + 0.5 * level))
 
 

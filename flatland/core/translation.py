@@ -34,15 +34,15 @@ __all__ = [
 ]
 
 SMALL_WEIGHT = 1e-5
-"""Paired weights with ``|w|`` below this count as 1 (the authors' implementation, theory/kernels)."""
+"""Paired weights with $|w|$ below this count as 1 (the authors' implementation, theory/kernels)."""
 
 
 def translation_offset(c: Any, ok: Any = None) -> Any:
-    """The translation offset ``Δ = c(θ) - detach(c(θ))``: value 0, derivative c'(θ).
+    r"""The translation offset $Δ = c(θ) - \mathrm{detach}(c(θ))$: value 0, derivative $c'(θ)$.
 
-    A sample y evaluated at ``T(y, θ) = y + Δ`` is where it was at θ0 (T is the
+    A sample y evaluated at $T(y, θ) = y + Δ$ is where it was at θ0 (T is the
     identity there, so the primal is the naive one) and moves like the point c
-    (Loubet et al. 2019, Sec. 3.2). The same difference ``x - detach(x)``
+    (Loubet et al. 2019, Sec. 3.2). The same difference $x - \mathrm{detach}(x)$
     is the zero-value part of a weight in :func:`control_variate`.
 
     Parameters
@@ -66,18 +66,18 @@ def translation_offset(c: Any, ok: Any = None) -> Any:
 
 
 def unit_weight(log_k: Any) -> Any:
-    """The kernel weight ``w = k / detach(k)`` from ``log k``: value exactly 1, derivative (log k)'.
+    r"""The kernel weight $w = k / \mathrm{detach}(k)$ from $\log k$: value exactly 1, derivative $(\log k)'$.
 
-    A convolution kernel k(T μ, ω) evaluated at the transformed sample carries the
+    A convolution kernel $k(T μ, ω)$ evaluated at the transformed sample carries the
     derivative the transform gives the kernel (Loubet et al. 2019, Sec. 4.2). Computed as
-    ``exp(log k - detach(log k))``: a kernel value that underflows to 0 cannot make 0/0,
-    and any additive constant of log k (a normalization) cancels, so callers may pass an
-    unnormalized log-kernel such as ``κ cos``.
+    $\exp(\log k - \mathrm{detach}(\log k))$: a kernel value that underflows to 0 cannot make 0/0,
+    and any additive constant of $\log k$ (a normalization) cancels, so callers may pass an
+    unnormalized log-kernel such as $κ \cos$.
 
     Parameters
     ----------
     log_k : Dual or ndarray
-        log k at the evaluation points.
+        $\log k$ at the evaluation points.
 
     Returns
     -------
@@ -88,12 +88,13 @@ def unit_weight(log_k: Any) -> Any:
 
 
 def control_variate(e: Any, scale: Any, w: Any) -> Any:
-    """``e - scale · (w - detach(w))``: the estimate e with the weight's derivative as control variate.
+    r"""$e - scale · (w - \mathrm{detach}(w))$: the estimate e with the weight's derivative as
+    control variate.
 
-    ``w - detach(w)`` has value 0 and, for a weight whose derivative has zero mean
+    $w - \mathrm{detach}(w)$ has value 0 and, for a weight whose derivative has zero mean
     (a kernel or filter weight: its integral is 1 for every θ), zero expectation.
     Subtracting it times a ``scale`` independent of w keeps the expectation of e,
-    value and derivative, and cancels the noise ``scale · w'`` when scale tracks e
+    value and derivative, and cancels the noise $scale · w'$ when scale tracks e
     (theory/monte_carlo; the authors' implementation uses it for paired samples, theory/kernels).
     The value is e's bit for bit: an exact zero is subtracted.
 
@@ -115,13 +116,13 @@ def control_variate(e: Any, scale: Any, w: Any) -> Any:
 
 
 def paired_combine(e0: Any, e1: Any, w0: Any, w1: Any) -> Any:
-    """Two members of a pair serve as each other's control variate (authors' implementation, theory/kernels).
+    r"""Two members of a pair serve as each other's control variate (authors' implementation, theory/kernels).
 
-    ``0.5 (e0 - e1 / w1 (w0 - detach(w0))) + 0.5 (e1 - e0 / w0 (w1 - detach(w1)))``:
+    $0.5 (e0 - e1 / w1 (w0 - \mathrm{detach}(w0))) + 0.5 (e1 - e0 / w0 (w1 - \mathrm{detach}(w1)))$:
     both members share one transform and are drawn from one kernel centre
     (Loubet et al. 2019, Sec. 4.2); each weight's derivative has zero mean given the
     centre and is independent of the other member, whose unweighted estimate
-    ``e / w`` scales it (:func:`control_variate`).
+    $e / w$ scales it (:func:`control_variate`).
 
     Weights with ``|w| < SMALL_WEIGHT`` (1e-5) count as 1 (value 1, derivative 0)
     in this formula, as in the authors' implementation: no division by a vanishing
@@ -173,18 +174,18 @@ def check_continuous_filter(kind: str) -> None:
 
 
 def central_difference(f: Callable[[float], Any], theta: float, h: float) -> Any:
-    """``[f(θ + h) - f(θ - h)] / 2h``, evaluating f at θ + h first.
+    """$[f(θ + h) - f(θ - h)] / 2h$, evaluating f at θ + h first.
 
     With common random numbers (f draws the same samples at every θ) the difference
     only sees the samples whose integrand changed. Its expectation is exactly
-    ``[I(θ + h) - I(θ - h)] / 2h = I'(θ) + h² I'''(θ) / 6 + O(h⁴)``: exact for a
+    $[I(θ + h) - I(θ - h)] / 2h = I'(θ) + h^2 I'''(θ) / 6 + O(h^4)$: exact for a
     polynomial of degree <= 2 up to rounding. Not part of the paper: the reference
     the other methods are checked against.
 
     The default steps are each package's and differ (changing one changes every
     number it produces): flatland's images use h = 1e-3, flatland's textbook
     integrals and sphere3d's renders h = 1e-2. The trade-off is the same everywhere,
-    a truncation bias ~ h² against a variance ~ 1 / h at discontinuities (common
+    a truncation bias ~ $h^2$ against a variance ~ $1/h$ at discontinuities (common
     random numbers); the image steps were chosen per package, not from one rule.
 
     Parameters

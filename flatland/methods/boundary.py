@@ -37,19 +37,19 @@ MAX_CANDIDATES = 1 << 18
 """Shading points × candidate discontinuities handled together (bounds memory in vertex-rich scenes)."""
 
 EPS_FILM = 1e-7
-"""Film-coordinate offset (relative to 1 + |t|) of the two camera rays beside a candidate."""
+"""Film-coordinate offset (relative to $1 + |t|$) of the two camera rays beside a candidate."""
 
 
 class BoundaryTransforms(Identity):
     """Identity transforms plus the jump terms at the shading points and at the pixels."""
 
     def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray:
-        """Σ_c [f(c⁻) - f(c⁺)] φ_c'(θ) of the integrand f = L_i cos of E at each shading point.
+        r"""$Σ_c [f(c^-) - f(c^+)] φ_c'(θ)$ of the integrand $f = L_i \cos$ of E at each shading point.
 
         Candidates c are the angles of all vertices and circle tangent points seen from
         x(θ) (Duals: they move with the geometry and with x); only those in front of the
         surface (cos > 0) can matter, since f vanishes behind it. The jump is found by
-        tracing at c ∓ ε on the detached geometry.
+        tracing at $c ∓ ε$ on the detached geometry.
         """
         n = ignore.size
         out = np.zeros(n)
@@ -83,11 +83,11 @@ class BoundaryTransforms(Identity):
         return np.bincount(rows, weights=term, minlength=n)
 
     def pixel_extra(self, task: ImageTask, geom: SceneState) -> np.ndarray | None:
-        """Σ_c k_j(t_c) [L(t_c⁻) - L(t_c⁺)] t_c'(θ) per batch and pixel (the camera's silhouettes).
+        """$Σ_c k_j(t_c) [L(t_c^-) - L(t_c^+)] t_c'(θ)$ per batch and pixel (the camera's silhouettes).
 
-        Candidates are the film coordinates t_c(θ) of every vertex and circle tangent
-        point seen from the camera (in front of it), as Duals: t_c' includes the motion
-        of the shapes and of the camera. The jump of the full radiance L = L_e + (ρ/2) E
+        Candidates are the film coordinates $t_c(θ)$ of every vertex and circle tangent
+        point seen from the camera (in front of it), as Duals: $t_c'$ includes the motion
+        of the shapes and of the camera. The jump of the full radiance $L = L_e + (ρ/2) E$
         is estimated per batch with ``spp / batches`` shading samples on each side, the
         same samples on both sides (common random numbers), so a candidate hidden
         behind something else contributes exactly zero.
@@ -129,18 +129,18 @@ class BoundaryTransforms(Identity):
 
 @GRADIENT_METHODS.register("boundary")
 def boundary(task: ImageTask | PointTask) -> Tally:
-    """Naive interior term plus every discontinuity term, computed explicitly (theory/boundary).
+    r"""Naive interior term plus every discontinuity term, computed explicitly (theory/boundary).
 
-    For the pixel integral ``I_j = ∫ k_j(t) L(t) dt`` and for every shading integral
-    ``E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ`` the Leibniz rule reads
-    ``d/dθ ∫ f = ∫ ∂f/∂θ + Σ_c [f(c⁻) - f(c⁺)] c'(θ)``. The interior term is the naive
+    For the pixel integral $I_j = ∫ k_j(t) L(t) dt$ and for every shading integral
+    $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n)) dφ$ the Leibniz rule reads
+    $d/dθ ∫ f = ∫ ∂f/∂θ + Σ_c [f(c^-) - f(c^+)] c'(θ)$. The interior term is the naive
     estimator (θ-free samples, forward AD through the re-attached hits). In 2D the
     discontinuities c are directions toward segment endpoints and circle tangent
     points (the only places where visibility, and so the integrand, can jump:
     emission, albedo and normals are constant or continuous along each primitive,
     and a fading emitter's end is continuous). They are enumerated from the camera
     and from every shading point; the jump is measured by tracing just beside c,
-    and c'(θ) (film coordinate or angle) comes from forward AD of the candidate's
+    and $c'(θ)$ (film coordinate or angle) comes from forward AD of the candidate's
     position. The pixel filter is static in t, so it adds no term, whatever its shape
     (box included).
 

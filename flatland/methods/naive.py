@@ -20,9 +20,9 @@ __all__ = ["naive"]
 
 @GRADIENT_METHODS.register("naive")
 def naive(task: ImageTask | PointTask) -> Tally:
-    """Differentiate every pixel and shading estimate with θ a forward-mode Dual.
+    r"""Differentiate every pixel and shading estimate with θ a forward-mode Dual.
 
-    The film samples t ~ k_j and the direction samples φ (cosine and emitter
+    The film samples $t \sim k_j$ and the direction samples φ (cosine and emitter
     sampling at θ0) are θ-free; the rays are traced detached and their hits
     re-attached to the θ-dependent geometry, so every smooth dependence is
     differentiated exactly: hit points sliding along moving surfaces, normals,
@@ -33,8 +33,8 @@ def naive(task: ImageTask | PointTask) -> Tally:
     direction sample whose ray passes a moving occluder or emitter edge, contributes
     a derivative of zero instead of its share of the jump. The estimate converges to
     the interior term of the Leibniz rule alone and misses
-    ``Σ_c k_j(c) [L(c⁻) - L(c⁺)] c'(θ)`` over the silhouettes seen from the camera and
-    ``(ρ/2) Σ_c [f(c⁻) - f(c⁺)] c'(θ)`` over those seen from each shading point
+    $Σ_c k_j(c) [L(c^-) - L(c^+)] c'(θ)$ over the silhouettes seen from the camera and
+    $(ρ/2) Σ_c [f(c^-) - f(c^+)] c'(θ)$ over those seen from each shading point
     (Leibniz rule, theory/leibniz; Loubet et al. 2019, Sec. 3.2); the boundary method adds
     exactly these terms. The value estimate is unbiased and, for the same seed, identical to
     the other methods'.

@@ -20,7 +20,7 @@ METHODS = MethodTable("estimator")
 
 @dataclass(frozen=True)
 class Samples:
-    """Primary samples x_i ~ p (θ-independent) and their density p(x_i)."""
+    r"""Primary samples $x_i \sim p$ (θ-independent) and their density $p(x_i)$."""
 
     x: np.ndarray
     pdf: np.ndarray

@@ -10,7 +10,7 @@ from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
 @METHODS.register("boundary")
 def boundary(integrand: Integrand, theta: float, n: int, seed: int) -> Estimate:
-    """Naive interior term plus ``Σ_i [f(c_i⁻) - f(c_i⁺)] c_i'(θ)`` computed exactly (theory/boundary).
+    """Naive interior term plus $Σ_i [f(c_i^-) - f(c_i^+)] c_i'(θ)$ computed exactly (theory/boundary).
 
     In 1D the discontinuities are points that the integrand enumerates, so the
     boundary term of the Leibniz rule needs no sampling: it is added as a constant

@@ -23,11 +23,11 @@ __all__ = ["follow_nearest", "reparam"]
 
 
 def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], points: np.ndarray) -> Dual:
-    """Per point, the translation Δ = c(θ) - detach(c(θ)) of the discontinuity nearest to it.
+    r"""Per point, the translation $Δ = c(θ) - \mathrm{detach}(c(θ))$ of the discontinuity nearest to it.
 
-    Δ has value 0 (so T(y, θ0) = y + Δ is the identity, Loubet et al. 2019, Sec. 3.2) and derivative
-    c'(θ) of the chosen discontinuity. With no discontinuity the translation is the
-    identity (Δ = 0, Δ' = 0).
+    Δ has value 0 (so $T(y, θ_0) = y + Δ$ is the identity, Loubet et al. 2019, Sec. 3.2) and derivative
+    $c'(θ)$ of the chosen discontinuity. With no discontinuity the translation is the
+    identity ($Δ = 0$, $Δ' = 0$).
     """
     points = np.asarray(points, dtype=np.float64)
     if not discontinuities:
@@ -47,30 +47,30 @@ def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], poin
 def reparam(
     integrand: Integrand, theta: float, n: int, seed: int, kappa: float | None, paired: bool
 ) -> Estimate:
-    """Reparameterize each sample by the translation that follows the nearest discontinuity.
+    r"""Reparameterize each sample by the translation that follows the nearest discontinuity.
 
-    Without a kernel (``kappa=None``), sample x_i ~ p is evaluated at
-    ``T_i(x_i, θ) = x_i + c_k(θ) - c_k(θ0)`` with c_k the discontinuity nearest x_i
-    (Sec. 3.2 and 4.1; |det J| = 1). The primal estimate is bit-identical to the
+    Without a kernel (``kappa=None``), sample $x_i \sim p$ is evaluated at
+    $T_i(x_i, θ) = x_i + c_k(θ) - c_k(θ_0)$ with $c_k$ the discontinuity nearest $x_i$
+    (Sec. 3.2 and 4.1; $|\det J| = 1$). The primal estimate is bit-identical to the
     naive one. Unbiased when one translation follows every discontinuity that can
     affect a sample; where discontinuities moving at different speeds meet (their
-    Voronoi boundary m), it is biased by ``Σ_m (c_left' - c_right') f(m)``.
+    Voronoi boundary m), it is biased by $Σ_m (c_{left}' - c_{right}') f(m)$.
 
     With a kernel of concentration ``kappa`` (Sec. 4.2) the integral is written as
-    ``∫∫ f(μ) k(μ, ω) dμ dω``. Here μ = x_i is the naive sample and the kernel centre
-    ω_i ~ k(·, x_i) is drawn around it (the same joint density as the paper's
-    "ω ~ p, μ ~ k(·, ω)" read the other way, because k is symmetric and integrates to
+    $∫∫ f(μ) k(μ, ω) dμ dω$. Here $μ = x_i$ is the naive sample and the kernel centre
+    $ω_i \sim k(·, x_i)$ is drawn around it (the same joint density as the paper's
+    "$ω \sim p, μ \sim k(·, ω)$" read the other way, because k is symmetric and integrates to
     1 in each argument), which keeps the primal estimate bit-identical to the naive
-    one. The translation follows the discontinuity nearest ω_i, and the weight
-    ``k(T μ, ω) / detach(k(T μ, ω))`` (value 1) carries the kernel's derivative.
+    one. The translation follows the discontinuity nearest $ω_i$, and the weight
+    $k(T μ, ω) / \mathrm{detach}(k(T μ, ω))$ (value 1) carries the kernel's derivative.
     Bias: a discontinuity the translation does not follow still contributes where
     the kernel reaches it, a tail mass that falls as κ grows; variance grows with κ
-    through the derivative of log k (about √κ per sample).
+    through the derivative of $\log k$ (about $\sqrt{κ}$ per sample).
 
-    ``paired=True`` (needs ``kappa``) uses the paper's order instead: ω_i ~ p,
-    two kernel samples μ_i0, μ_i1 ~ k(·, ω_i) share one translation, and each one's
+    ``paired=True`` (needs ``kappa``) uses the paper's order instead: $ω_i \sim p$,
+    two kernel samples $μ_{i0}, μ_{i1} \sim k(·, ω_i)$ share one translation, and each one's
     zero-mean weight derivative serves as the other's control variate:
-    ``0.5 (e0 - e1 / w1 (w0 - detach(w0))) + 0.5 (e1 - e0 / w0 (w1 - detach(w1)))``
+    $0.5 (e0 - e1 / w1 (w0 - \mathrm{detach}(w0))) + 0.5 (e1 - e0 / w0 (w1 - \mathrm{detach}(w1)))$
     (theory/kernels). ``n`` counts integrand evaluations, so n // 2 pairs; the primal
     is then a different (still unbiased) estimate than the naive one.
     """

@@ -1,4 +1,4 @@
-"""Closed forms the gradient methods are checked against, per pixel and per shading point.
+r"""Closed forms the gradient methods are checked against, per pixel and per shading point.
 
 Two scenes of one black triangle (albedo 0, emission 0) in front of a constant sky
 ``L`` have exact answers, values and θ-derivatives, to rounding:
@@ -7,9 +7,9 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
    sky (radiance L) or meets the triangle (radiance 0), so the pixel integral of
    :mod:`sphere3d.integrator` is
 
-       I(p) = ∫ k(s) L(ray(c_p + s)) ds = L (1 - ∫_T k(x - c_p) dx),
+       $I(p) = ∫ k(s) L(\mathrm{ray}(c_p + s)) ds = L (1 - ∫_T k(x - c_p) dx)$,
 
-   with k the pixel filter of :mod:`sphere3d.sampling`, c_p the pixel centre and T the
+   with k the pixel filter of :mod:`sphere3d.sampling`, $c_p$ the pixel centre and T the
    triangle projected to the film (pixel coordinates). The film integral is reduced to
    the triangle's three edges by Green's theorem and the edge integrals are computed by
    Gauss–Legendre quadrature between the kinks of the filter (:func:`polygon_filter_integral`);
@@ -17,9 +17,9 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
    the silhouette term of Loubet et al. 2019, Sec. 3.2, that a gradient method must
    recover at moving visibility edges.
 2. **The irradiance at a point under the sky** (:func:`occluded_sky_irradiance`):
-   ``E = π L - L Φ(T)``, Φ the projected solid angle of the triangle by Lambert's
+   $E = π L - L Φ(T)$, Φ the projected solid angle of the triangle by Lambert's
    polygon formula (:func:`projected_solid_angle`), Dual-aware, so its derivative comes
-   with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's ``E = L Φ``.
+   with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's $E = L Φ$.
 
 Both are written from the scene's definition (camera frame, pixel mapping, filter
 profiles, shape transform), not from the estimators' code. The scenes the tests and

@@ -32,7 +32,7 @@ QUADRATURE_NODES = {"box": 2, "tent": 4, "gaussian": 16}
 """Gauss–Legendre nodes per smooth piece of an edge. Between the kinks of the filter the
 edge integrands are polynomials in the edge parameter s (box: degree 1, tent: degree 3,
 for the value and the derivative alike), which n nodes integrate exactly up to degree
-2n - 1; the gaussian's pieces are entire functions of s, for which 24 nodes on pieces at
+$2n - 1$; the gaussian's pieces are entire functions of s, for which 24 nodes on pieces at
 most 1.5 px = 3σ long leave a relative error below 1e-14 (test_closed_form.py test03)."""
 
 # the truncated gaussian profile k₁(x) = (g(x) - g(R)) / Z on |x| <= R, g(x) = exp(-x²/2σ²):
@@ -45,9 +45,9 @@ _Z = _SIGMA * math.sqrt(2.0 * math.pi) * (1.0 - 2.0 * _PHI_LOW) - 2.0 * _RADIUS 
 
 # ------------------------------------------------------------------- 1D filter
 def filter_kinks(kind: str) -> tuple[float, ...]:
-    """Offsets (pixels) where the 1D profile k₁ or its CDF K is not smooth, plus the gaussian's centre.
+    """Offsets (pixels) where the 1D profile $k_1$ or its CDF K is not smooth, plus the gaussian's centre.
 
-    box: the support's ends ±½ (k₁ jumps); tent: -1, 0, 1 (k₁' jumps); gaussian: ±R (k₁'
+    box: the support's ends ±½ ($k_1$ jumps); tent: -1, 0, 1 ($k_1'$ jumps); gaussian: ±R ($k_1'$
     jumps where the shifted profile reaches 0) and 0, which is smooth but halves the pieces.
     """
     kind = check_choice("filter", kind, FILTERS)
@@ -55,9 +55,9 @@ def filter_kinks(kind: str) -> tuple[float, ...]:
 
 
 def filter_profile_1d(x: Any, kind: str) -> Any:
-    """The 1D profile k₁ of the separable pixel filter k(x, y) = k₁(x) k₁(y), integral 1.
+    r"""The 1D profile $k_1$ of the separable pixel filter $k(x, y) = k_1(x) k_1(y)$, integral 1.
 
-    box: 1 on [-½, ½]; tent: max(1 - |x|, 0); gaussian: (e^{-x²/2σ²} - e^{-R²/2σ²}) / Z on
+    box: 1 on [-½, ½]; tent: $\max(1 - |x|, 0)$; gaussian: $(e^{-x^2/2σ^2} - e^{-R^2/2σ^2}) / Z$ on
     [-R, R] (σ = ½, R = 3σ as :mod:`sphere3d.sampling`), 0 outside. Dual-aware.
     """
     kind = check_choice("filter", kind, FILTERS)
@@ -69,10 +69,10 @@ def filter_profile_1d(x: Any, kind: str) -> Any:
 
 
 def filter_cdf_1d(x: np.ndarray, kind: str) -> np.ndarray:
-    """K(x) = ∫_{-∞}^x k₁(t) dt, from 0 below the support to 1 above it (plain arrays).
+    r"""$K(x) = ∫_{-∞}^x k_1(t) dt$, from 0 below the support to 1 above it (plain arrays).
 
-    box: clip(x + ½, 0, 1). tent: ½ (1 + x)² on [-1, 0], 1 - ½ (1 - x)² on [0, 1].
-    gaussian: [σ√(2π) (Φ(x/σ) - Φ(-R/σ)) - g(R) (x + R)] / Z on [-R, R].
+    box: $\mathrm{clip}(x + ½, 0, 1)$. tent: $½ (1 + x)^2$ on [-1, 0], $1 - ½ (1 - x)^2$ on [0, 1].
+    gaussian: $[σ\sqrt{2π} (Φ(x/σ) - Φ(-R/σ)) - g(R) (x + R)] / Z$ on [-R, R].
     """
     kind = check_choice("filter", kind, FILTERS)
     x = np.asarray(x, dtype=np.float64)
@@ -94,7 +94,7 @@ def _edges(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Green's theorem needs the boundary positively oriented in the coordinates used; the
     film's y axis points down, so the order is taken from the sign of the shoelace area
-    ½ Σ (x_i y_{i+1} - x_{i+1} y_i), not from how the polygon looks on screen.
+    $½ Σ (x_i y_{i+1} - x_{i+1} y_i)$, not from how the polygon looks on screen.
     """
     a = polygon
     b = np.roll(polygon, -1, axis=0)
@@ -112,11 +112,11 @@ def _check_polygon(field: str, polygon: Any) -> np.ndarray:
 def _pieces(a: np.ndarray, b: np.ndarray, centres: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Legendre nodes s (P, E, N) and weights on the edges a→b, split at the filter's kinks.
 
-    For pixel centre c, the edge point p(s) = a + s (b - a) crosses a kink κ of the
-    profile in x where a_x + s (b_x - a_x) = c_x + κ, i.e. s = (c_x + κ - a_x) / (b_x - a_x);
+    For pixel centre c, the edge point $p(s) = a + s (b - a)$ crosses a kink κ of the
+    profile in x where $a_x + s (b_x - a_x) = c_x + κ$, i.e. $s = (c_x + κ - a_x) / (b_x - a_x)$;
     same in y. Those s in (0, 1), with 0 and 1, cut [0, 1] into pieces on which the
-    integrand is smooth; each piece [s0, s1] gets the nodes s0 + (s1 - s0)(g + 1)/2 and
-    weights (s1 - s0) w / 2 (zero-length pieces weigh 0).
+    integrand is smooth; each piece [s0, s1] gets the nodes $s0 + (s1 - s0)(g + 1)/2$ and
+    weights $(s1 - s0) w / 2$ (zero-length pieces weigh 0).
     """
     kinks = np.asarray(filter_kinks(kind))
     d = b - a  # (E, 2)
@@ -135,13 +135,13 @@ def _pieces(a: np.ndarray, b: np.ndarray, centres: np.ndarray, kind: str) -> tup
 
 
 def polygon_filter_integral(polygon: Any, centres: Any, kind: str) -> np.ndarray:
-    """∫_T k(x - c) dx for every centre c: the share of each pixel's filter the polygon T covers.
+    r"""$∫_T k(x - c) dx$ for every centre c: the share of each pixel's filter the polygon T covers.
 
-    Green's theorem with Q = K(x - c_x) k₁(y - c_y), P = 0 (∂Q/∂x = k₁(x - c_x) k₁(y - c_y) = k):
-    ``∫_T k dA = ∮_∂T K(x - c_x) k₁(y - c_y) dy``, and on the edge a→b, p(s) = a + s (b - a),
-    dy = (b_y - a_y) ds:
+    Green's theorem with $Q = K(x - c_x) k_1(y - c_y)$, $P = 0$ ($∂Q/∂x = k_1(x - c_x) k_1(y - c_y) = k$):
+    $∫_T k\, dA = ∮_{∂T} K(x - c_x) k_1(y - c_y) dy$, and on the edge a→b, $p(s) = a + s (b - a)$,
+    $dy = (b_y - a_y) ds$:
 
-        ∫_T k = Σ_edges (b_y - a_y) ∫_0^1 K(p_x(s) - c_x) k₁(p_y(s) - c_y) ds,
+        $∫_T k = Σ_{edges} (b_y - a_y) ∫_0^1 K(p_x(s) - c_x) k_1(p_y(s) - c_y) ds$,
 
     each 1D integral by Gauss–Legendre between the kinks (:data:`QUADRATURE_NODES`).
 
@@ -168,15 +168,15 @@ def polygon_filter_integral(polygon: Any, centres: Any, kind: str) -> np.ndarray
 
 
 def polygon_filter_derivative(polygon: Any, polygon_dot: Any, centres: Any, kind: str) -> np.ndarray:
-    """d/dθ ∫_{T(θ)} k(x - c) dx when the polygon's vertices move with velocities ``polygon_dot``.
+    r"""$d/dθ ∫_{T(θ)} k(x - c) dx$ when the polygon's vertices move with velocities ``polygon_dot``.
 
     Reynolds transport: k does not depend on θ, so only the boundary moves,
-    ``d/dθ ∫_T k = ∮_∂T k(p) (v·n) dl``, n the outward unit normal. The polygon at θ is
-    the one through the moved vertices, so its edge a→b at θ + dθ is the segment between
-    a + ȧ dθ and b + ḃ dθ, and the point p(s) = a + s (b - a) moves with
-    v(s) = (1 - s) ȧ + s ḃ. For a counter-clockwise edge, n dl = (dy, -dx) = (b - a)^⊥ ds:
+    $d/dθ ∫_T k = ∮_{∂T} k(p) (v·n) dl$, n the outward unit normal. The polygon at θ is
+    the one through the moved vertices, so its edge a→b at $θ + dθ$ is the segment between
+    $a + \dot a\, dθ$ and $b + \dot b\, dθ$, and the point $p(s) = a + s (b - a)$ moves with
+    $v(s) = (1 - s) \dot a + s \dot b$. For a counter-clockwise edge, $n\, dl = (dy, -dx) = (b - a)^⊥ ds$:
 
-        d/dθ ∫_T k = Σ_edges ∫_0^1 k(p(s) - c) [v_x(s) (b_y - a_y) - v_y(s) (b_x - a_x)] ds.
+        $d/dθ ∫_T k = Σ_{edges} ∫_0^1 k(p(s) - c) [v_x(s) (b_y - a_y) - v_y(s) (b_x - a_x)] ds$.
 
     Parameters
     ----------
@@ -212,21 +212,21 @@ def polygon_filter_derivative(polygon: Any, polygon_dot: Any, centres: Any, kind
 
 # ---------------------------------------------------------------- projection
 def project(camera: Camera, points: Any) -> tuple[Any, Any]:
-    """Continuous pixel coordinates (x right, y down) of 3D points through the pinhole; Dual-aware.
+    r"""Continuous pixel coordinates (x right, y down) of 3D points through the pinhole; Dual-aware.
 
     With (f, r, u) the camera frame built here from the scene format's convention
-    (f toward ``look_at``, r = f × up normalized, u = r × f; not with the renderer's
+    (f toward ``look_at``, $r = f × up$ normalized, $u = r × f$; not with the renderer's
     :meth:`~sphere3d.scene.Camera.frame`, so a mistake there cannot be shared) and
-    q = P - position, the ray through P meets the film plane (distance 1 along f) at
-    (q·r, q·u) / (q·f); the camera maps the film square [-t, t] (t = tan(fov/2)) to
+    $q = P - position$, the ray through P meets the film plane (distance 1 along f) at
+    $(q·r, q·u) / (q·f)$; the camera maps the film square [-t, t] ($t = \tan(fov/2)$) to
     [0, width) and [-t h/w, t h/w] to [0, height) top to bottom (square pixels):
 
-        x = (q·r / q·f / t + 1) w / 2,    y = (1 - q·u / q·f / (t h / w)) h / 2.
+        $x = (q·r / q·f / t + 1) w / 2$,    $y = (1 - q·u / q·f / (t h / w)) h / 2$.
 
     Raises
     ------
     ValidationError
-        If a point is not strictly in front of the camera (q·f <= 0): behind the pinhole
+        If a point is not strictly in front of the camera ($q·f ≤ 0$): behind the pinhole
         a straight edge does not project to a straight segment.
     """
     f = np.subtract(camera.look_at, camera.position)
@@ -274,8 +274,8 @@ def _triangle_shape(scene: Scene, field: str = "scene") -> int:
 def triangle_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) -> Any:
     """World vertices (3, 3) of the scene's triangle with ``param`` offset by ``theta`` (float or Dual).
 
-    The scene's transform of a shape (:mod:`sphere3d.scene`): world = translate + R (scale · local),
-    R = Rz Ry Rx of ``rotate``; ``NAME.translate.a`` adds θ to translate[a], ``NAME.rotate.a``
+    The scene's transform of a shape (:mod:`sphere3d.scene`): $world = translate + R (scale · local)$,
+    $R = R_z R_y R_x$ of ``rotate``; ``NAME.translate.a`` adds θ to translate[a], ``NAME.rotate.a``
     to rotate[a], ``NAME.scale`` multiplies the scale by 1 + θ.
     """
     i = _triangle_shape(scene)
@@ -317,7 +317,7 @@ def _rotate_xyz(points: Any, angles: Any) -> Any:
 class TriangleImage:
     """The exact image of a black triangle against the sky, and its θ-derivative, shape (height, width).
 
-    ``coverage`` is ∫_T k per pixel; ``value = sky (1 - coverage)``; ``derivative`` its θ-derivative
+    ``coverage`` is $∫_T k$ per pixel; ``value = sky (1 - coverage)``; ``derivative`` its θ-derivative
     (zeros without a parameter); ``vertices`` the projected triangle (3, 2) in pixel coordinates.
     """
 
@@ -328,7 +328,7 @@ class TriangleImage:
 
 
 def triangle_image(scene: Any, param: str | None = None, theta: float = 0.0) -> TriangleImage:
-    """The image ``I(p) = sky (1 - ∫_T k(x - c_p) dx)`` of a one-triangle scene, and dI/dθ.
+    r"""The image $I(p) = sky (1 - ∫_T k(x - c_p) dx)$ of a one-triangle scene, and dI/dθ.
 
     Parameters
     ----------
@@ -348,9 +348,9 @@ def triangle_image(scene: Any, param: str | None = None, theta: float = 0.0) -> 
     Notes
     -----
     The vertices' film velocities come from the projection evaluated on Duals
-    (:func:`project`, :func:`triangle_vertices`): ȧ = d(pixel coordinates)/dθ exactly.
+    (:func:`project`, :func:`triangle_vertices`): $\dot a = d(\text{pixel coordinates})/dθ$ exactly.
     The pixel integral sees radiance 0 on the triangle from either side (albedo and
-    emission 0) and ``sky`` elsewhere; the derivative is ``-sky d/dθ ∫_T k`` by
+    emission 0) and ``sky`` elsewhere; the derivative is $-sky\, d/dθ ∫_T k$ by
     :func:`polygon_filter_derivative`.
     """
     scene = load_scene(scene)

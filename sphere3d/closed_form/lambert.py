@@ -21,16 +21,16 @@ __all__ = [
 
 # ------------------------------------------------------------ Lambert's formula
 def projected_solid_angle(point: Any, normal: Any, vertices: Any) -> Any:
-    """Φ = ∫_{Ω(T)} n·ω dω, the projected solid angle of a polygon above the horizon (Lambert 1760).
+    r"""$Φ = ∫_{Ω(T)} n·ω\, dω$, the projected solid angle of a polygon above the horizon (Lambert 1760).
 
-    With u_i the unit directions from the point to the vertices, the irradiance vector
-    of the cone over the polygon is ½ Σ γ_i m_i (Lambert; Arvo 1995, "Applications of
-    irradiance tensors"): each edge spans with the point a plane of unit normal m_i and
-    subtends the great arc u_i → u_{i+1} of angle γ_i, and by Stokes' theorem on the
+    With $u_i$ the unit directions from the point to the vertices, the irradiance vector
+    of the cone over the polygon is $½ Σ γ_i m_i$ (Lambert; Arvo 1995, "Applications of
+    irradiance tensors"): each edge spans with the point a plane of unit normal $m_i$ and
+    subtends the great arc $u_i → u_{i+1}$ of angle $γ_i$, and by Stokes' theorem on the
     sphere the cosine-weighted solid angle is the sum of those arcs' contributions:
 
-        Φ = ½ Σ_i γ_i n·m_i,    γ_i = atan2(|u_i × u_{i+1}|, u_i·u_{i+1}),
-                                m_i = (u_i × u_{i+1}) / |u_i × u_{i+1}|.
+        $Φ = ½ Σ_i γ_i n·m_i$,    $γ_i = \mathrm{atan2}(|u_i × u_{i+1}|, u_i·u_{i+1})$,
+        $m_i = (u_i × u_{i+1}) / |u_i × u_{i+1}|$.
 
     The sum is positive when the vertices wind counter-clockwise about n (seen from
     the tip of n); the absolute value is returned. Dual-aware in all arguments.
@@ -44,7 +44,7 @@ def projected_solid_angle(point: Any, normal: Any, vertices: Any) -> Any:
     Raises
     ------
     ValidationError
-        If a vertex is not strictly above the horizon (n·(v - x) <= 0): the formula needs
+        If a vertex is not strictly above the horizon ($n·(v - x) ≤ 0$): the formula needs
         the polygon clipped there, which is not implemented.
     """
     d = vertices - point
@@ -65,9 +65,9 @@ def projected_solid_angle(point: Any, normal: Any, vertices: Any) -> Any:
 
 
 def polygon_irradiance(point: Any, normal: Any, vertices: Any, radiance: Any) -> Any:
-    """Irradiance from a uniform one-sided polygonal emitter: E = L Φ if its front faces the point, else 0.
+    """Irradiance from a uniform one-sided polygonal emitter: $E = L Φ$ if its front faces the point, else 0.
 
-    The front side is the one its normal (v1 - v0) × (v2 - v0) points to (as
+    The front side is the one its normal $(v1 - v0) × (v2 - v0)$ points to (as
     :mod:`sphere3d.shapes` orients emitters); Φ from :func:`projected_solid_angle`. Dual-aware.
     """
     m = np.cross(vertices[1] - vertices[0], vertices[2] - vertices[0])
@@ -78,10 +78,11 @@ def polygon_irradiance(point: Any, normal: Any, vertices: Any, radiance: Any) ->
 def occluded_sky_irradiance(
     scene: Any, point: Any, normal: Any, param: str | None = None, theta: float = 0.0
 ) -> tuple[float, float]:
-    """E = sky (π - Φ(T)) at a point under a constant sky with the scene's black triangle above it, and dE/dθ.
+    r"""$E = sky (π - Φ(T))$ at a point under a constant sky with the scene's black triangle above it,
+    and dE/dθ.
 
-    The open sky gives ∫_H L cos θ dω = π L; the triangle (black, so nothing of it adds
-    light) removes L Φ. Returns (value, derivative) at the parameter offset ``theta``;
+    The open sky gives $∫_H L \cos θ\, dω = π L$; the triangle (black, so nothing of it adds
+    light) removes $L Φ$. Returns (value, derivative) at the parameter offset ``theta``;
     the derivative flows through Lambert's formula with a Dual θ (derivative 0 without
     ``param``).
     """

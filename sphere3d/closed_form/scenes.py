@@ -28,12 +28,12 @@ TRIANGLE_SHAPE = ((-0.5, -0.4, 0.0), (0.55, -0.3, 0.0), (0.05, 0.5, 0.0))
 
 
 def pinhole_triangle_scene(size: float, width: int = 16, filter: str = "gaussian", sky: float = 1.0) -> dict:
-    """A black triangle about ``size`` px across, centred in a ``width`` × ``width`` image, under the sky.
+    r"""A black triangle about ``size`` px across, centred in a ``width`` × ``width`` image, under the sky.
 
     The camera sits at (0, 0, -4) looking at the origin (up +y, so ``translate.x`` moves the
     triangle sideways, ``translate.z`` away from the camera); its fov makes a pixel
     :data:`PIXEL` = 0.1 wide at the triangle's depth whatever ``width``
-    (tan(fov/2) = width · PIXEL / (2 · 4)). The triangle's centre is offset by (0.13, -0.21)
+    ($\tan(fov/2) = width · PIXEL / (2 · 4)$). The triangle's centre is offset by (0.13, -0.21)
     px from the optical axis, so no edge or vertex lines up with the pixel grid.
     """
     tan_half = width * PIXEL / 8.0
@@ -96,10 +96,10 @@ def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:
 
 @dataclass(frozen=True)
 class ShareLost:
-    """The share of an exact derivative an estimator misses, from its independent batches.
+    r"""The share of an exact derivative an estimator misses, from its independent batches.
 
-    ``mean`` = 1 - mean over batches of Σ sign(g) d_b / Σ |g| (g the exact derivative, d_b a batch's
-    estimate; for a scalar 1 - d_b / g); ``stderr`` its standard error; ``batches`` the count.
+    ``mean`` = 1 - mean over batches of $Σ \mathrm{sign}(g) d_b / Σ |g|$ (g the exact derivative, $d_b$ a
+    batch's estimate; for a scalar $1 - d_b / g$); ``stderr`` its standard error; ``batches`` the count.
     Positive: the estimate is short of the exact derivative, as a missed boundary term makes it.
     """
 

@@ -25,7 +25,7 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     integrand changed: visibility flips within $h |c'|$ of a moving edge, and the
     smooth change of everything else. Assumes nothing about continuity; biased by
     the truncation error $h^2 I'''/6 + O(h^4)$ (per pixel), with a variance that grows
-    like 1/h at edges. Not part of the paper: the reference the other methods are
+    like $1/h$ at edges. Not part of the paper: the reference the other methods are
     checked against. For ``*.scale`` parameters (scale by 1 + θ) h must be < 1.
 
     The default h = 1e-2 is ten times flatland's: the step trades the truncation bias
@@ -37,7 +37,7 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     (the predicted factor √10), while the bias at 1e-2 stayed below the noise (the
     image's summed derivative -6.4 ± 0.6 at h = 0.1, -6.2 ± 2.6 at h = 1e-2).
     Embree's float32 tracing is not what limits h: it places an edge to about 1e-7
-    of the scene's size, far inside the band ``h |c'|`` that even h = 1e-3 sees.
+    of the scene's size, far inside the band $h |c'|$ that even h = 1e-3 sees.
     """
     if (task.param or "").endswith(".scale") and h >= 1.0:
         raise ValidationError(
