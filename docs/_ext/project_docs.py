@@ -68,6 +68,7 @@ from docutils import nodes
 from sphinx import addnodes
 from sphinx.application import Sphinx
 from sphinx.errors import PycodeError
+from sphinx.ext import autosummary
 from sphinx.pycode import ModuleAnalyzer
 from sphinx.util import logging
 from sphinx.util.docutils import SphinxDirective
@@ -383,6 +384,9 @@ def _forget_environment_after_warnings(app: Sphinx, exception: Exception | None)
 def setup(app: Sphinx) -> dict[str, Any]:
     """Register the directive and the event handlers."""
     app.setup_extension("sphinx.ext.autodoc")  # its events are connected below
+    # a summary line citing "(Loubet et al. 2019, Sec. 4.2)" must not end at "Sec."
+    if "Sec." not in autosummary.WELL_KNOWN_ABBREVIATIONS:
+        autosummary.WELL_KNOWN_ABBREVIATIONS = (*autosummary.WELL_KNOWN_ABBREVIATIONS, "Sec.")
     app.add_config_value("project_api_packages", PROJECT_PACKAGES, "env")
     app.add_directive("implements", Implements)
     app.connect("builder-inited", _document_shadowed_modules, priority=900)  # after autosummary (500)
