@@ -41,6 +41,7 @@ __all__ = [
     "DIVERGING",
     "PRIMAL",
     "gradient_figure",
+    "grid_beside",
     "image_figure",
     "panel_figure",
     "plot_gradient",
@@ -66,8 +67,9 @@ def save_png(fig: Figure, path: str | os.PathLike) -> Path:
     return path
 
 
-def _grid(fig: Figure, sketch: Sketch | None, nrows: int, ncols: int, **grid: Any) -> GridSpecBase:
-    """The grid of the film panels; with a ``sketch``, right of a panel spanning all rows that it draws."""
+def grid_beside(fig: Figure, sketch: Sketch | None, nrows: int, ncols: int, **grid: Any) -> GridSpecBase:
+    """The grid of a figure's film panels; with a ``sketch``, right of a panel spanning all rows that it
+    draws, the figure widened by :data:`SKETCH_INCHES` (and at least that tall)."""
     if sketch is None:
         return fig.add_gridspec(nrows, ncols, **grid)
     width = fig.get_figwidth()
@@ -111,7 +113,7 @@ def image_figure(
     norm = radiance_norm(value)
     if value.ndim == 1:
         fig = Figure(figsize=(7, 3.2))
-        top, bottom = _grid(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
+        top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
         _film(top, value, PRIMAL, norm, title)
         top.set_xlabel("")
         _curve(bottom, value, stderr, "radiance", color="k")
@@ -120,7 +122,7 @@ def image_figure(
         bottom.set_xlim(0, value.size)
     else:
         fig = Figure(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4))
-        ax = _grid(fig, sketch, 1, 1).subplots()
+        ax = grid_beside(fig, sketch, 1, 1).subplots()
         fig.colorbar(_film(ax, value, PRIMAL, norm, title), ax=ax, shrink=0.8)
     return save_png(fig, path)
 
@@ -136,7 +138,7 @@ def gradient_figure(
     norm = symmetric_norm(limit)
     if derivative.ndim == 1:
         fig = Figure(figsize=(7, 3.2))
-        top, bottom = _grid(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
+        top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
         fig.colorbar(
             _film(top, derivative, DIVERGING, norm, title), ax=[top, bottom], shrink=0.6, label="dI/dθ"
         )
@@ -148,7 +150,7 @@ def gradient_figure(
         bottom.set_xlim(0, derivative.size)
     else:
         fig = Figure(figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4))
-        ax = _grid(fig, sketch, 1, 1).subplots()
+        ax = grid_beside(fig, sketch, 1, 1).subplots()
         fig.colorbar(_film(ax, derivative, DIVERGING, norm, title), ax=ax, shrink=0.8, label="dI/dθ")
     return save_png(fig, path)
 
@@ -174,13 +176,13 @@ def panel_figure(
     primal_norm = radiance_norm(primal)
     if primal.ndim == 1:
         fig = Figure(figsize=(2.6 * columns, 5.2))
-        grid = _grid(fig, sketch, 2, columns, height_ratios=(1, 1.6), hspace=0.45)
+        grid = grid_beside(fig, sketch, 2, columns, height_ratios=(1, 1.6), hspace=0.45)
         axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
         curves = neutral_cycle(fig.add_subplot(grid[1, :]))
     else:
         aspect = primal.shape[0] / max(primal.shape[1], 1)
         fig = Figure(figsize=(2.6 * columns, 2.6 * aspect + 0.9), layout="constrained")
-        axes, curves = list(np.atleast_1d(_grid(fig, sketch, 1, columns).subplots())), None
+        axes, curves = list(np.atleast_1d(grid_beside(fig, sketch, 1, columns).subplots())), None
     _film(axes[0], primal, PRIMAL, primal_norm, "primal")
     mappable = None
     for ax, (label, (derivative, _)) in zip(axes[1:], gradients.items(), strict=True):
