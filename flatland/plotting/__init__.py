@@ -17,7 +17,10 @@ The figures:
   packages' ``plot`` modules and the command line;
 * :mod:`flatland.plotting.textbook` (with
   :mod:`~flatland.plotting.textbook_estimates`) and
-  :mod:`flatland.plotting.tutorials`: figures returned to a notebook.
+  :mod:`flatland.plotting.tutorials`: figures returned to a notebook;
+* :mod:`flatland.plotting.sketch`: the sketch of a flatland scene (shapes, emitters,
+  camera frustum, the part a parameter moves and its motion), drawn beside every
+  flatland film of the command line and the tutorials.
 
 No module here imports pyplot or selects a matplotlib backend (figures are made as
 :class:`matplotlib.figure.Figure` objects), so importing any of them leaves a
