@@ -1,7 +1,9 @@
 """``python -m flatland demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.app.cli`).
 
 ``demo`` also prints the textbook table (:mod:`flatland.textbook_report`): every
-estimator on every textbook integral next to its closed form.
+estimator on every textbook integral next to its closed form. Every film figure of ``demo``,
+``render`` and ``gradient`` has the scene's sketch on its left (:mod:`flatland.plotting.sketch`):
+the shapes, the emitter, the camera's view and, for a gradient, the part the parameter moves.
 """
 
 from __future__ import annotations
@@ -9,6 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from flatland.app.cli import Package
 from flatland.app.cli import main as _main
@@ -25,6 +28,13 @@ def _textbook_section(args: argparse.Namespace) -> str:
     from flatland.textbook_report import textbook_table
 
     return textbook_table(seed=args.seed)
+
+
+def _sketch(ax: Any, scene: Any, param: str | None = None) -> Any:
+    """The scene sketch beside every film the command line writes (:mod:`flatland.plotting.sketch`)."""
+    from flatland.plotting.sketch import draw_scene  # matplotlib only once there is a figure to draw
+
+    return draw_scene(ax, scene, param)
 
 
 STUDIES = {
@@ -78,6 +88,7 @@ PACKAGE = Package(
     demo_param="occluder.translate.x",
     demo_spp=256,
     demo_sections=(_textbook_section,),
+    sketch=_sketch,
     studies=STUDIES,
     integrals=_INTEGRALS,
     estimate=_estimate,

@@ -304,12 +304,13 @@ assert np.all(np.abs(reference.derivative - fd_image.derivative) <= tolerance)
 assert np.abs(reference.derivative).max() > 5.0
 
 # %% [markdown]
-# The primal strip and the three derivatives on one colour scale; below, the same derivatives
+# The scene on the left (the moving polygon haloed in green, its motion as arrows), then the
+# primal strip and the three derivatives on one colour scale; below, the same derivatives
 # as curves with 99 % bands. The naive strip is blank: both silhouettes of the polygon are
 # missing.
 
 # %%
-ptu.plot_gradient_panel(image, methods, title=f"silhouette: d/d {param}")
+ptu.plot_gradient_panel(image, methods, title=f"silhouette: d/d {param}", scene=silhouette, param=param)
 
 # %% [markdown]
 # ## Summary

@@ -246,7 +246,8 @@ assert np.all(np.abs(boundary.derivative - fd.derivative) <= tolerance)
 assert np.sum(z_naive > t32) >= 10
 
 # %% [markdown]
-# The occluder covers pixels 8 to 11 (its lit top is the white pixel); to its left lies the floor
+# Left, the scene: the camera's view in cyan, the light in gold, the occluder and its motion in
+# green. The occluder covers pixels 8 to 11 (its lit top is the white pixel); to its left lies the floor
 # in front of it, to its right its shadow on the floor, then the lit floor. Moving the occluder
 # right moves its two silhouettes and both penumbrae of its shadow, and the boundary method finds
 # all four. The naive derivative is zero everywhere: a horizontal segment sliding along itself
@@ -254,7 +255,7 @@ assert np.sum(z_naive > t32) >= 10
 # changes only through visibility, so there is no interior term at all.
 
 # %%
-ptu.plot_gradient_panel(image, gradients, title=f"hard shadow: d/d {PARAM}")
+ptu.plot_gradient_panel(image, gradients, title=f"hard shadow: d/d {PARAM}", scene=scene, param=PARAM)
 
 # %% [markdown]
 # ## 4. What it costs, and why this does not carry over to 3D

@@ -335,11 +335,11 @@ assert np.array_equal(methods["reparam"].value, methods["naive"].value)
 assert methods["naive"].error_vs(reference) > 0.2
 
 # %% [markdown]
-# The panel: the primal, then the three derivatives on one colour scale, and below them as
-# curves with 99 % bands.
+# The panel: the scene (the occluder and its motion in green), the primal, then the three
+# derivatives on one colour scale, and below them as curves with 99 % bands.
 
 # %%
-ptu.plot_gradient_panel(image, methods, title=f"shadow: d/d {PARAM}")
+ptu.plot_gradient_panel(image, methods, title=f"shadow: d/d {PARAM}", scene=shadow, param=PARAM)
 
 # %% [markdown]
 # ## Summary

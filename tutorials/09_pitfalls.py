@@ -163,6 +163,8 @@ ptu.plot_film(
     },
     styles={"closed form": ptu.REFERENCE_STYLE},
     title="black bar, box filter: d/d bar.translate.x",
+    scene=box_scene,
+    param="bar.translate.x",
 )
 
 # %% [markdown]
@@ -260,6 +262,8 @@ ptu.plot_film(
     {"boundary (reference)": reference, **{f"reparam, {k}": g for k, g in rows.items()}},
     marks=[9.5],
     title="two_occluders at 16 pixels: d/d near.translate.x",
+    scene=two,
+    param="near.translate.x",
 )
 
 # %% [markdown]
@@ -374,15 +378,16 @@ for fade, pair_images in images.items():
 assert len(disagree[0.0]) >= 2 and len(disagree[0.1]) == 0
 
 # %% [markdown]
-# The two films side by side: with hard ends, reparam adds a spurious positive derivative on the
-# lit floor right of the shadow (around pixels 25 to 30), where nothing moves, and misses part of
-# the penumbra on the other side.
+# The scene, then the two films side by side: with hard ends, reparam adds a spurious positive
+# derivative on the lit floor right of the shadow (around pixels 25 to 30), where nothing moves,
+# and misses part of the penumbra on the other side.
 
 # %%
 fig = ptu.plot_grid(
-    2, titles=["hard-edged emitter", "emitter faded over 10 % at each end"], panel_size=(5.2, 3.4)
+    3, titles=["", "hard-edged emitter", "emitter faded over 10 % at each end"], panel_size=(4.6, 3.4)
 )
-for ax, fade in zip(fig.axes, (0.0, 0.1), strict=True):
+ptu.plot_scene(hard_shadow(0.0), "occluder.translate.x", ax=fig.axes[0])
+for ax, fade in zip(fig.axes[1:], (0.0, 0.1), strict=True):
     ptu.plot_film({"boundary": images[fade]["boundary"], "reparam": images[fade]["reparam"]}, ax=ax)
 fig
 

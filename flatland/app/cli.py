@@ -103,6 +103,11 @@ class Package:
         Figure writers; None (the default) draws with the shared
         :mod:`flatland.plotting.films` and :mod:`flatland.plotting.study`, imported
         (with matplotlib) only when there is a figure to draw.
+    sketch : callable, optional
+        ``sketch(ax, scene, param)`` draws a scene (and what ``param`` moves; None:
+        nothing) into a matplotlib Axes; the figures of ``demo``, ``render`` and
+        ``gradient`` then show it in a left panel, the scene beside its film. None:
+        no sketch.
     """
 
     name: str
@@ -129,6 +134,7 @@ class Package:
     plot_gradient: Callable[..., Path] | None = None
     plot_panel: Callable[..., Path] | None = None
     plot_study: Callable[..., list[Path]] | None = None
+    sketch: Callable[[Any, Any, str | None], Any] | None = None
 
     def plot(self, kind: str) -> Callable[..., Any]:
         """The figure writer ``plot_<kind>``: the package's own, else the shared one (imported now)."""

@@ -3,7 +3,8 @@
 Each verb is a function ``(package, args) -> exit status`` that the parser of
 :mod:`flatland.app.cli` attaches to its subcommand; what a verb does is described
 there. Figures are drawn by the package's writers (:meth:`Package.plot
-<flatland.app.cli.Package.plot>`).
+<flatland.app.cli.Package.plot>`), with the scene's sketch on the left when the package
+has one (:attr:`Package.sketch <flatland.app.cli.Package>`).
 """
 
 from __future__ import annotations
@@ -108,6 +109,14 @@ def _reference_ratio(gradients: Mapping[str, Any], reference: Any) -> float:
     return se(reference) / min(judged) if judged else 0.0
 
 
+def _sketch(pkg: Package, scene: Any, param: str | None = None) -> dict[str, Any]:
+    """``{"sketch": draw}`` for a figure writer, drawing ``scene`` (and what ``param`` moves) into an
+    Axes, when the package sketches its scenes; ``{}`` when it does not."""
+    if pkg.sketch is None:
+        return {}
+    return {"sketch": lambda ax: pkg.sketch(ax, scene, param)}
+
+
 def _film_sum(g: Any) -> str:
     """Σ_j dI_j/dθ ± its standard error (pixels estimated independently)."""
     total = float(np.sum(g.derivative))
@@ -149,7 +158,8 @@ def verb_demo(pkg: Package, args: argparse.Namespace) -> int:
         )
     columns = {PANEL_TITLES.get(m, m): g for m, g in gradients.items()}
     title = f"{pkg.demo_scene}: d/d {pkg.demo_param}, {spp} spp"
-    panel = pkg.plot("panel")(primal, columns, out / "demo_panel.png", title=title)
+    sketch = _sketch(pkg, scene, pkg.demo_param)
+    panel = pkg.plot("panel")(primal, columns, out / "demo_panel.png", title=title, **sketch)
     title = (
         f"{pkg.name} demo: scene {pkg.demo_scene!r}, parameter {pkg.demo_param!r}, {spp} spp, seed {seed}\n"
         f"reference: {ref_label} at {ref_spp} spp, seed {seed + 1}: Σ dI/dθ = {_film_sum(reference)}"
@@ -170,7 +180,9 @@ def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     image = pkg.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
     name = _stem(args.scene)
     out = Path(args.out)
-    png = pkg.plot("image")(image, out / f"{name}.png", title=f"{name}, {args.spp} spp")
+    png = pkg.plot("image")(
+        image, out / f"{name}.png", title=f"{name}, {args.spp} spp", **_sketch(pkg, scene)
+    )
     npy = _save_fields(out / f"{name}.npy", value=image.value, stderr=image.stderr)
     print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
     return 0
@@ -189,7 +201,7 @@ def verb_gradient(pkg: Package, args: argparse.Namespace) -> int:
     name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
     out = Path(args.out)
     title = f"{_stem(args.scene)}: d/d {args.param}, {args.method}, {args.spp} spp"
-    png = pkg.plot("gradient")(g, out / f"{name}.png", title=title)
+    png = pkg.plot("gradient")(g, out / f"{name}.png", title=title, **_sketch(pkg, scene, args.param))
     npy = _save_fields(
         out / f"{name}.npy",
         value=g.value,

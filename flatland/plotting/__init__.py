@@ -19,6 +19,9 @@ The figures:
   :mod:`~flatland.plotting.textbook_estimates`), :mod:`flatland.plotting.tutorials` and
   :mod:`flatland.plotting.convergence` (error against time): figures returned to a
   notebook, with :mod:`flatland.plotting.probe_rays` for the probe rays of tutorial 8.
+* :mod:`flatland.plotting.sketch`: the sketch of a flatland scene (shapes, emitters,
+  camera frustum, the part a parameter moves and its motion), drawn beside every
+  flatland film of the command line and the tutorials.
 
 No module here imports pyplot or selects a matplotlib backend (figures are made as
 :class:`matplotlib.figure.Figure` objects), so importing any of them leaves a

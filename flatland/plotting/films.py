@@ -6,20 +6,24 @@ A 1D film is drawn as a strip (one row of pixels stretched vertically) and, in t
 panel, also as curves with ± 2 standard-error bands (their coverage, 95.45 %, in
 the legend), each method in its colour (:mod:`flatland.plotting.style`).
 
-Every function writes one PNG and returns its path. Figures are made without pyplot,
-so no backend is selected or needed and nothing stays open after saving.
+Every function writes one PNG and returns its path. Given a ``sketch`` (a function that
+draws into a matplotlib Axes, e.g. a flatland scene with
+:func:`~flatland.plotting.sketch.draw_scene`), a figure gets a left panel, spanning its
+rows, for it: the scene beside its film. Figures are made without pyplot, so no
+backend is selected or needed and nothing stays open after saving.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.gridspec import GridSpecBase
 
 from flatland.plotting.bands import draw_estimate
 from flatland.plotting.style import (
@@ -37,6 +41,7 @@ __all__ = [
     "DIVERGING",
     "PRIMAL",
     "gradient_figure",
+    "grid_beside",
     "image_figure",
     "panel_figure",
     "plot_gradient",
@@ -48,6 +53,10 @@ __all__ = [
 
 DPI = 110
 """Resolution of the written PNGs."""
+SKETCH_INCHES = 3.8
+"""Width added to a figure for its sketch panel, and the least height of such a figure."""
+Sketch = Callable[[Any], Any]
+"""A function drawing into the Axes it is given (the scene sketch beside a film)."""
 
 
 def save_png(fig: Figure, path: str | os.PathLike) -> Path:
@@ -56,6 +65,18 @@ def save_png(fig: Figure, path: str | os.PathLike) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=DPI, bbox_inches="tight")
     return path
+
+
+def grid_beside(fig: Figure, sketch: Sketch | None, nrows: int, ncols: int, **grid: Any) -> GridSpecBase:
+    """The grid of a figure's film panels; with a ``sketch``, right of a panel spanning all rows that it
+    draws, the figure widened by :data:`SKETCH_INCHES` (and at least that tall)."""
+    if sketch is None:
+        return fig.add_gridspec(nrows, ncols, **grid)
+    width = fig.get_figwidth()
+    fig.set_size_inches(width + SKETCH_INCHES, max(fig.get_figheight(), SKETCH_INCHES))
+    outer = fig.add_gridspec(1, 2, width_ratios=(SKETCH_INCHES, width), wspace=0.22)
+    sketch(fig.add_subplot(outer[0]))
+    return outer[1].subgridspec(nrows, ncols, **grid)
 
 
 def _film(ax: Any, array: np.ndarray, cmap: str, norm: Normalize, title: str = "") -> Any:
@@ -83,14 +104,16 @@ def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, co
 
 
 def image_figure(
-    value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = ""
-) -> Path:
-    """A rendered image (1D: strip over a curve with ±2 standard errors; 2D: grey image)."""
+    value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
+    sketch: Sketch | None = None,
+) -> Path:  # fmt: skip
+    """A rendered image (1D: strip over a curve with ±2 standard errors; 2D: grey image), the
+    ``sketch`` (if given) on its left."""
     value = np.asarray(value)
     norm = radiance_norm(value)
     if value.ndim == 1:
         fig = Figure(figsize=(7, 3.2))
-        top, bottom = fig.subplots(2, 1, height_ratios=(1, 2), sharex=True)
+        top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
         _film(top, value, PRIMAL, norm, title)
         top.set_xlabel("")
         _curve(bottom, value, stderr, "radiance", color="k")
@@ -99,22 +122,23 @@ def image_figure(
         bottom.set_xlim(0, value.size)
     else:
         fig = Figure(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4))
-        ax = fig.subplots()
+        ax = grid_beside(fig, sketch, 1, 1).subplots()
         fig.colorbar(_film(ax, value, PRIMAL, norm, title), ax=ax, shrink=0.8)
     return save_png(fig, path)
 
 
 def gradient_figure(
     derivative: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
-    limit: float | None = None,
+    limit: float | None = None, sketch: Sketch | None = None,
 ) -> Path:  # fmt: skip
-    """A derivative image on the diverging map centred on zero (1D: strip over a curve)."""
+    """A derivative image on the diverging map centred on zero (1D: strip over a curve), the
+    ``sketch`` (if given) on its left."""
     derivative = np.asarray(derivative)
     limit = symmetric_limit([derivative]) if limit is None else limit
     norm = symmetric_norm(limit)
     if derivative.ndim == 1:
         fig = Figure(figsize=(7, 3.2))
-        top, bottom = fig.subplots(2, 1, height_ratios=(1, 2), sharex=True)
+        top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
         fig.colorbar(
             _film(top, derivative, DIVERGING, norm, title), ax=[top, bottom], shrink=0.6, label="dI/dθ"
         )
@@ -126,7 +150,7 @@ def gradient_figure(
         bottom.set_xlim(0, derivative.size)
     else:
         fig = Figure(figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4))
-        ax = fig.subplots()
+        ax = grid_beside(fig, sketch, 1, 1).subplots()
         fig.colorbar(_film(ax, derivative, DIVERGING, norm, title), ax=ax, shrink=0.8, label="dI/dθ")
     return save_png(fig, path)
 
@@ -136,12 +160,14 @@ def panel_figure(
     gradients: Mapping[str, tuple[np.ndarray, np.ndarray | None]],
     path: str | os.PathLike,
     title: str = "",
+    sketch: Sketch | None = None,
 ) -> Path:
     """The side-by-side panel: primal, then each method's derivative on one shared diverging scale.
 
     ``gradients`` maps a column title to ``(derivative, stderr)``. A 1D film gets a
     second row with all derivatives as curves (± 2 standard errors) on one axis, each
     in its method's colour when the title names one (``"finite differences"`` does).
+    The ``sketch``, if given, draws a first column spanning both rows.
     """
     primal = np.asarray(primal)
     columns = 1 + len(gradients)
@@ -150,13 +176,13 @@ def panel_figure(
     primal_norm = radiance_norm(primal)
     if primal.ndim == 1:
         fig = Figure(figsize=(2.6 * columns, 5.2))
-        grid = fig.add_gridspec(2, columns, height_ratios=(1, 1.6), hspace=0.45)
+        grid = grid_beside(fig, sketch, 2, columns, height_ratios=(1, 1.6), hspace=0.45)
         axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
         curves = neutral_cycle(fig.add_subplot(grid[1, :]))
     else:
         aspect = primal.shape[0] / max(primal.shape[1], 1)
         fig = Figure(figsize=(2.6 * columns, 2.6 * aspect + 0.9), layout="constrained")
-        axes, curves = list(np.atleast_1d(fig.subplots(1, columns))), None
+        axes, curves = list(np.atleast_1d(grid_beside(fig, sketch, 1, columns).subplots())), None
     _film(axes[0], primal, PRIMAL, primal_norm, "primal")
     mappable = None
     for ax, (label, (derivative, _)) in zip(axes[1:], gradients.items(), strict=True):
@@ -178,20 +204,26 @@ def panel_figure(
     return save_png(fig, path)
 
 
-def plot_image(image: Any, path: str | os.PathLike, title: str = "") -> Path:
-    """PNG of an :class:`~flatland.core.image.Image`."""
-    return image_figure(image.value, image.stderr, path, title or image.scene)
+def plot_image(image: Any, path: str | os.PathLike, title: str = "", sketch: Sketch | None = None) -> Path:
+    """PNG of an :class:`~flatland.core.image.Image` (the ``sketch`` on its left, if given)."""
+    return image_figure(image.value, image.stderr, path, title or image.scene, sketch)
 
 
 def plot_gradient(
-    gradient: Any, path: str | os.PathLike, title: str = "", limit: float | None = None
-) -> Path:
-    """PNG of a :class:`~flatland.core.image.GradientImage`'s derivative, diverging map centred on 0."""
+    gradient: Any, path: str | os.PathLike, title: str = "", limit: float | None = None,
+    sketch: Sketch | None = None,
+) -> Path:  # fmt: skip
+    """PNG of a :class:`~flatland.core.image.GradientImage`'s derivative, diverging map centred on 0
+    (the ``sketch`` on its left, if given)."""
     title = title or f"{gradient.scene}: d/d {gradient.param} ({gradient.method})"
-    return gradient_figure(gradient.derivative, gradient.derivative_stderr, path, title, limit)
+    return gradient_figure(gradient.derivative, gradient.derivative_stderr, path, title, limit, sketch)
 
 
-def plot_panel(primal: Any, gradients: Mapping[str, Any], path: str | os.PathLike, title: str = "") -> Path:
-    """The side-by-side panel from an Image and GradientImages keyed by column title."""
+def plot_panel(
+    primal: Any, gradients: Mapping[str, Any], path: str | os.PathLike, title: str = "",
+    sketch: Sketch | None = None,
+) -> Path:  # fmt: skip
+    """The side-by-side panel from an Image and GradientImages keyed by column title (the ``sketch``
+    first, if given)."""
     columns = {label: (g.derivative, g.derivative_stderr) for label, g in gradients.items()}
-    return panel_figure(primal.value, columns, path, title)
+    return panel_figure(primal.value, columns, path, title, sketch)

@@ -9,7 +9,8 @@ references in black. Variants of one method (options such as ``kappa=10`` or
 (:func:`series_styles`).
 Series that name no method take colours from :data:`OTHER_COLOURS`, none of which a
 method uses: it is the colour cycle of every Axes the figure modules make
-(:func:`neutral_cycle`).
+(:func:`neutral_cycle`). Scene sketches draw with :data:`SKETCH_COLOURS`: emitters in
+gold, the camera in cyan and the part a parameter moves in green.
 
 This module imports matplotlib but not pyplot and selects no backend: a notebook's
 inline backend stays as it is.
@@ -38,6 +39,7 @@ __all__ = [
     "OTHER_COLOURS",
     "PRIMAL",
     "REFERENCE_STYLE",
+    "SKETCH_COLOURS",
     "TWO_SIGMA",
     "coverage_label",
     "method_colour",
@@ -61,6 +63,15 @@ METHOD_COLOURS = {
 """The colour of each gradient method (and of closed forms and references), in every figure."""
 OTHER_COLOURS = ("#2ca02c", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
 """Colours of series that name no method, in order; no method uses one of them."""
+SKETCH_COLOURS = {
+    "shape": "#404040",
+    "fill": "#e6e6e6",
+    "emitter": "#d4a017",
+    "camera": "#17becf",
+    "moving": "#2ca02c",
+}
+"""Colours of the scene sketches (:mod:`flatland.plotting.sketch`): shapes, their fill, emitters,
+the camera with its frustum and film, and the part the parameter moves; no method uses one of them."""
 MARKERS = ("o", "s", "^", "D", "v", "P")
 """Markers of the variants of one method in one figure, in order."""
 LINESTYLES = ("-", "--", "-.", ":")

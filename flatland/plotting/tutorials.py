@@ -13,7 +13,13 @@ drawn over the pixel index, a 2D film (sphere3d) as an image.
 :func:`plot_gradient_panel`    primal | derivative | derivative ...: strips (1D) or
                                images (2D) on one shared diverging scale
 :func:`plot_descent`           loss and parameter per iteration of gradient descent
+:func:`plot_scene`             the sketch of a flatland scene: shapes, emitters,
+                               camera frustum, the part a parameter moves
+                               (:mod:`flatland.plotting.sketch`)
 =============================  ======================================================
+
+Given a flatland ``scene`` (and the ``param`` differentiated), :func:`plot_film` and
+:func:`plot_gradient_panel` draw its sketch in a left panel: the geometry beside its film.
 
 A *series* is given as an array, as a ``(values, stderr)`` tuple, or as a result
 object: a :class:`~flatland.core.image.GradientImage` stands for its derivative and
@@ -36,6 +42,8 @@ from matplotlib.figure import Figure
 
 from flatland.core.validate import ValidationError
 from flatland.plotting.bands import draw_estimate
+from flatland.plotting.films import grid_beside
+from flatland.plotting.sketch import draw_scene, plot_scene
 from flatland.plotting.style import (
     DIVERGING,
     FIGSIZE,
@@ -58,6 +66,7 @@ __all__ = [
     "plot_film",
     "plot_gradient_panel",
     "plot_grid",
+    "plot_scene",
 ]
 
 
@@ -85,6 +94,11 @@ def _series(name: str, item: Any) -> tuple[np.ndarray, np.ndarray | None]:
 def _primal(item: Any) -> np.ndarray:
     """The pixel values of an Image, a GradientImage or an array."""
     return np.asarray(getattr(item, "value", item), dtype=np.float64)
+
+
+def _sketch(scene: Any, param: str | None) -> Any:
+    """The sketch of ``scene`` for :func:`~flatland.plotting.films.grid_beside`, or None without a scene."""
+    return None if scene is None else lambda ax: draw_scene(ax, scene, param)
 
 
 def plot_grid(
@@ -137,6 +151,8 @@ def plot_film(
     title: str | None = None,
     xlabel: str = "pixel",
     ylabel: str = "dI/dθ",
+    scene: Any = None,
+    param: str | None = None,
 ) -> Figure:
     """Draw per-pixel series of a 1D film over the pixel index, each with a confidence band.
 
@@ -157,12 +173,21 @@ def plot_film(
         Pixel positions (pixel j spans [j - 0.5, j + 0.5]) to mark with thin lines.
     ax, title, xlabel, ylabel
         Draw into ``ax`` instead of a new figure; axis annotations.
+    scene, param : optional
+        A flatland scene (and the parameter differentiated) to sketch left of the film
+        (:func:`plot_scene`); only in a new figure (into a grid, draw it with
+        ``plot_scene(scene, param, ax=...)``).
 
     Returns
     -------
     Figure
     """
     styles = styles or {}
+    if scene is not None:
+        if ax is not None:
+            raise ValidationError("scene", "a sketch needs a new figure: draw it with plot_scene(..., ax=)")
+        fig = Figure(figsize=FIGSIZE, layout="constrained")
+        ax = neutral_cycle(fig.add_subplot(grid_beside(fig, _sketch(scene, param), 1, 1)[0]))
     ax = new_axes(ax, title)
     variants = series_styles(curves, vary="linestyle", others=False)  # a method's colour, variants dashed
     length = None
@@ -207,6 +232,8 @@ def plot_gradient_panel(
     *,
     level: float = 0.99,
     title: str | None = None,
+    scene: Any = None,
+    param: str | None = None,
 ) -> Figure:
     """The side-by-side panel: the primal image, then each derivative on one shared diverging scale.
 
@@ -222,6 +249,9 @@ def plot_gradient_panel(
         ± z · stderr band at this two-sided level (:func:`plot_film`).
     title : str, optional
         Figure title.
+    scene, param : optional
+        A flatland scene (and the parameter differentiated) to sketch in a first
+        column spanning both rows (:func:`plot_scene`).
 
     Returns
     -------
@@ -239,13 +269,16 @@ def plot_gradient_panel(
     grey = radiance_norm(image)
     if image.ndim == 1:
         fig = Figure(figsize=(max(2.6 * columns, 7.0), 5.0), layout="constrained")
-        grid = fig.add_gridspec(2, columns, height_ratios=(1.0, 2.2))
+        grid = grid_beside(fig, _sketch(scene, param), 2, columns, height_ratios=(1.0, 2.2))
         axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
         curves = neutral_cycle(fig.add_subplot(grid[1, :]))
     else:
         aspect = image.shape[0] / max(image.shape[1], 1)
         fig = Figure(figsize=(2.7 * columns + 0.8, 2.7 * aspect + 0.7), layout="constrained")
-        axes, curves = list(np.atleast_1d(fig.subplots(1, columns))), None
+        axes, curves = (
+            list(np.atleast_1d(grid_beside(fig, _sketch(scene, param), 1, columns).subplots())),
+            None,
+        )
     fig.colorbar(_strip(axes[0], image, PRIMAL, grey, "primal"), ax=axes[0], shrink=0.8)
     mappable = None
     for ax, (label, (values, _)) in zip(axes[1:], series.items(), strict=True):

@@ -15,12 +15,15 @@ import subprocess
 import sys
 from functools import partial
 
+import matplotlib.colors
+import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
 from flatland.__main__ import PACKAGE, main
 from flatland.app.study import load_config, read_csv
 from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_depth
+from flatland.plotting.style import SKETCH_COLOURS
 from flatland.scene import load_scene, parameter_names
 from flatland.state import parse_parameter
 
@@ -33,6 +36,18 @@ def run(*args, cwd=None):
         timeout=120,
         cwd=cwd,
     )
+
+
+def has_sketch(png, moving):
+    """True if the PNG shows the scene sketch: emitter and camera colours (no other figure uses them),
+    and the moving part's green exactly when a parameter moves something."""
+    rgb = mpimg.imread(png)[..., :3]
+
+    def count(key):
+        target = np.array(matplotlib.colors.to_rgb(SKETCH_COLOURS[key]))
+        return int(np.sum(np.all(np.abs(rgb - target) < 0.02, axis=-1)))
+
+    return count("emitter") > 20 and count("camera") > 20 and (count("moving") > 20) == moving
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +71,7 @@ def test02_demo_writes_the_panel_and_prints_both_tables(tmp_path):
     result = run("demo", "--spp", 32, "--out", tmp_path / "demo", "--quiet")
     assert result.returncode == 0, result.stderr
     panel = tmp_path / "demo" / "demo_panel.png"
-    assert panel.stat().st_size > 20_000
+    assert panel.stat().st_size > 20_000 and has_sketch(panel, moving=True)
     out = result.stdout
     for method in ("naive", "boundary", "reparam", "finite_difference"):
         assert f"\n{method} " in out
@@ -67,6 +82,7 @@ def test03_render_writes_png_and_structured_npy(tmp_path, scene_file):
     result = run("render", scene_file, "--spp", 8, "--seed", 3, "--out", tmp_path)
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "small_shadow.png").stat().st_size > 5_000
+    assert has_sketch(tmp_path / "small_shadow.png", moving=False)
     data = np.load(tmp_path / "small_shadow.npy")
     assert data.shape == (24,) and data.dtype.names == ("value", "stderr")
     assert np.all(data["value"] >= 0.0) and np.any(data["value"] > 0.0)
@@ -80,7 +96,7 @@ def test04_gradient_writes_value_derivative_and_standard_errors(tmp_path, scene_
     assert result.returncode == 0, result.stderr
     png = tmp_path / "small_shadow_occluder.translate.x_reparam.png"
     npy = tmp_path / "small_shadow_occluder.translate.x_reparam.npy"
-    assert png.stat().st_size > 5_000
+    assert png.stat().st_size > 5_000 and has_sketch(png, moving=True)
     data = np.load(npy)
     assert data.dtype.names == ("value", "value_stderr", "derivative", "derivative_stderr")
     assert (

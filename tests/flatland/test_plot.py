@@ -164,3 +164,36 @@ def test06_error_time_figure_is_log_log_with_one_line_per_method(tmp_path, monke
     assert path.stat().st_size > 10_000 and seen["x"] == "log" and seen["y"] == "log"
     methods = [label for label in seen["labels"] if not label.startswith(("∝", "_"))]
     assert methods == ["naive (BIASED)", "reparam"] and "∝ 1/√t (guide)" in seen["labels"]
+
+
+@pytest.mark.parametrize("shape", [(W,), (24, 32)], ids=["film1d", "film2d"])
+def test07_a_sketch_gets_a_left_panel_spanning_every_row_of_each_film_figure(tmp_path, shape, monkeypatch):
+    x = np.linspace(-1.0, 1.0, int(np.prod(shape))).reshape(shape)
+    image = Image(value=1.0 + x**2, stderr=np.full(shape, 0.01), spp=16, seed=0, batches=4, scene="t")
+    figures = []
+    original = films.save_png
+
+    def keep(fig, path):
+        figures.append(fig)
+        return original(fig, path)
+
+    monkeypatch.setattr(films, "save_png", keep)
+    drawn = []
+    sketch = drawn.append  # a sketch draws into the Axes it is given; this one records it
+    writers = [
+        lambda **kw: plot.plot_image(image, tmp_path / f"i{len(kw)}.png", **kw),
+        lambda **kw: plot.plot_gradient(_grad(x), tmp_path / f"g{len(kw)}.png", **kw),
+        lambda **kw: plot.plot_panel(image, {"b": _grad(x, "boundary")}, tmp_path / f"p{len(kw)}.png", **kw),
+    ]
+    for write in writers:
+        plain = write()
+        plain_width = figures[-1].get_figwidth()
+        with_sketch = write(sketch=sketch)
+        fig, ax = figures[-1], drawn[-1]
+        assert ax.figure is fig and fig.get_figwidth() == pytest.approx(plain_width + films.SKETCH_INCHES)
+        spec = ax.get_subplotspec()
+        others = [a.get_position().x0 for a in fig.axes if a is not ax]
+        assert spec.colspan.start == 0 and ax.get_position().x1 < min(others)  # leftmost, before every film
+        assert spec.rowspan == range(spec.get_gridspec().nrows)  # spans every row
+        assert _pixels(with_sketch).shape[1] > _pixels(plain).shape[1]
+    assert len(drawn) == 3

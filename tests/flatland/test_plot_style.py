@@ -196,7 +196,8 @@ def test04_importing_the_plotting_modules_leaves_the_backend_alone():
         "matplotlib.use('svg')\n"
         "import flatland.plotting, flatland.plotting.style, flatland.plotting.bands\n"
         "import flatland.plotting.films, flatland.plotting.study, flatland.plotting.textbook\n"
-        "import flatland.plotting.tutorials, flatland.plotting.convergence, flatland.plot, sphere3d.plot\n"
+        "import flatland.plotting.tutorials, flatland.plotting.convergence, flatland.plotting.sketch\n"
+        "import flatland.plot, sphere3d.plot\n"
         "print(matplotlib.get_backend(), 'matplotlib.pyplot' in sys.modules)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)

@@ -264,3 +264,21 @@ def test14_plot_probes_rejects_bad_input_naming_the_field(change, field):
     args.update(change)
     with pytest.raises(ValidationError, match=field):
         prb.plot_probes(**args)
+
+
+def test15_a_flatland_scene_is_sketched_left_of_the_film_and_the_panel():
+    film = np.linspace(-1.0, 1.0, 12)
+    panel = ptu.plot_gradient_panel(film, {"reparam": film}, scene="shadow", param="occluder.translate.x")
+    sketch = panel.axes[0]
+    assert sketch.get_title() == "shadow: occluder.translate.x" and sketch.get_aspect() == 1.0
+    spec = sketch.get_subplotspec()
+    assert spec.colspan.start == 0 and spec.rowspan == range(spec.get_gridspec().nrows)
+    assert [ax.get_title() for ax in panel.axes[1:3]] == ["primal", "reparam"]
+    assert any(a.get_gid() == "moving:occluder" for a in sketch.get_children())
+    lone = ptu.plot_film({"reparam": film}, scene="silhouette", title="film")
+    assert [ax.get_title() for ax in lone.axes] == ["silhouette", "film"]
+    assert lone.axes[0].get_position().x1 < lone.axes[1].get_position().x0
+    grid = ptu.plot_grid(2)
+    with pytest.raises(ValidationError, match=r"^scene:"):
+        ptu.plot_film({"reparam": film}, scene="shadow", ax=grid.axes[1])
+    assert ptu.plot_scene("shadow", ax=grid.axes[0]) is grid
