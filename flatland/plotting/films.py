@@ -117,6 +117,7 @@ def image_figure(
         _film(top, value, PRIMAL, norm, title)
         top.set_xlabel("")
         _curve(bottom, value, stderr, "radiance", color="k")
+        bottom.legend(fontsize=8, loc="upper right")  # names the band and its coverage
         bottom.set_xlabel("pixel")
         bottom.set_ylabel("radiance")
         bottom.set_xlim(0, value.size)
@@ -144,6 +145,7 @@ def gradient_figure(
         )
         top.set_xlabel("")
         _curve(bottom, derivative, stderr, "dI/dθ", color="k")
+        bottom.legend(fontsize=8, loc="upper right")  # names the band and its coverage
         bottom.axhline(0.0, color="0.5", lw=0.6)
         bottom.set_xlabel("pixel")
         bottom.set_ylabel("dI/dθ")
