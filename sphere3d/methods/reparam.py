@@ -21,28 +21,8 @@ Measured against the closed forms of :mod:`sphere3d.closed_form` by
 seed 11, 16 batches; ± one standard error); tested as biases in
 ``tests/sphere3d/test_triangle_closed_form.py``.
 
-**Camera: the film kernel** (:mod:`sphere3d.camera_kernel`). A black triangle about s pixels across
-against a constant sky (:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian
-filter), moving sideways (``translate.x``) or away from the camera (``translate.z``).
-Share of the silhouette term lost, 1 - Σ sign(g) d / Σ |g| over the film (g the exact
-derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
-
-========  ==================  ==================  ==================
-size      image, spp          sideways            depth
-========  ==================  ==================  ==================
-1 px      8 × 8, 65536        32.2 % ± 0.6 %      49.4 % ± 0.6 %
-2 px      8 × 8, 65536        2.3 % ± 0.4 %       4.8 % ± 0.5 %
-4 px      8 × 8, 65536        1.2 % ± 0.2 %       1.8 % ± 0.3 %
-8 px      16 × 16, 16384      0.8 % ± 0.3 %       1.0 % ± 0.3 %
-20 px     32 × 32, 4096       1.0 % ± 0.4 %       0.1 % ± 0.4 %
-========  ==================  ==================  ==================
-
-Short of the exact derivative where a kernel reaches a discontinuity that its rotation
-does not follow: an edge between the ring's probes, or, on a triangle about a pixel
-across, all three edges inside one kernel (a rotation follows two edges at their common
-corner, not three). Motion in depth loses more there: the edges' film velocities differ
-(the image scales about the principal point), while a sideways translation moves every
-edge alike. Not fixed by more samples.
+**Camera**: the film kernel's loss of a small triangle's silhouette term, in
+:mod:`sphere3d.camera_kernel` (Bias).
 
 **Shading: the cosine-sampled integral with the vMF kernel.** The irradiance at the origin
 (normal +z) under a constant sky with a black triangle above it
