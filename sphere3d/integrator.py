@@ -39,7 +39,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach
+from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
 from sphere3d.rotation import Rotation
@@ -188,11 +188,12 @@ class FilmTransform:
         """No change of variables."""
         return FilmTransform((Rotation.identity(shape),))
 
-    def log_kernel(self, member: int, fx: Any, fy: Any) -> Any:
-        """log g(f - c) + const at the rotated film point f = (fx, fy) (Loubet et al. 2019, Sec. 4.2)."""
+    def log_kernel(self, member: int, fx: Any, fy: Any, rows: Any = slice(None)) -> Any:
+        """log g(f - c) + const at the rotated film points f = (fx, fy) of samples ``rows``
+        (Loubet et al. 2019, Sec. 4.2)."""
         if not self.centres:
             return 0.0
-        c = self.centres[member]
+        c = self.centres[member][rows]
         dx, dy = fx - c[:, 0], fy - c[:, 1]
         return -0.5 * self.kappa * (dx * dx + dy * dy)  # log of exp(-κ |f - c|² / 2)
 
@@ -299,20 +300,23 @@ def pixel_samples(
     d = cam.directions(x, y)
     if state.dual:
         film = transforms.camera(state, x, y, draws)
-        rotated, w = 0.0, 0.0
+        # only rows where a rotation moves: elsewhere every tangent below is exactly 0
+        live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
+        r_dot, w_dot = np.zeros(d.shape), np.zeros(len(d))
         for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
-            r = rotation.apply(d)
+            r = rotation.take(live).apply(d[live])
             fx, fy = cam.film(r)
             # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
             # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)
-            log_k = log_filter_value(np.stack([fx - cx, fy - cy], axis=-1), cam.filter)
-            rotated = rotated + r
-            w = w + unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy))
+            log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
+            w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+            r_dot[live] += tangent(r)
+            w_dot[live] += tangent(w)
         # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is
         # linear in the direction's, so one evaluation along the mean tangent gives the mean of
-        # the tangents; values exact (ω + ω = 2ω, 1 + 1 = 2, halved exactly)
+        # the tangents; values exactly ω and 1 (the primal stays the naive one)
         m = len(film.rotations)
-        rotated, weight = rotated / m, weight * (w / m)
+        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(len(d)), w_dot / m)
     else:
         rotated = d
     return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight)
