@@ -1,4 +1,4 @@
-"""The film kernel of the pixel integral: one rotation per camera sample, chosen inside a small kernel.
+"""The film kernel of the pixel integral: rotations per camera sample, chosen inside small kernels.
 
 The pixel integral ``∫ k(s) L(ω(s)) ds`` is convolved with a Gaussian film kernel
 g(s - c) of variance 1 / ``kappa_film`` (pixels⁻²), ``∫ g(s - c) dc = 1`` for every s
@@ -13,6 +13,14 @@ it and its partner). The sample is evaluated along R·ω(s) with the weight
 ``g(film(Rω) - c) / detach(g(film(Rω) - c))`` (value exactly 1,
 :func:`~flatland.core.translation.unit_weight`), next to the filter's own
 ``k J (Rω) / detach(k J (Rω))`` (:func:`~sphere3d.integrator.pixel_samples`).
+
+Each sample gets two centres, c = s + σz and its mirror image c' = s - σz, each with its
+own probes and rotation, and the estimate is the mean of the two (an antithetic pair, not
+the authors' paired samples: those share one rotation between two evaluation points and
+change the primal; ``paired`` leaves the film kernel as it is). Where both rotations
+follow the same motion, the kernel weights' derivatives κ (c - s)·ḟ and κ (c' - s)·ḟ
+cancel; the radiance is evaluated once, along the mean of the two rotated directions'
+tangents (exact: the derivative is linear in them).
 
 Unbiased for a silhouette that the rotation follows: for a fixed centre the rotation is
 one change of variables of the whole film integral, and integrating over c restores
