@@ -39,7 +39,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach
+from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
 from sphere3d.rotation import Rotation
@@ -59,6 +59,7 @@ from sphere3d.vector import dot, norm, scatter
 
 __all__ = [
     "PRIMARY_UNIFORMS",
+    "FilmTransform",
     "Identity",
     "PixelSamples",
     "Shading",
@@ -168,11 +169,41 @@ class PixelSamples:
         return self.radiance * self.weight
 
 
+@dataclass(frozen=True)
+class FilmTransform:
+    """Per camera sample: one or two rotations of its direction, each optionally with a film kernel.
+
+    The sample's estimate is the mean of its estimates under the ``rotations`` (one, or
+    two: an antithetic pair); ``centres`` (one (n, 2) array per rotation, pixels) are the
+    centres c of Gaussian film kernels of concentration ``kappa`` (1 / variance, pixels⁻²),
+    none for no kernel (log weight 0).
+    """
+
+    rotations: tuple[Rotation, ...]
+    centres: tuple[np.ndarray, ...] = ()
+    kappa: float = 0.0
+
+    @staticmethod
+    def identity(shape: tuple[int, ...]) -> FilmTransform:
+        """No change of variables."""
+        return FilmTransform((Rotation.identity(shape),))
+
+    def log_kernel(self, member: int, fx: Any, fy: Any, rows: Any = slice(None)) -> Any:
+        """log g(f - c) + const at the rotated film points f = (fx, fy) of samples ``rows``
+        (Loubet et al. 2019, Sec. 4.2)."""
+        if not self.centres:
+            return 0.0
+        c = self.centres[member][rows]
+        dx, dy = fx - c[:, 0], fy - c[:, 1]
+        return -0.5 * self.kappa * (dx * dx + dy * dy)  # log of exp(-κ |f - c|² / 2)
+
+
 class Transforms(Protocol):
     """How a method changes variables in the renderer's integrals (see the module docstring)."""
 
-    def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
-        """One rotation per (batch, pixel) of the pixel integral, given one uniform ``u`` each."""
+    def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
+        """One rotation (and film kernel) per camera sample at film point (x, y), pixels; one row of
+        ``draws`` per sample."""
         ...
 
     def emitter(self, shading: Shading) -> Rotation:
@@ -190,8 +221,8 @@ class Transforms(Protocol):
 class Identity:
     """No change of variables: the renderer as it stands (the naive estimator, Sec. 3.1)."""
 
-    def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
-        return Rotation.identity(rows.shape)
+    def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
+        return FilmTransform.identity(x.shape)
 
     def emitter(self, shading: Shading) -> Rotation:
         return Rotation.identity((len(shading),))
@@ -253,29 +284,39 @@ def pixel_samples(
     rows: np.ndarray,
     cols: np.ndarray,
     u: np.ndarray,
-    camera_rotation: Rotation,
     draws: Draws,
 ) -> Any:
     """One estimate of the pixel integral per sample (pixel ``rows``, ``cols``; uniforms ``u``).
 
-    ``camera_rotation`` holds one rotation per sample (its pixel's). The estimate is
-    ``radiance * weight`` (:class:`PixelSamples`); both are Duals when the state
-    carries tangents. ``draws`` keys the samples' further random numbers on their indices.
+    With tangents, ``transforms.camera`` gives each sample its rotations and film kernels.
+    The estimate is ``radiance * weight`` (:class:`PixelSamples`); both are Duals when the
+    state carries tangents. ``draws`` keys the samples' further random numbers on their indices.
     """
     cam = state.camera
     offsets = sample_filter(u[:, 0:2], cam.filter)
     weight = filter_value(offsets, cam.filter) / pdf_filter(offsets, cam.filter)  # k / p, θ-free
     cx, cy = cols + 0.5, rows + 0.5
-    d = cam.directions(cx + offsets[:, 0], cy + offsets[:, 1])
+    x, y = cx + offsets[:, 0], cy + offsets[:, 1]
+    d = cam.directions(x, y)
     if state.dual:
-        rotated = camera_rotation.apply(d)
-        fx, fy = cam.film(rotated)
-        # k(film(Rω)) J(Rω) / detach(...): value 1, derivative of the filter under the rotation
-        # (theory/pixel_filters)
-        log_kj = log_filter_value(np.stack([fx - cx, fy - cy], axis=-1), cam.filter) + cam.log_jacobian(
-            rotated
-        )
-        weight = weight * unit_weight(log_kj)
+        film = transforms.camera(state, x, y, draws)
+        # only rows where a rotation moves: elsewhere every tangent below is exactly 0
+        live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
+        r_dot, w_dot = np.zeros(d.shape), np.zeros(len(d))
+        for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
+            r = rotation.take(live).apply(d[live])
+            fx, fy = cam.film(r)
+            # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
+            # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)
+            log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
+            w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+            r_dot[live] += tangent(r)
+            w_dot[live] += tangent(w)
+        # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is
+        # linear in the direction's, so one evaluation along the mean tangent gives the mean of
+        # the tangents; values exactly ω and 1 (the primal stays the naive one)
+        m = len(film.rotations)
+        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(len(d)), w_dot / m)
     else:
         rotated = d
     return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight)

@@ -41,6 +41,7 @@ is instead the mean of the attached hits of the occluded shadow probes
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -66,6 +67,9 @@ PARALLEL = 0.99
 """|n0·n1| above which the two tangent planes count as parallel (Loubet et al. 2019, Sec. 4.3)."""
 DEGENERATE = 1e-6
 """|det| of the plane system below which the intersection is ill-conditioned."""
+Snap = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Hits], tuple[np.ndarray, np.ndarray]]
+"""``snap(rows, origin, inside, outside, hits) -> (u, v)``: where on a bisected hit's triangle to follow
+(:func:`select_points`)."""
 REFINE = 3
 """Default bisection rays that move a single probe's hit towards the silhouette next to it (3: to
 1/8 of the gap); the default of the ``reparam`` option ``refine``."""
@@ -142,9 +146,10 @@ def _bisect(
     hits: Hits,
     normal: np.ndarray | None,
     refine: int,
-) -> Hits:
+) -> tuple[Hits, np.ndarray, np.ndarray]:
     """Move ``hits`` towards their shape's silhouette: ``refine`` bisections between a direction
-    that hits the shape (``inside``, with ``hits``) and one that does not (``outside``)."""
+    that hits the shape (``inside``, with ``hits``) and one that does not (``outside``); returns
+    the moved hits and the final pair of directions."""
     for _ in range(refine):
         mid = inside + outside
         mid = mid / norm(mid)[:, None]
@@ -155,7 +160,7 @@ def _bisect(
         inside = np.where(on[:, None], mid, inside)
         outside = np.where(on[:, None], outside, mid)
         hits = h.where(on, hits)
-    return hits
+    return hits, inside, outside
 
 
 def select_points(
@@ -166,6 +171,7 @@ def select_points(
     hits: Hits,
     normal: np.ndarray | None = None,
     refine: int = REFINE,
+    snap: Snap | None = None,
 ) -> tuple[Any, np.ndarray]:
     """The point to follow per row of probes, and whether there is one (see the module docstring).
 
@@ -186,6 +192,11 @@ def select_points(
     refine : int, optional
         Bisection rays toward the silhouette per single-probe point (default
         :data:`REFINE`; 0: the probe's own hit).
+    snap : callable, optional
+        ``snap(rows, origin, inside, outside, hits) -> (u, v)``: the barycentrics to follow on
+        the bisected hits' triangles instead of the hits' own (rows: the rows of the
+        single-probe points; the final bisection directions); used on the film by
+        :mod:`sphere3d.camera_kernel`.
 
     Returns
     -------
@@ -253,8 +264,9 @@ def select_points(
         start = h0.take(single).where(first, h1.take(single))
         tro = np.broadcast_to(trace_origin, (m, 3))[single]
         nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
-        edge = _bisect(state, tro, inside, outside, start, nrm, refine)
-        moved = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
+        edge, inside, outside = _bisect(state, tro, inside, outside, start, nrm, refine)
+        u, v = (edge.u, edge.v) if snap is None else snap(single, tro, inside, outside, edge)
+        moved = attached_points(state.triangles[edge.triangle], u, v)
         p0[single] = np.where(first[:, None], moved, p0[single])
         p1[single] = np.where(first[:, None], p1[single], moved)
     point = np.where(use_cross[:, None], crossing, np.where(use_p1[:, None], p1, p0))
@@ -269,9 +281,10 @@ def follow_probes(
     hits: Hits,
     normal: np.ndarray | None = None,
     refine: int = REFINE,
+    snap: Snap | None = None,
 ) -> Rotation:
     """The rotation following the point chosen by :func:`select_points` (identity where none)."""
-    point, found = select_points(state, origin, trace_origin, directions, hits, normal, refine)
+    point, found = select_points(state, origin, trace_origin, directions, hits, normal, refine, snap)
     to, found = _towards(point, origin, found)
     return Rotation.following(to, found)
 

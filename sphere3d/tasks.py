@@ -8,9 +8,8 @@ float (plain) or as a Dual, and returns a :class:`Tally` of per-batch means. Met
 sample: sample j of pixel p has the global index ``p * spp + j`` (batch
 ``j // (spp / batches)``), its uniforms are ``Draws.of(seed, index).uniforms("samples", ...)``
 whatever the method, and anything a method draws in addition is keyed on the same
-index under other stream names (``"kernel.bsdf"``, ``"probes.emitter"``, ...; see
-:class:`flatland.core.rng.Draws`). The camera's per-(pixel, batch) probe phases come
-from the sequential stream ``"probes.camera"``. Results therefore do not depend on
+index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.emitter"``,
+...; see :class:`flatland.core.rng.Draws`). Results therefore do not depend on
 :data:`CHUNK` or on the number of threads.
 """
 
@@ -25,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from flatland.core.rng import Draws, stream
+from flatland.core.rng import Draws
 from flatland.core.translation import control_variate
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
@@ -113,9 +112,8 @@ class ImageTask:
         """Render every pixel with the parameter offset by ``theta`` (float or Dual) under ``transforms``.
 
         All batches of a range of pixels are processed together (one vectorized call
-        per memory chunk); every sample's numbers are keyed on its index
-        ``pixel * spp + j`` and batch b's camera rotations come from
-        ``stream(seed, "probes.camera", b)``, so every batch is independent and the
+        per memory chunk); every sample's numbers, its camera rotation's included, are
+        keyed on its index ``pixel * spp + j``, so every batch is independent and the
         image does not depend on how pixels are grouped into chunks.
         """
         transforms = transforms or Identity()
@@ -124,10 +122,6 @@ class ImageTask:
         batches, per_batch = self.batches, self.spp // self.batches
         pixels = np.arange(height * width)
         rows_all, cols_all = np.divmod(pixels, width)
-        # one phase per pixel and batch for the probes of the pixel integral, from their own streams
-        camera_u = np.stack(
-            [stream(self.seed, "probes.camera", b).random(pixels.size) for b in range(batches)]
-        )
         chunk_pixels = max(1, CHUNK // self.spp)
 
         def chunk(c: int) -> np.ndarray:
@@ -137,19 +131,7 @@ class ImageTask:
             draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
             u = draws.uniforms("samples", PRIMARY_UNIFORMS)
             sample_pix = p_idx.ravel()
-            # one rotation per pixel and batch for the pixel integral (rows: batch-major)
-            rows, cols = np.tile(rows_all[pix], batches), np.tile(cols_all[pix], batches)
-            camera = transforms.camera(state, rows, cols, camera_u[:, pix].ravel())
-            sample_rot = np.repeat(np.arange(batches * pix.size), per_batch)
-            est = pixel_samples(
-                state,
-                transforms,
-                rows_all[sample_pix],
-                cols_all[sample_pix],
-                u,
-                camera.take(sample_rot),
-                draws,
-            )
+            est = pixel_samples(state, transforms, rows_all[sample_pix], cols_all[sample_pix], u, draws)
             return np.mean(self._control_variate(est, per_batch), axis=1).reshape(batches, pix.size)
 
         parts = _map(chunk, range(-(-pixels.size // chunk_pixels)))

@@ -162,12 +162,12 @@ PACKAGE_NAMES = {"GRADIENT_METHODS", "render", "render_gradient", "irradiance", 
 SHARED_OPTIONS = {
     "naive": (),
     "finite_difference": ("h",),
-    "reparam": ("kappa", "probes", "spread", "refine", "paired"),
+    "reparam": ("kappa", "kappa_film", "probes", "spread", "refine", "paired"),
     "boundary": (),
 }
 """Gradient methods both packages have, and their options in order (2D-only options aside)."""
-ONLY_2D_OPTIONS = {"reparam": ("kappa_film",)}
-"""Options flatland's methods have beyond the shared ones (the film kernel of a 1D film)."""
+ONLY_2D_OPTIONS: dict[str, tuple[str, ...]] = {}
+"""Options flatland's methods have beyond the shared ones (none: both have the film kernel ``kappa_film``)."""
 ONLY_3D_OPTIONS = {"boundary": ("rate",)}
 """Options sphere3d's methods have beyond the shared ones (flatland's boundary terms are exact
 sums over endpoints and tangent points; sphere3d's are sampled along edges at a ``rate``)."""

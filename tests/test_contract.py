@@ -382,13 +382,13 @@ def _naive_scaled(package):
 
         return naive_scaled
 
-    from sphere3d.integrator import Identity
+    from sphere3d.integrator import FilmTransform, Identity
     from sphere3d.rotation import Rotation
     from sphere3d.tasks import Tally
 
     class PassThroughTransforms:  # the identity, as a new method's transforms start out
-        def camera(self, state, rows, cols, u):
-            return Rotation.identity(rows.shape)
+        def camera(self, state, x, y, draws):
+            return FilmTransform.identity(x.shape)
 
         def emitter(self, shading):
             return Rotation.identity((len(shading),))

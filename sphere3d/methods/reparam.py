@@ -1,9 +1,10 @@
 """Reparameterization by rotations on S², with probe rays, vMF convolution and paired samples.
 
 Where the integrator calls it: one ``task.evaluate(variable(0.0), ReparamTransforms(...))``.
-``camera`` is called once per chunk for every batch and pixel, before the camera rays
-are traced (the pixel integral's rotation); ``emitter`` once per set of shading points,
-before the emitter samples' directions are rotated (the emitter-sampling strategy);
+``camera`` is called once per chunk for every camera sample, before the camera rays
+are traced (the pixel integral's rotations, :mod:`sphere3d.camera_kernel`); ``emitter``
+once per set of shading points, before the emitter samples' directions are rotated (the
+emitter-sampling strategy);
 ``bsdf`` estimates the cosine-sampled strategy itself (vMF kernel, probes, paired
 samples), calling back ``Shading.trace`` and ``Shading.evaluate_bsdf``. A
 :class:`~sphere3d.tasks.PointTask` calls only ``emitter`` and ``bsdf``.
@@ -20,29 +21,8 @@ Measured against the closed forms of :mod:`sphere3d.closed_form` by
 seed 11, 16 batches; ± one standard error); tested as biases in
 ``tests/sphere3d/test_triangle_closed_form.py``.
 
-**Camera: one rotation per pixel and batch.** A black triangle about s pixels across
-against a constant sky (:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian
-filter), moving sideways (``translate.x``) or away from the camera (``translate.z``).
-Share of the silhouette term lost, 1 - Σ sign(g) d / Σ |g| over the film (g the exact
-derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
-
-========  ==================  ==================  ==================
-size      image, spp          sideways            depth
-========  ==================  ==================  ==================
-1 px      8 × 8, 65536        68.6 % ± 0.7 %      79.8 % ± 1.3 %
-2 px      8 × 8, 65536        39.7 % ± 2.7 %      75.9 % ± 3.1 %
-4 px      8 × 8, 65536        15.4 % ± 1.3 %      32.8 % ± 1.3 %
-8 px      16 × 16, 16384      10.5 % ± 0.9 %      17.6 % ± 0.9 %
-20 px     32 × 32, 4096       4.3 % ± 0.4 %       6.6 % ± 0.5 %
-========  ==================  ==================  ==================
-
-The estimate is always short of the exact derivative, never noisier around the right
-value: a ring of probes wider than the silhouette (3σ = 1.5 px) mostly misses a triangle of
-1–2 px, so the rotation follows nothing or one probe; where a pixel's footprint holds two
-edges or a corner, one rotation follows one of them. Motion in depth loses more: the
-silhouette's film velocity varies along the edges (the image scales about the principal
-point), and the followed point, the mean of the probes that hit, lies inside the triangle,
-where the image moves more slowly than at its edge. Not fixed by more samples.
+**Camera**: the film kernel's loss of a small triangle's silhouette term, in
+:mod:`sphere3d.camera_kernel` (Bias).
 
 **Shading: the cosine-sampled integral with the vMF kernel.** The irradiance at the origin
 (normal +z) under a constant sky with a black triangle above it
@@ -80,22 +60,21 @@ import numpy as np
 
 from flatland.core.contract import Option
 from flatland.core.dual import detach, tangent, variable
+from flatland.core.rng import Draws
 from flatland.core.translation import check_continuous_filter, paired_combine, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
-from sphere3d.integrator import Shading
+from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_transform
+from sphere3d.integrator import FilmTransform, Shading
 from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.probes import (
     REFINE,
     follow_probes,
     mean_point_direction,
     ring_directions,
-    ring_offsets,
     vmf_spread_angle,
 )
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
-    FILTER_STD,
-    filter_radius,
     sample_cosine_hemisphere,
     sample_mesh,
     sample_vmf,
@@ -121,6 +100,9 @@ class ReparamTransforms:
         (0, :data:`KAPPA_MAX`];
         None: no kernel, one rotation per sample from probes drawn from the cosine
         density itself (Sec. 4.1 over a support too large for it: biased).
+    kappa_film : float
+        1 / variance of the Gaussian film kernel of the pixel integral, pixels⁻²
+        (:mod:`sphere3d.camera_kernel`).
     probes : int
         Probe rays per transform, >= 1. With one probe (the kernel's centre, the pixel
         centre) there is no pair: its attached hit is followed, the identity where it
@@ -128,8 +110,8 @@ class ReparamTransforms:
     spread : float
         Radius of the ring of probes around a kernel's centre, in kernel standard
         deviations (:mod:`sphere3d.probes`), >= 0: any value has a ring, whose angle
-        grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film it is
-        capped at the filter's radius.
+        grows to π (:func:`~sphere3d.probes.vmf_spread_angle`); on the film, in film
+        kernel standard deviations.
     refine : int
         Bisection rays that move a single probe's hit toward the silhouette next to
         it, >= 0 (:func:`~sphere3d.probes.select_points`).
@@ -138,23 +120,15 @@ class ReparamTransforms:
     """
 
     kappa: float | None
+    kappa_film: float
     probes: int
     spread: float
     refine: int
     paired: bool
 
-    def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
-        """Pixel integral (small support): one rotation per pixel from a ring of probes on its footprint.
-
-        Probe 0 at the pixel centre, the others on a circle of ``spread`` filter
-        standard deviations (at most the filter's radius), random phase.
-        """
-        cam = state.camera
-        radius = min(self.spread * FILTER_STD[cam.filter], filter_radius(cam.filter))
-        s = ring_offsets(radius, self.probes, u)
-        d = cam.directions(cols[:, None] + 0.5 + s[..., 0], rows[:, None] + 0.5 + s[..., 1])
-        hits = state.tracer.intersect(detach(cam.origin), d)
-        return follow_probes(state, cam.origin, detach(cam.origin), d, hits, refine=self.refine)
+    def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
+        """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
+        return film_transform(state, x, y, draws, self.kappa_film, self.probes, self.spread, self.refine)
 
     def emitter(self, shading: Shading) -> Rotation:
         """Emitter sampling: one rotation per shading point from ``probes`` shadow rays (Sec. 4.3).
@@ -283,23 +257,32 @@ def _check_kappa(name: str, value: Any) -> float | None:
 @GRADIENT_METHODS.register(
     "reparam",
     Option("kappa", 1000.0, _check_kappa),
+    Option("kappa_film", KAPPA_FILM, check_kappa_film),
     Option("probes", 4, check_int),  # an integer >= 1; one probe has no pair and stands alone
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("refine", REFINE, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
 )
 def reparam(
-    task: ImageTask | PointTask, kappa: float | None, probes: int, spread: float, refine: int, paired: bool
+    task: ImageTask | PointTask,
+    kappa: float | None,
+    kappa_film: float,
+    probes: int,
+    spread: float,
+    refine: int,
+    paired: bool,
 ) -> Tally:
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
     Each integral's samples ω are evaluated at R(θ)·ω, R the identity at θ0 that moves
     like one chosen occluder point (Loubet et al. 2019, Sec. 4.1), |det J| = 1:
 
-    - **pixel integral** (support: the filter footprint): one rotation per pixel and
-      batch from ``probes`` camera rays on a ring over the footprint and the
-      heuristic of Sec. 4.3 (:mod:`sphere3d.probes`). The filter weight carries the
-      derivative of k·J under the rotation, with a zero-mean control variate
+    - **pixel integral** (support: the filter footprint): the Gaussian film kernel of
+      concentration ``kappa_film`` (default the authors' camera kernel, σ ≈ 0.28 px),
+      an antithetic pair of kernel centres per camera sample, each with its rotation
+      from :func:`~sphere3d.camera_kernel.film_probes` probes on a ring around it
+      (:mod:`sphere3d.camera_kernel`, Sec. 4.2, 4.3). The filter and kernel weights carry
+      the derivative of k·J·g under the rotation, with a zero-mean control variate
       (:class:`~sphere3d.tasks.ImageTask`); it needs a continuous filter (tent,
       gaussian): with ``box`` the footprint's edge would move and bias the gradient
       (theory/pixel_filters), so a box filter is refused, as in flatland.
@@ -336,18 +319,18 @@ def reparam(
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
     ================  ===========================  ===========================
-    penumbra          3.2 ± 0.2 % kept (89 %)      3.3 ± 0.2 % kept (70 %)
-    silhouette        95.1 ± 1.4 % kept (11 %)     95.7 ± 1.1 % kept (27 %)
-    occluder          116 ± 7 % kept (0 %)         100.3 ± 2.1 % kept (3 %)
-    bias floor        0.31 rms per pixel           0.38 rms per pixel
+    penumbra          3.2 ± 0.2 % kept (92 %)      3.3 ± 0.2 % kept (86 %)
+    silhouette        95.5 ± 1.4 % kept (9 %)      97.3 ± 1.1 % kept (9 %)
+    occluder          116 ± 6 % kept (0 %)         100.3 ± 1.9 % kept (4 %)
+    bias floor        0.30 rms per pixel           0.34 rms per pixel
     ================  ===========================  ===========================
 
     The penumbra's derivative (the soft-shadow term) is lost: the emitter rotation
     follows the occluder, and in its frame the light's unfaded edge moves, which the
     re-attachment to the light's plane does not see (the emitter-border bias above).
-    The silhouette loss sits where the occluder's silhouette and the ground's far edge
-    share a footprint (98 % and 95 % of its squared bias, in the pixels whose footprint
-    also sees past the ground): one rotation per pixel cannot follow two edges. On the
+    On the sphere the silhouette loss sits where its silhouette crosses the ground's far
+    edge (one pixel holds 86 % of the region's squared bias): a film kernel there holds two
+    edges moving differently, which one rotation cannot follow. On the
     cube's faces the error has both signs (0.30 rms per pixel; the edges between faces
     inside a footprint); the lit ground and the umbra have none.
     ``tests/sphere3d/test_hard_shadow.py`` tests the penumbra and silhouette fractions
@@ -366,4 +349,4 @@ def reparam(
         check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
-    return task.evaluate(variable(0.0), ReparamTransforms(kappa, probes, spread, refine, paired))
+    return task.evaluate(variable(0.0), ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired))

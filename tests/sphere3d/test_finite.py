@@ -15,6 +15,7 @@ import pytest
 
 import sphere3d as s3
 from flatland.core.validate import ValidationError
+from sphere3d.camera_kernel import KAPPA_FILM_MAX
 from sphere3d.methods.reparam import KAPPA_MAX
 from sphere3d.state import COORD_MAX
 
@@ -28,6 +29,8 @@ OPTIONS = [
     ("reparam", {"probes": 1, "spread": 0.0}),
     ("reparam", {"probes": 16, "spread": 1e300}),
     ("reparam", {"spread": 9.0}),
+    ("reparam", {"kappa_film": 1e-300}),
+    ("reparam", {"kappa_film": KAPPA_FILM_MAX, "probes": 16}),
     ("reparam", {"paired": True, "kappa": KAPPA_MAX, "probes": 1}),
     ("reparam", {"paired": True, "kappa": 1e-300, "spread": 1e300}),
 ]

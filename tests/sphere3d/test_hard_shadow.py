@@ -261,8 +261,8 @@ def kept_fraction(g, ref, mask):
 REPARAM = {
     # scene: {region: (documented kept fraction, its standard error)}, from
     # benchmarks/bench_hard_shadow.py-style runs: 4 seeds x 256 spp against the stored reference
-    "hard_shadow": {"penumbra": (0.032, 0.002), "silhouette": (0.951, 0.014)},
-    "hard_shadow_cube": {"penumbra": (0.033, 0.002), "silhouette": (0.957, 0.011)},
+    "hard_shadow": {"penumbra": (0.032, 0.002), "silhouette": (0.955, 0.014)},
+    "hard_shadow_cube": {"penumbra": (0.033, 0.002), "silhouette": (0.973, 0.011)},
 }
 """reparam's per-region bias as documented in :func:`sphere3d.methods.reparam.reparam`."""
 REPARAM_SPP = 128

@@ -14,6 +14,7 @@ import pytest
 import sphere3d as s3
 from flatland.core.validate import ValidationError
 from sphere3d import tasks
+from sphere3d.camera_kernel import KAPPA_FILM
 
 
 def _small(name: str, size: int = 12, **camera) -> dict:
@@ -31,7 +32,14 @@ def test01_api_exports_and_methods():
     assert image.batches == 4 and image.spp == 4 and image.scene == "shadow"
     g = s3.render_gradient(_small("shadow"), "occluder.translate.x", spp=8, seed=3, kappa=300.0)
     assert isinstance(g, s3.GradientImage) and g.derivative.shape == (12, 12)
-    assert dict(g.options) == {"kappa": 300.0, "probes": 4, "spread": 3.0, "refine": 3, "paired": False}
+    assert dict(g.options) == {
+        "kappa": 300.0,
+        "kappa_film": KAPPA_FILM,
+        "probes": 4,
+        "spread": 3.0,
+        "refine": 3,
+        "paired": False,
+    }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
 
@@ -98,6 +106,9 @@ BAD = [
     (dict(method="textbook"), "'textbook'; choose from naive, finite_difference, reparam, boundary"),
     (dict(kappa=0.0), "kappa: must be > 0, got 0.0"),
     (dict(kappa=float("nan")), "kappa: must be finite"),
+    (dict(kappa_film=0.0), "kappa_film: must be > 0, got 0.0"),
+    (dict(kappa_film=None), "kappa_film: must be"),
+    (dict(kappa_film=1e13), "kappa_film: must be <= 1e+12"),
     (dict(probes=0), "probes: must be an integer >= 1, got 0"),
     (dict(spread=-1.0), "spread: must be >= 0, got -1.0"),
     (dict(paired=1), "paired: must be True or False, got 1"),

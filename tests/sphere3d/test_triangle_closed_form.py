@@ -15,7 +15,7 @@ in an average over the image:
 - ``naive``: exactly 0 here (constant sky, black triangle: nothing moves but visibility), so its
   bias is minus the whole silhouette term;
 - ``reparam``: its measured loss of the silhouette term for small triangles, tested as a bias
-  against the numbers documented in :mod:`sphere3d.methods.reparam` (``Bias``).
+  against the numbers documented in :mod:`sphere3d.camera_kernel` (``Bias``).
 
 Tests 11–14 do the same for the shading integral: the irradiance at a point under the sky with
 a black triangle above it, ``E = L (π - Φ)``, Φ by Lambert's formula (against an area quadrature;
@@ -320,40 +320,43 @@ def test09_naive_misses_the_whole_silhouette_term(size, width, motion):
     assert np.array_equal(bias, -exact) and np.abs(exact).max() > 0.1
 
 
-# reparam's share of the silhouette term lost, as documented in sphere3d.methods.reparam (Bias):
+# reparam's share of the silhouette term lost, as documented in sphere3d.camera_kernel (Bias):
 # (size px, image width, motion) -> (mean, stderr) in %, `python -m benchmarks --only reparam_bias`
 REPARAM_CAMERA_LOSS = {
-    (1, 8, "sideways"): (68.6, 0.7),
-    (1, 8, "depth"): (79.8, 1.3),
-    (2, 8, "sideways"): (39.7, 2.7),
-    (2, 8, "depth"): (75.9, 3.1),
-    (4, 8, "sideways"): (15.4, 1.3),
-    (4, 8, "depth"): (32.8, 1.3),
-    (8, 16, "sideways"): (10.5, 0.9),
-    (8, 16, "depth"): (17.6, 0.9),
+    (1, 8, "sideways"): (32.2, 0.6),
+    (1, 8, "depth"): (49.4, 0.6),
+    (2, 8, "sideways"): (2.3, 0.4),
+    (2, 8, "depth"): (4.8, 0.5),
+    (4, 8, "sideways"): (1.2, 0.2),
+    (4, 8, "depth"): (1.8, 0.3),
+    (8, 16, "sideways"): (0.8, 0.3),
+    (8, 16, "depth"): (1.0, 0.3),
 }
-# spp per row, for an expected z of about 6 at the documented loss (its noise grows as the triangle shrinks)
+REPARAM_BIASED = {1}
+"""Sizes (px) whose loss is large enough to show at test cost (z > 4); the others are only held to
+their documented values, which a loss growing back (e.g. to 10 %) exceeds."""
+# spp per row: z of about 6 at the documented loss for 1 px, a standard error of about 1 % above it
 REPARAM_TEST_SPP = {
     (1, "sideways"): 1024,
     (1, "depth"): 1024,
     (2, "sideways"): 8192,
-    (2, "depth"): 4096,
-    (4, "sideways"): 8192,
+    (2, "depth"): 8192,
+    (4, "sideways"): 4096,
     (4, "depth"): 4096,
-    (8, "sideways"): 4096,
+    (8, "sideways"): 2048,
     (8, "depth"): 2048,
 }
 
 
 @pytest.mark.parametrize("size, width, motion", list(REPARAM_CAMERA_LOSS), ids=lambda v: str(v))
 def test10_reparam_loses_a_documented_share_of_the_silhouette_term(size, width, motion):
-    """The bias of one rotation per pixel (Sec. 4.1, 4.3) on a small silhouette, tested as a bias.
+    """The film kernel's bias (Sec. 4.2, 4.3) on a small silhouette, tested as a bias.
 
     Share lost: 1 - Σ sign(g) d / Σ |g| over the film (:func:`~sphere3d.closed_form.share_lost`),
-    with its standard error over 16 batches. Asserted: significantly positive (z > 4), and
-    consistent with the documented number (seed 11, 16× the samples here) within
-    q · sqrt(se² + se_doc²), q the two-sided Student-t quantile (15 degrees of freedom) at
-    the Šidák level for the 8 rows, α = 1e-3.
+    with its standard error over 16 batches. Asserted: consistent with the documented number
+    (seed 11, 8 to 64× the samples here) within q · sqrt(se² + se_doc²), q the two-sided
+    Student-t quantile (15 degrees of freedom) at the Šidák level for the 8 rows, α = 1e-3;
+    and significantly positive (z > 4) for the sizes of :data:`REPARAM_BIASED`.
     """
     scene = s3.load_scene(cf.pinhole_triangle_scene(size, width))
     param = MOTIONS[motion]
@@ -363,7 +366,7 @@ def test10_reparam_loses_a_documented_share_of_the_silhouette_term(size, width, 
     lost = cf.share_lost(tally.derivative, exact)
     documented, documented_se = (x / 100.0 for x in REPARAM_CAMERA_LOSS[size, width, motion])
     print(f"{size} px {motion}: {100 * lost.mean:.1f} % +- {100 * lost.stderr:.1f} %")
-    assert lost.mean / lost.stderr > 4.0
+    assert size not in REPARAM_BIASED or lost.mean / lost.stderr > 4.0
     q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, len(REPARAM_CAMERA_LOSS)), BATCHES - 1)
     assert abs(lost.mean - documented) <= q * math.hypot(lost.stderr, documented_se)
 

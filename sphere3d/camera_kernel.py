@@ -1,0 +1,272 @@
+"""The film kernel of the pixel integral: rotations per camera sample, chosen inside small kernels.
+
+The pixel integral ``∫ k(s) L(ω(s)) ds`` is convolved with a Gaussian film kernel
+g(s - c) of variance 1 / ``kappa_film`` (pixels⁻²), ``∫ g(s - c) dc = 1`` for every s
+(Loubet et al. 2019, Sec. 4.2). Each camera sample s (drawn from the filter, the naive
+estimator's own sample) gets a kernel centre c ~ g(· - s), the reverse order of the
+paper's ω ~ p, μ ~ k(·, ω) (theory/kernels), which keeps every evaluation at s itself
+and the primal bit-identical to ``naive``'s; around c a ring of probes
+(:func:`~sphere3d.probes.ring_offsets`, radius ``spread`` kernel standard deviations)
+chooses the point the sample's rotation follows (Sec. 4.3, :mod:`sphere3d.probes`,
+with the ``refine`` bisection that moves a single probe's hit onto the silhouette between
+it and its partner). The sample is evaluated along R·ω(s) with the weight
+``g(film(Rω) - c) / detach(g(film(Rω) - c))`` (value exactly 1,
+:func:`~flatland.core.translation.unit_weight`), next to the filter's own
+``k J (Rω) / detach(k J (Rω))`` (:func:`~sphere3d.integrator.pixel_samples`).
+
+Each sample gets two centres, c = s + σz and its mirror image c' = s - σz, each with its
+own probes and rotation, and the estimate is the mean of the two (an antithetic pair, not
+the authors' paired samples: those share one rotation between two evaluation points and
+change the primal; ``paired`` leaves the film kernel as it is). Where both rotations
+follow the same motion, the kernel weights' derivatives κ (c - s)·ḟ and κ (c' - s)·ḟ
+cancel; the radiance is evaluated once, along the mean of the two rotated directions'
+tangents (exact: the derivative is linear in them).
+
+Unbiased for a silhouette that the rotation follows: for a fixed centre the rotation is
+one change of variables of the whole film integral, and integrating over c restores
+the pixel integral. The product of the two weights keeps a zero-mean derivative,
+``d/dθ ∫ dc ∫ k(film Rω) J g(film Rω - c) dω = d/dθ 1 = 0``, so the filter-weight
+control variate of :class:`~sphere3d.tasks.ImageTask` stays exact.
+
+The default concentration is the authors' camera kernel κ = 1 / (1 - cos(0.4 · pixel
+angle)) read on the film, 1 - cos x ≈ x² / 2: a Gaussian of σ = 0.4 / √2 ≈ 0.28 px,
+flatland's :func:`~flatland.methods.reparam.default_kappa_film` in pixel units. The
+kernel being a fraction of a pixel wide, the probes see the silhouette next to each
+sample rather than somewhere on the pixel's footprint: two edges or a corner in one
+footprint are followed by different samples, and a silhouette a pixel or two wide is not
+missed by a ring wider than itself.
+
+Bias
+----
+Measured against the closed forms of :mod:`sphere3d.closed_form` by
+``python -m benchmarks --only reparam_bias`` (``reparam`` defaults: ``kappa_film`` 12.5,
+4 probes (7 on the film), spread 3, refine 3; seed 11, 16 batches; ± one standard error);
+tested as biases in ``tests/sphere3d/test_triangle_closed_form.py`` (test10).
+
+A black triangle about s pixels across against a constant sky
+(:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian filter), moving sideways
+(``translate.x``) or away from the camera (``translate.z``).
+Share of the silhouette term lost, 1 - Σ sign(g) d / Σ |g| over the film (g the exact
+derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
+
+========  ==================  ==================  ==================
+size      image, spp          sideways            depth
+========  ==================  ==================  ==================
+1 px      8 × 8, 65536        32.2 % ± 0.6 %      49.4 % ± 0.6 %
+2 px      8 × 8, 65536        2.3 % ± 0.4 %       4.8 % ± 0.5 %
+4 px      8 × 8, 65536        1.2 % ± 0.2 %       1.8 % ± 0.3 %
+8 px      16 × 16, 16384      0.8 % ± 0.3 %       1.0 % ± 0.3 %
+20 px     32 × 32, 4096       1.0 % ± 0.4 %       0.1 % ± 0.4 %
+========  ==================  ==================  ==================
+
+Short of the exact derivative where a kernel reaches a discontinuity that its rotation
+does not follow: an edge between the ring's probes, or, on a triangle about a pixel
+across, all three edges inside one kernel (a rotation follows two edges at their common
+corner, not three). Motion in depth loses more there: the edges' film velocities differ
+(the image scales about the principal point), while a sideways translation moves every
+edge alike. Not fixed by more samples.
+
+Noise: on ``hard_shadow`` (64 spp in one batch, 4 seeds, against the stored reference) one
+kernel centre per sample doubled the derivative's RMSE (0.57 to 1.00), from the kernel
+scores on the occluder's lit silhouette; with the antithetic pair it is 0.57, as with one
+rotation per pixel.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach, tangent
+from flatland.core.rng import Draws
+from flatland.core.validate import ValidationError, check_positive
+from sphere3d.integrator import FilmTransform
+from sphere3d.probes import Snap, follow_probes, ring_offsets
+from sphere3d.rotation import Rotation
+from sphere3d.state import SceneState
+from sphere3d.tracing import Hits
+from sphere3d.vector import cross
+
+__all__ = [
+    "KAPPA_FILM",
+    "KAPPA_FILM_MAX",
+    "check_kappa_film",
+    "film_probes",
+    "film_transform",
+    "silhouette_snap",
+]
+
+KAPPA_FILM = 2.0 / 0.4**2
+"""Default film kernel concentration, pixels⁻²: σ = 0.4 px / √2 ≈ 0.28 px, the authors' camera
+kernel κ = 1 / (1 - cos(0.4 · pixel angle)) with 1 - cos x ≈ x² / 2 (Loubet et al. 2019, Sec. 4.2)."""
+KAPPA_FILM_MAX = 1e12
+"""Largest film kernel concentration: σ = 1e-6 px, still far above the rounding of film coordinates
+(about 1e-14 px on a film of a few thousand pixels); the weight's derivative grows like √κ."""
+
+
+def film_probes(probes: int) -> int:
+    """Probes per film kernel, ``2 probes - 1``: the centre and twice the ring of a shading kernel.
+
+    A ring of n probes at radius r detects every straight edge within r cos(π/n) of the
+    centre, one beyond it only for some phases: with the 3 ring probes of ``probes=4``,
+    edges past 1.5 σ of a spread-3 ring went undetected often enough to lose 17 % of a 2 px
+    triangle's silhouette term (sideways), with 6 (2.6 σ) 2.4 ± 1.5 %. Camera probes are
+    traced once per camera sample, from one origin.
+    """
+    return 2 * probes - 1
+
+
+def check_kappa_film(name: str, value: Any) -> float:
+    """0 < ``kappa_film`` <= :data:`KAPPA_FILM_MAX` (pixels⁻²), one error naming the option otherwise."""
+    kappa = check_positive(name, value)
+    if kappa > KAPPA_FILM_MAX:
+        raise ValidationError(
+            name, f"must be <= {KAPPA_FILM_MAX:g} (a kernel below 1e-6 px is rounding), got {value!r}"
+        )
+    return kappa
+
+
+def film_transform(
+    state: SceneState,
+    x: np.ndarray,
+    y: np.ndarray,
+    draws: Draws,
+    kappa_film: float,
+    probes: int,
+    spread: float,
+    refine: int,
+) -> FilmTransform:
+    """Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
+
+    The centres c = s + σz and c' = s - σz are both distributed as g(· - s), so the mean
+    of the two estimates is unbiased; where both rotations follow the same motion their
+    kernel weights' derivatives κ (c - s)·ḟ and κ (c' - s)·ḟ cancel (module docstring).
+
+    Parameters
+    ----------
+    state : SceneState
+        The scene at θ (camera, tracer, θ-dependent triangles).
+    x, y : ndarray, shape (n,)
+        The samples' film coordinates (pixel centre plus the filter offset).
+    draws : Draws
+        One row per sample: z from ``"kernel.film"``, the rings' phases from ``"probes.film"``.
+    kappa_film : float
+        1 / variance of the Gaussian kernel, pixels⁻².
+    probes, spread, refine
+        As the ``reparam`` options: the centre and a ring of :func:`film_probes` ``- 1`` at
+        ``spread`` kernel standard deviations; bisection rays toward the silhouette.
+
+    Returns
+    -------
+    FilmTransform
+        The two rotations and their kernel centres (Loubet et al. 2019, Sec. 4.2, 4.3).
+    """
+    cam = state.camera
+    n = x.size
+    sigma = 1.0 / math.sqrt(kappa_film)
+    # c ~ g(· - s) around the sample (reverse order, theory/kernels), and its mirror image c' = 2s - c
+    s, z = np.stack([x, y], axis=-1), sigma * draws.normals("kernel.film", 2)
+    centre = np.concatenate([s + z, s - z])  # rows: the n first members, then the n second
+    phase = draws.uniforms("probes.film", 2).T.ravel()
+    rotation = Rotation.identity((2 * n,))
+    # where the camera stands still and no probe can see a moving triangle, any point chosen is static
+    # and the rotation the identity: probes and heuristic run only on the other rows (same result)
+    rows = _reaching_motion(state, centre, spread * sigma)
+    if rows.size:
+        ring = centre[rows, None] + ring_offsets(spread * sigma, film_probes(probes), phase[rows])
+        d = cam.directions(ring[..., 0], ring[..., 1])
+        hits = state.tracer.intersect(detach(cam.origin), d)
+        if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
+            moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+            seen = np.any(moving[np.maximum(hits.triangle, 0)] & (hits.triangle >= 0), axis=1)
+            rows, d, hits = rows[seen], d[seen], hits.take(seen)
+        # a corner up to twice the ring's radius away: its second edge still enters the ring if it
+        # makes more than 30 degrees with the line to the centre (sin 30° = 1/2)
+        snap = silhouette_snap(state, centre[rows], 2.0 * spread * sigma)
+        o = cam.origin
+        sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap)
+        rotation.target[rows] = sub.target
+        rotation.active[rows] = sub.active
+    first, second = np.arange(n), np.arange(n, 2 * n)
+    return FilmTransform((rotation.take(first), rotation.take(second)), (centre[:n], centre[n:]), kappa_film)
+
+
+def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.ndarray:
+    """Rows whose probes (within ``reach`` px of ``centre``) may see a moving triangle, or all rows
+    when the camera moves or a moving triangle reaches behind the camera plane.
+
+    Conservative: the film box of the moving triangles' vertices (in front of the camera)
+    holds every film point whose ray can meet one of them.
+    """
+    cam = state.camera
+    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+    if np.any(tangent(cam.origin) != 0.0):
+        return np.arange(len(centre))
+    if not moving.any():
+        return np.arange(0)
+    v = np.asarray(detach(state.triangles))[moving].reshape(-1, 3) - detach(cam.origin)
+    if np.any(v @ np.asarray(detach(cam.forward)) <= 0.0):
+        return np.arange(len(centre))
+    fx, fy = (np.asarray(detach(f)) for f in cam.film(v))
+    x, y = centre[:, 0], centre[:, 1]
+    inside = (
+        (x + reach >= fx.min()) & (x - reach <= fx.max()) & (y + reach >= fy.min()) & (y - reach <= fy.max())
+    )
+    return np.flatnonzero(inside)
+
+
+def silhouette_snap(state: SceneState, centre: np.ndarray, radius: float) -> Snap:
+    """Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
+
+    The hook ``snap`` of :func:`~sphere3d.probes.select_points`. After bisection the hit
+    lies up to 1/2^refine of the probe gap inside its triangle T; the point followed is
+    instead where the segment of directions from ``inside`` (hits T) to ``outside`` (misses
+    the shape) leaves T. With ``e_k(d) = ((V_{k+1} - o) × (V_{k+2} - o)) · d``, linear in d and
+    proportional to the barycentric weight of V_k of the hit along d, that exit is the
+    smallest λ in (0, 1] with ``e_k((1 - λ) a + λ b) = 0``. A film rotation (locally a
+    translation of the film) that follows a point on a straight edge's line follows the
+    whole edge under translation and motion in depth (the edge's normal velocity is
+    affine in the point and constant along the line), while one following a point inside
+    T drifts by its distance from the edge times the image's rate of scaling. Where an end
+    of that edge projects within ``radius`` (the probe ring) of the kernel centre, the
+    corner is followed instead: it lies on both edges that meet there, so one rotation
+    follows the two (Loubet et al. 2019, Sec. 4.3: a refinement of the heuristic).
+    """
+    cam = state.camera
+    triangles = np.asarray(detach(state.triangles))
+
+    def snap(
+        rows: np.ndarray, origin: np.ndarray, inside: np.ndarray, outside: np.ndarray, hits: Hits
+    ) -> tuple[np.ndarray, np.ndarray]:
+        m = np.arange(rows.size)
+        vert = triangles[hits.triangle] - origin[:, None]  # (k, 3, 3): V_j - o
+        # row j of c: (V_{j+1} - o) × (V_{j+2} - o), so e_j(d) = c_j · d
+        c = cross(np.roll(vert, -1, axis=1), np.roll(vert, -2, axis=1))
+        ea, eb = np.einsum("kjx,kx->kj", c, inside), np.einsum("kjx,kx->kj", c, outside)
+        sign = np.where(ea.sum(axis=1) < 0.0, -1.0, 1.0)[:, None]  # orient: e_j(inside) >= 0
+        ea, eb = ea * sign, eb * sign
+        leaving = (eb < 0.0) & (ea >= 0.0)
+        lam = np.where(leaving, ea / np.where(leaving, ea - eb, 1.0), np.inf)
+        j = np.argmin(lam, axis=1)  # V_j's weight reaches 0 first: the exit edge is V_{j+1} V_{j+2}
+        exits = np.isfinite(lam[m, j])
+        d = inside + np.where(exits, lam[m, j], 0.0)[:, None] * (outside - inside)
+        w = np.maximum(np.einsum("kjx,kx->kj", c, d) * sign, 0.0)
+        w[m, j] = 0.0
+        total = w.sum(axis=1)
+        exits &= total > 0.0
+        w = w / np.where(total > 0.0, total, 1.0)[:, None]
+        # the exit edge's ends on the film, the nearer one to the kernel centre if the ring reaches it
+        ends = np.stack([(j + 1) % 3, (j + 2) % 3], axis=1)
+        fx, fy = cam.film(vert[m[:, None], ends])
+        gap = np.hypot(fx - centre[rows, None, 0], fy - centre[rows, None, 1])
+        near = np.argmin(gap, axis=1)
+        corner = exits & (gap[m, near] <= radius)
+        w[corner] = 0.0
+        w[m[corner], ends[m, near][corner]] = 1.0
+        u = np.where(exits, w[:, 1], hits.u)
+        v = np.where(exits, w[:, 2], hits.v)
+        return u, v
+
+    return snap

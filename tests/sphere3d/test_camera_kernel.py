@@ -1,0 +1,68 @@
+"""The film kernel of the pixel integral (:mod:`sphere3d.camera_kernel`), piece by piece.
+
+The snap that moves a bisected probe hit onto its triangle's edge or corner, the antithetic
+pair of kernel centres and the option's checks; the kernel's effect on the derivative is
+measured against the closed form in ``test_triangle_closed_form.py`` (test10).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flatland.core.dual import detach, tangent, variable
+from flatland.core.rng import Draws
+from flatland.core.validate import ValidationError
+from sphere3d import closed_form as cf
+from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_probes, film_transform, silhouette_snap
+from sphere3d.scene import load_scene
+from sphere3d.tracing import attached_points
+from sphere3d.vector import normalize
+
+
+def _state(param="tri.translate.x"):
+    return load_scene(cf.pinhole_triangle_scene(4, 8)).state(param, variable(0.0))
+
+
+def test01_the_snap_moves_a_bisected_hit_onto_the_edge_or_its_corner():
+    state = _state()
+    o = np.asarray(detach(state.camera.origin))
+    tri = np.asarray(detach(state.triangles))[0]
+    centroid, mid = tri.mean(axis=0), 0.5 * (tri[0] + tri[1])
+    # inside: towards the centroid; outside: past the middle of edge V0 V1 on the same line, so the
+    # plane of the two directions meets that edge at its middle
+    inside = normalize(centroid - o)[None]
+    outside = normalize(centroid + 1.5 * (mid - centroid) - o)[None]
+    hits = state.tracer.intersect(o, inside)
+    assert hits.triangle.tolist() == [0]
+    far = np.array([[1e6, 1e6]])  # no corner within reach: the exit point on the edge
+    u, v = silhouette_snap(state, far, 1.0)(np.array([0]), o[None], inside, outside, hits)
+    np.testing.assert_allclose(attached_points(tri, u, v)[0], mid, atol=1e-12)
+    fx, fy = state.camera.film(tri[0] - o)  # a kernel centred on V0's image: the corner V0
+    u, v = silhouette_snap(state, np.array([[fx, fy]]), 1.0)(np.array([0]), o[None], inside, outside, hits)
+    assert (u.tolist(), v.tolist()) == ([0.0], [0.0])
+
+
+def test02_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_triangle():
+    state = _state()
+    n = 400
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(2.0, 6.0, n), rng.uniform(2.0, 6.0, n)
+    film = film_transform(state, x, y, Draws.of(5, np.arange(n)), KAPPA_FILM, 4, 3.0, 3)
+    first, second = film.centres
+    np.testing.assert_allclose(first + second, 2.0 * np.stack([x, y], axis=-1), atol=1e-12)
+    assert len(film.rotations) == 2 and film.kappa == KAPPA_FILM
+    # some kernels reach the moving triangle, whose rotations move; the others stay the identity
+    for rotation in film.rotations:
+        moving = np.any(tangent(rotation.target) != 0.0, axis=1)
+        assert 0 < moving.sum() < n and np.all(rotation.active[moving])
+
+
+def test03_probe_counts_and_the_options_checks():
+    assert [film_probes(p) for p in (1, 2, 4, 8)] == [1, 3, 7, 15]
+    assert check_kappa_film("kappa_film", KAPPA_FILM) == 2.0 / 0.4**2  # σ = 0.4 px / √2, the same expression
+    assert check_kappa_film("kappa_film", 3) == 3.0
+    for bad, message in [(0.0, "must be > 0"), (1e13, r"must be <= 1e\+12"), (None, "kappa_film")]:
+        with pytest.raises(ValidationError, match=message) as info:
+            check_kappa_film("kappa_film", bad)
+        assert str(info.value).startswith("kappa_film")
