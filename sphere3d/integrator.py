@@ -42,6 +42,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
+from sphere3d.emitter_edges import add_tangent, sample_emitter_edges
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -219,12 +220,20 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     idx = np.flatnonzero(valid)
     blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
-    if vis.size == 0:
+    # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
+    edge = (
+        sample_emitter_edges(state, shading)
+        if state.dual and getattr(transforms, "emitter_edges", False)
+        else None
+    )
+    if vis.size == 0 and edge is None:
         return scatter(m, vis, 0.0, state.dual)
     # θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
     pdf = solid_angle_pdf(1.0 / float(detach(state.emitter_area)), dist[vis], cos_y[vis])
     sub = shading.take(vis)
-    rotated = transforms.emitter(sub).apply(w[vis])
+    need = vis if edge is None else np.union1d(vis, edge.index)  # one rotation per point, for both terms
+    rotation = transforms.emitter(shading.take(need))
+    rotated = rotation.take(np.searchsorted(need, vis)).apply(w[vis])
     # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
     it = intersect_triangles(sub.x, rotated, state.triangles[tri[vis]])
     cos_x_d = np.maximum(dot(sub.n, rotated), 0.0)
@@ -232,7 +241,11 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     p_light = solid_angle_pdf(1.0 / state.emitter_area, it.t, cos_y_d)
     p_cos = cos_x_d * INV_PI
     f = state.emitted(tri[vis], it.b1, it.b2) * cos_x_d
-    return scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
+    out = scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
+    if edge is None:
+        return out
+    at = rotation.take(np.searchsorted(need, edge.index))
+    return add_tangent(out, edge.index, edge.tangent_term(state, shading.x[edge.index], at))
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:

@@ -135,6 +135,9 @@ class ReparamTransforms:
         it, >= 0 (:func:`~sphere3d.probes.select_points`).
     paired : bool
         Two kernel samples per outer sample share one rotation (theory/kernels).
+    emitter_edges : bool
+        Add the boundary term of the emitters' sharp edges to the emitter strategy
+        (:mod:`sphere3d.emitter_edges`), which holds them fixed under its rotation.
     """
 
     kappa: float | None
@@ -142,6 +145,7 @@ class ReparamTransforms:
     spread: float
     refine: int
     paired: bool
+    emitter_edges: bool = True
 
     def camera(self, state: SceneState, rows: np.ndarray, cols: np.ndarray, u: np.ndarray) -> Rotation:
         """Pixel integral (small support): one rotation per pixel from a ring of probes on its footprint.
@@ -287,9 +291,16 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("refine", REFINE, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
+    Option("emitter_edges", True, check_bool),
 )
 def reparam(
-    task: ImageTask | PointTask, kappa: float | None, probes: int, spread: float, refine: int, paired: bool
+    task: ImageTask | PointTask,
+    kappa: float | None,
+    probes: int,
+    spread: float,
+    refine: int,
+    paired: bool,
+    emitter_edges: bool,
 ) -> Tally:
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
@@ -366,4 +377,6 @@ def reparam(
         check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
-    return task.evaluate(variable(0.0), ReparamTransforms(kappa, probes, spread, refine, paired))
+    return task.evaluate(
+        variable(0.0), ReparamTransforms(kappa, probes, spread, refine, paired, emitter_edges)
+    )
