@@ -31,8 +31,9 @@ The edges are the emitters' **boundary edges** (one face among the emitter trian
 edges between two emitter shapes and creases (two non-coplanar faces); for a
 two-face edge both faces' terms are summed at the same point (each only if its front
 faces the shading point). An edge shared by three or more emitter triangles gets the
-term of one face only (no built-in scene has one). Each shading point draws one point
-uniform in length on these edges (density 1 / perimeter) and traces one shadow ray.
+term of one face only (no built-in scene has one). Each shading point draws
+:data:`POINTS` points uniform in length on these edges, an antithetic pair (arc lengths
+s and s + P/2 along their loops), one shadow ray each.
 """
 
 from __future__ import annotations
@@ -48,9 +49,11 @@ from sphere3d.rotation import Rotation
 from sphere3d.tracing import face_normals, intersect_triangles
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["EmitterEdgeSamples", "add_tangent", "sample_emitter_edges"]
+__all__ = ["POINTS", "EmitterEdgeSamples", "add_tangent", "sample_emitter_edges"]
 
 INV_PI = 1.0 / np.pi
+POINTS = 2
+"""Points on the edges per shading point, at arc lengths s and s + P/2 (one shadow ray each)."""
 
 
 @dataclass(frozen=True)
@@ -60,8 +63,9 @@ class EmitterEdgeSamples:
     Attributes
     ----------
     index : ndarray of int, shape (k,)
-        The shading points (rows of the :class:`~sphere3d.integrator.Shading`) whose edge
-        point is above their surface, in front of a face of the edge and unoccluded.
+        The shading point (row of the :class:`~sphere3d.integrator.Shading`) of each edge
+        point above its surface, in front of a face of the edge and unoccluded (a point
+        appears up to :data:`POINTS` times).
     w : ndarray, shape (k, 3)
         Unit direction from the shading point to the edge point.
     faces : ndarray of int, shape (k, 2)
@@ -72,8 +76,8 @@ class EmitterEdgeSamples:
         Outward unit normal of each face at the edge, in the face's plane.
     dist, cos_x : ndarray, shape (k,)
         Distance to the edge point and cos θ_x there.
-    perimeter : float
-        Total length of the edges (the sampling density is 1 / perimeter).
+    weight : float
+        The edges' total length P over :data:`POINTS`: each point's weight.
     """
 
     index: np.ndarray
@@ -83,13 +87,13 @@ class EmitterEdgeSamples:
     outward: np.ndarray
     dist: np.ndarray
     cos_x: np.ndarray
-    perimeter: float
+    weight: float
 
     def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
         """The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
 
         ``x``: the points ``index`` (Dual positions); ``rotation``: their emitter rotations.
-        Estimate ``- perimeter · Σ_faces F_in (V_T · n_out)`` (module docstring).
+        Estimate ``- P/POINTS · Σ_faces F_in (V_T · n_out)`` per edge point (module docstring).
         """
         rotated = rotation.apply(self.w)
         area = float(detach(state.emitter_area))
@@ -114,16 +118,29 @@ class EmitterEdgeSamples:
             # F_in: L_e (just inside: the border fade, if any, is 0 there) cos_x cos_y / d² w_L
             emitted = np.asarray(detach(state.emitted(f, detach(it.b1), detach(it.b2))), dtype=np.float64)
             f_in = emitted * self.cos_x[s] * cos_y / (d * d) * (p_light / (p_light + p_cos))
-            out[s] -= self.perimeter * f_in * speed
+            out[s] -= self.weight * f_in * speed
         return out
 
 
-def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
-    """One point per shading point, uniform in length on the emitters' edges (module docstring).
+@dataclass(frozen=True)
+class _EdgeTable:
+    """The emitters' edges that carry a term, in loop order, with per-face data (small arrays, θ0)."""
 
-    ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
-    (stream ``"emitter.edge"``), so the primary samples are untouched. None when the
-    emitters have no such edge (a closed mesh without creases) or no point sees one.
+    a: np.ndarray  # (E, 3) start, in face 0's winding order
+    b: np.ndarray  # (E, 3) end
+    faces: np.ndarray  # (E, 2) global triangle indices, -1: no second face
+    normals: np.ndarray  # (E, 2, 3) the faces' unit normals
+    outward: np.ndarray  # (E, 2, 3) outward unit normal of each face at the edge, in its plane
+    cdf: np.ndarray  # (E,) cumulative length in loop order
+
+
+def _edge_table(state: Any) -> _EdgeTable | None:
+    """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
+
+    Ordered along their loops (each edge followed by the one starting where it ends, a
+    walk over the few edges, not over samples) so that arc length ``s`` and ``s + P/2``
+    are opposite points of a loop: on a parallelogram light, reflections through its
+    centre (the antithetic pair of :func:`sample_emitter_edges`).
     """
     emitters = np.asarray(detach(state.triangles))[state.emitters]
     edges = mesh_edges(emitters, state.shape_of[state.emitters])
@@ -131,35 +148,74 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     if keep.size == 0:
         return None
     edges = edges.take(keep)
-    length = norm(edges.b - edges.a)
-    cdf = np.cumsum(length)
-    perimeter = float(cdf[-1])
-    u = shading.draws.uniforms("emitter.edge", 2)
-    e = np.minimum(np.searchsorted(cdf, u[:, 0] * perimeter, side="right"), len(cdf) - 1)
-    y = edges.a[e] + u[:, 1:2] * (edges.b[e] - edges.a[e])
-    local = np.stack([edges.face[e], edges.other[e]], axis=1)  # into ``emitters``; -1: no second face
-    faces = np.where(local >= 0, state.emitters[np.maximum(local, 0)], -1)
-    to = y - detach(shading.x)
+    starts = {tuple(p): i for i, p in enumerate(edges.a)}
+    order, seen, i = [], np.zeros(len(edges), dtype=bool), 0
+    while len(order) < len(edges):
+        order.append(i)
+        seen[i] = True
+        i = starts.get(tuple(edges.b[i]), -1)
+        if i < 0 or seen[i]:  # a loop closed (or a chain ended): start the next one
+            i = int(np.argmin(seen))
+    edges = edges.take(np.array(order))
+    local = np.stack([edges.face, edges.other], axis=1)
+    tri = emitters[np.maximum(local, 0)]  # (E, 2, 3, 3)
+    normals = np.stack([edges.n1, edges.n2], axis=1)
+    outward = cross((edges.b - edges.a)[:, None], normals)
+    outward = outward / norm(outward)[..., None]
+    away = dot(outward, edges.a[:, None] - tri.mean(axis=2)) > 0.0  # away from the face's centroid
+    return _EdgeTable(
+        a=edges.a,
+        b=edges.b,
+        faces=np.where(local >= 0, state.emitters[np.maximum(local, 0)], -1),
+        normals=normals,
+        outward=np.where(away[..., None], outward, -outward),
+        cdf=np.cumsum(norm(edges.b - edges.a)),
+    )
+
+
+def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
+    """:data:`POINTS` points per shading point on the emitters' edges (module docstring).
+
+    Each is uniform in length (density 1 / perimeter P): arc lengths ``s`` and
+    ``s + P/2`` along the loops (antithetic: the terms of opposite edges nearly cancel
+    when the light's image moves as a whole, and the pair samples them together).
+    ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
+    (stream ``"emitter.edge"``), so the primary samples are untouched. None when the
+    emitters have no such edge (a closed mesh without creases) or no point sees one.
+    """
+    table = _edge_table(state)
+    if table is None:
+        return None
+    perimeter = float(table.cdf[-1])
+    u = shading.draws.uniforms("emitter.edge")
+    arc = (np.add.outer(u, np.arange(POINTS) / POINTS) % 1.0).ravel() * perimeter
+    point = np.repeat(np.arange(len(shading)), POINTS)
+    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
+    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
+    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
+    y = table.a[e] + along[:, None] * (table.b[e] - table.a[e])
+    to = y - detach(shading.x)[point]
     dist = norm(to)
     w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
-    cos_x = dot(detach(shading.n), w)
-    tri = emitters[np.maximum(local, 0)]  # (m, 2, 3, 3)
-    normals = face_normals(tri)
-    front = (-dot(normals, w[:, None]) > 1e-9) & (faces >= 0)  # the emitter strategy's own test
+    cos_x = dot(detach(shading.n)[point], w)
+    faces = table.faces[e]
+    front = (-dot(table.normals[e], w[:, None]) > 1e-9) & (faces >= 0)  # the emitter strategy's own test
     valid = front.any(axis=1) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
-    blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
+    blocked = state.tracer.occluded(shading.origin[point[idx]], w[idx], dist[idx] - 2.0 * state.epsilon)
     idx = idx[~blocked]
     if idx.size == 0:
         return None
-    # outward normal in the face's plane: perpendicular to the edge, away from the face's centroid
-    along = edges.b[e[idx]] - edges.a[e[idx]]
-    outward = cross(along[:, None], normals[idx])
-    outward = outward / norm(outward)[..., None]
-    centroid = tri[idx].mean(axis=2)
-    away = dot(outward, edges.a[e[idx]][:, None] - centroid) > 0.0
-    outward = np.where(away[..., None], outward, -outward)
-    return EmitterEdgeSamples(idx, w[idx], faces[idx], front[idx], outward, dist[idx], cos_x[idx], perimeter)
+    return EmitterEdgeSamples(
+        point[idx],
+        w[idx],
+        faces[idx],
+        front[idx],
+        table.outward[e[idx]],
+        dist[idx],
+        cos_x[idx],
+        perimeter / POINTS,
+    )
 
 
 def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:
