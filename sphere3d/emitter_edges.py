@@ -57,37 +57,71 @@ POINTS = 2
 
 
 @dataclass(frozen=True)
+class _EdgeTable:
+    """The emitters' edges that carry a term, in loop order, with per-face data (small arrays, θ0)."""
+
+    a: np.ndarray  # (E, 3) start, in face 0's winding order
+    b: np.ndarray  # (E, 3) end
+    faces: np.ndarray  # (E, 2) global triangle indices, -1: no second face
+    normals: np.ndarray  # (E, 2, 3) the faces' unit normals
+    outward: np.ndarray  # (E, 2, 3) outward unit normal of each face at the edge, in its plane
+    cdf: np.ndarray  # (E,) cumulative length in loop order
+
+
+@dataclass(frozen=True)
 class EmitterEdgeSamples:
-    """One point on the emitters' edges per shading point that sees it (plain arrays, θ0).
+    """Points on the emitters' edges, :data:`POINTS` per shading point (plain arrays, θ0).
 
     Attributes
     ----------
     index : ndarray of int, shape (k,)
         The shading point (row of the :class:`~sphere3d.integrator.Shading`) of each edge
-        point above its surface, in front of a face of the edge and unoccluded (a point
-        appears up to :data:`POINTS` times).
+        point above its surface and in front of a face of the edge (a shading point
+        appears up to :data:`POINTS` times); visibility is traced by :meth:`term`.
     w : ndarray, shape (k, 3)
         Unit direction from the shading point to the edge point.
-    faces : ndarray of int, shape (k, 2)
-        The edge's emitter triangles (global indices); -1 where there is no second one.
+    edge : ndarray of int, shape (k,)
+        The edge each point lies on (a row of ``table``).
     front : ndarray of bool, shape (k, 2)
-        Which of them faces the shading point (the emitter strategy samples only those).
-    outward : ndarray, shape (k, 2, 3)
-        Outward unit normal of each face at the edge, in the face's plane.
+        Which of the edge's (up to two) emitter triangles faces the shading point (the
+        emitter strategy samples only those).
     dist, cos_x : ndarray, shape (k,)
         Distance to the edge point and cos θ_x there.
+    table : _EdgeTable
+        The edges: endpoints, triangles, normals, outward normals in the triangles' planes.
     weight : float
         The edges' total length P over :data:`POINTS`: each point's weight.
     """
 
     index: np.ndarray
     w: np.ndarray
-    faces: np.ndarray
+    edge: np.ndarray
     front: np.ndarray
-    outward: np.ndarray
     dist: np.ndarray
     cos_x: np.ndarray
+    table: _EdgeTable
     weight: float
+
+    def take(self, rows: np.ndarray) -> EmitterEdgeSamples:
+        """The edge points at ``rows``."""
+        fields = [getattr(self, f)[rows] for f in self.__dataclass_fields__ if f not in ("table", "weight")]
+        return EmitterEdgeSamples(*fields, self.table, self.weight)
+
+    def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
+        """The shading points and the boundary term's tangents, given each edge point's emitter rotation.
+
+        V_T is exactly 0 where the rotation is the identity (no point followed) and neither
+        the shading point nor an emitter moves: those edge points are dropped untraced
+        (on ``hard_shadow`` the lit ground). The others get their shadow ray, and the
+        visible ones the estimate of :meth:`tangent_term`.
+        """
+        x_moves = np.any(tangent(shading.x)[self.index] != 0.0, axis=1)
+        emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
+        k = np.flatnonzero(rotation.active | x_moves | emitters_move)
+        tmax = self.dist[k] - 2.0 * state.epsilon
+        k = k[~state.tracer.occluded(shading.origin[self.index[k]], self.w[k], tmax)]
+        sub = self.take(k)
+        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
 
     def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
         """The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
@@ -103,14 +137,14 @@ class EmitterEdgeSamples:
             s = np.flatnonzero(self.front[:, j])
             if s.size == 0:
                 continue
-            f = self.faces[s, j]
+            f = self.table.faces[self.edge[s], j]
             it = intersect_triangles(x[s], rotated[s], state.triangles[f])
             t0 = tri0[f]
             # velocity of the re-attached point relative to the emitter, V_T = ḃ₁ e₁ + ḃ₂ e₂
             v = tangent(it.b1)[:, None] * (t0[:, 1] - t0[:, 0]) + tangent(it.b2)[:, None] * (
                 t0[:, 2] - t0[:, 0]
             )
-            speed = dot(v, self.outward[s, j])
+            speed = dot(v, self.table.outward[self.edge[s], j])
             cos_y = -dot(face_normals(t0), self.w[s])
             d = self.dist[s]
             p_light = d * d / (area * cos_y)  # solid-angle density of the emitter strategy
@@ -120,18 +154,6 @@ class EmitterEdgeSamples:
             f_in = emitted * self.cos_x[s] * cos_y / (d * d) * (p_light / (p_light + p_cos))
             out[s] -= self.weight * f_in * speed
         return out
-
-
-@dataclass(frozen=True)
-class _EdgeTable:
-    """The emitters' edges that carry a term, in loop order, with per-face data (small arrays, θ0)."""
-
-    a: np.ndarray  # (E, 3) start, in face 0's winding order
-    b: np.ndarray  # (E, 3) end
-    faces: np.ndarray  # (E, 2) global triangle indices, -1: no second face
-    normals: np.ndarray  # (E, 2, 3) the faces' unit normals
-    outward: np.ndarray  # (E, 2, 3) outward unit normal of each face at the edge, in its plane
-    cdf: np.ndarray  # (E,) cumulative length in loop order
 
 
 def _edge_table(state: Any) -> _EdgeTable | None:
@@ -181,7 +203,8 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     when the light's image moves as a whole, and the pair samples them together).
     ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
     (stream ``"emitter.edge"``), so the primary samples are untouched. None when the
-    emitters have no such edge (a closed mesh without creases) or no point sees one.
+    emitters have no such edge (a closed mesh without creases) or no point faces one.
+    No ray is traced here (:meth:`EmitterEdgeSamples.term` traces the shadow rays).
     """
     table = _edge_table(state)
     if table is None:
@@ -198,23 +221,16 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     dist = norm(to)
     w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
     cos_x = dot(detach(shading.n)[point], w)
-    faces = table.faces[e]
-    front = (-dot(table.normals[e], w[:, None]) > 1e-9) & (faces >= 0)  # the emitter strategy's own test
+    front = np.zeros((len(e), 2), dtype=bool)
+    for j in np.flatnonzero(np.any(table.faces >= 0, axis=0)):  # the edges' one or two faces
+        # facing the point: the emitter strategy's own test, cos θ_y > 1e-9
+        front[:, j] = (-dot(table.normals[e, j], w) > 1e-9) & (table.faces[e, j] >= 0)
     valid = front.any(axis=1) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
-    blocked = state.tracer.occluded(shading.origin[point[idx]], w[idx], dist[idx] - 2.0 * state.epsilon)
-    idx = idx[~blocked]
     if idx.size == 0:
         return None
     return EmitterEdgeSamples(
-        point[idx],
-        w[idx],
-        faces[idx],
-        front[idx],
-        table.outward[e[idx]],
-        dist[idx],
-        cos_x[idx],
-        perimeter / POINTS,
+        point[idx], w[idx], e[idx], front[idx], dist[idx], cos_x[idx], table, perimeter / POINTS
     )
 
 

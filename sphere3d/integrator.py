@@ -244,8 +244,7 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     out = scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
     if edge is None:
         return out
-    at = rotation.take(np.searchsorted(need, edge.index))
-    return add_tangent(out, edge.index, edge.tangent_term(state, shading.x[edge.index], at))
+    return add_tangent(out, *edge.term(state, shading, rotation.take(np.searchsorted(need, edge.index))))
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
