@@ -261,20 +261,26 @@ def kept_fraction(g, ref, mask):
 REPARAM = {
     # scene: {region: (documented kept fraction, its standard error)}, from
     # benchmarks/bench_hard_shadow.py-style runs: 4 seeds x 256 spp against the stored reference
-    "hard_shadow": {"penumbra": (0.032, 0.002), "silhouette": (0.951, 0.014)},
-    "hard_shadow_cube": {"penumbra": (0.033, 0.002), "silhouette": (0.957, 0.011)},
+    # (the larger of the seeds' spread and the propagated per-pixel errors)
+    "hard_shadow": {"penumbra": (0.980, 0.004), "silhouette": (0.956, 0.014)},
+    "hard_shadow_cube": {"penumbra": (1.023, 0.003), "silhouette": (0.957, 0.018)},
 }
 """reparam's per-region bias as documented in :func:`sphere3d.methods.reparam.reparam`."""
 REPARAM_SPP = 128
+PENUMBRA_TOLERANCE = 0.05
+"""Largest |kept - 1| in the penumbra: the soft-shadow term of the light's sharp edge is there
+(:mod:`sphere3d.emitter_edges`; without it 3 % was kept); what remains (-2 % sphere, +2 % cube)
+is the occluder's shadow edge, which one emitter rotation per shading point holds still only
+approximately."""
 
 
 @pytest.mark.parametrize("name", SCENES)
-def test04_reparam_loses_the_penumbra_as_documented(name, masks):
-    # The documented biases of reparam (its docstring): the soft-shadow term of a sharp light is
-    # lost in the penumbra (3 % kept), and a few % of the silhouette term. Tested as biases: the
-    # penumbra's kept fraction is significantly below 1 (by more than the Šidák quantile of the
-    # regions in standard errors) and both fractions lie within the quantile of their documented
-    # values (the documented value's error and the test's combined).
+def test04_reparam_keeps_the_penumbra_and_loses_a_little_silhouette_as_documented(name, masks):
+    # The documented per-region fractions of reparam (its docstring), at another seed and spp:
+    # each within the Šidák quantile of the regions in standard errors (the documented value's
+    # and the test's combined). The penumbra keeps the soft-shadow term within PENUMBRA_TOLERANCE;
+    # the silhouette loses a few % (one camera rotation per pixel cannot follow two edges), a bias
+    # tested as one: its fraction is significantly below 1.
     ref = _reference(name)
     g = s3.render_gradient(name, PARAM, method="reparam", spp=REPARAM_SPP, seed=11)
     q = sidak_quantile(2 * len(SCENES) * len(REPARAM[name]), np.inf)
@@ -282,4 +288,6 @@ def test04_reparam_loses_the_penumbra_as_documented(name, masks):
         k, se = kept_fraction(g, ref, masks[name][key])
         assert abs(k - documented) < q * np.hypot(se, doc_se), (key, k, se)
         if key == "penumbra":
+            assert abs(k - 1.0) < PENUMBRA_TOLERANCE, (k, se)
+        else:
             assert (1.0 - k) / se > q, (k, se)
