@@ -316,12 +316,13 @@ def reparam(
       (theory/pixel_filters), so a box filter is refused, as in flatland.
     - **emitter sampling**: one rotation per shading point following the mean of the
       attached hits of the occluded ones among ``probes`` shadow rays (the authors'
-      implementation), else the mean attached probe point on the emitters. Exact
-      when one rigid occluder shadows a small emitter; biased when occluders moving
-      differently share the emitter's solid angle, and at an emitter's own border
-      unless its radiance fades there (``fade``, theory/probes): a 0.6 × 0.4 light moving
-      sideways 1.5 above a point got 73 % of its derivative lost without a fade, none
-      with it (tests/sphere3d/test_closed_forms.py).
+      implementation), else the mean attached probe point on the emitters. The
+      emitters' sharp edges are held fixed: ``emitter_edges`` (default True) adds their
+      boundary term (:mod:`sphere3d.emitter_edges`, theory/probes), so a 0.6 × 0.4 light
+      moving sideways 1.5 above a point gets -0.3003 ± 0.0019 (exact -0.3007; 73 % lost
+      without the term, tests/sphere3d/test_closed_forms.py). Still biased where the
+      rotation does not hold an occluder's shadow edge still (occluders moving
+      differently, or one whose outline lies at several depths).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
       with concentration ``kappa``: a kernel centre ω ~ vMF(μ, κ) per sample, probes
       on a ring of ``spread`` kernel widths around it, weight
@@ -342,27 +343,29 @@ def reparam(
     d/d ``occluder.translate.x``, default options, 4 seeds x 256 spp against the
     Richardson finite-difference reference of ``benchmarks/reference``; regions as in
     ``tests/sphere3d/test_hard_shadow.py``), as the least-squares fraction of the
-    reference kept, Σ g·ref / Σ ref², and the share of the squared per-pixel bias:
+    reference kept, Σ g·ref / Σ ref², and the region's part of the bias floor (the rms
+    per-pixel bias over the image, noise subtracted, ``benchmarks/bench_hard_shadow.py``):
 
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
     ================  ===========================  ===========================
-    penumbra          3.2 ± 0.2 % kept (89 %)      3.3 ± 0.2 % kept (70 %)
-    silhouette        95.1 ± 1.4 % kept (11 %)     95.7 ± 1.1 % kept (27 %)
-    occluder          116 ± 7 % kept (0 %)         100.3 ± 2.1 % kept (3 %)
-    bias floor        0.31 rms per pixel           0.38 rms per pixel
+    penumbra          98.0 ± 0.4 % kept (0.09)     102.3 ± 0.3 % kept (0.11)
+    silhouette        95.6 ± 1.4 % kept (0.11)     95.7 ± 1.8 % kept (0.18)
+    occluder          95 ± 6 % kept (< noise)      100.1 ± 1.9 % kept (0.10)
+    bias floor        0.12 rms per pixel           0.24 rms per pixel
     ================  ===========================  ===========================
 
-    The penumbra's derivative (the soft-shadow term) is lost: the emitter rotation
-    follows the occluder, and in its frame the light's unfaded edge moves, which the
-    re-attachment to the light's plane does not see (the emitter-border bias above).
+    Without ``emitter_edges`` the penumbra kept 3.2 / 3.3 % (bias floor 0.31 / 0.38): the
+    emitter rotation follows the occluder, and in its frame the light's sharp edge moves.
+    What remains there is the occluder's shadow edge, which one rotation per shading
+    point holds still only approximately (the emitter strategy alone: 98.7 / 103.3 %;
+    the cosine strategy, whose per-sample rotations may drag the light's edge too, with
+    a balance weight of a few % here, moves the fractions by about 1 %).
     The silhouette loss sits where the occluder's silhouette and the ground's far edge
-    share a footprint (98 % and 95 % of its squared bias, in the pixels whose footprint
-    also sees past the ground): one rotation per pixel cannot follow two edges. On the
-    cube's faces the error has both signs (0.30 rms per pixel; the edges between faces
-    inside a footprint); the lit ground and the umbra have none.
-    ``tests/sphere3d/test_hard_shadow.py`` tests the penumbra and silhouette fractions
-    as biases.
+    share a footprint: one rotation per pixel cannot follow two edges. On the cube's
+    faces the error has both signs (the edges between faces inside a footprint); the lit
+    ground and the umbra have none. ``tests/sphere3d/test_hard_shadow.py`` tests these
+    fractions.
 
     Samples whose integrand is 0 with a zero derivative whatever the rotation (a
     shadow ray blocked, a cosine ray hitting a dark surface) get no probes. The
