@@ -46,6 +46,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.edges import mesh_edges
 from sphere3d.rotation import Rotation
+from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
 from sphere3d.tracing import face_normals, intersect_triangles
 from sphere3d.vector import cross, dot, norm
 
@@ -156,6 +157,22 @@ class EmitterEdgeSamples:
         return out
 
 
+def _faded_out(state: Any, edges: Any) -> np.ndarray:
+    """Boundary edges along which the emitted radiance is 0 (a ``fade`` border): no term there.
+
+    The fade factor (:func:`~sphere3d.shapes.fade_weight`) is 0 where a fade coordinate has
+    |c| >= 1; along an edge the coordinates interpolate linearly, so it is 0 on the whole
+    edge when one coordinate (u for both kinds, v too for rectangles) has the same value,
+    of modulus >= 1, at both ends. Two-face edges are kept (their other face may glow).
+    """
+    face = state.emitters[edges.face]
+    ua, ub = state.uv[face, edges.ia], state.uv[face, edges.ib]
+    flat = (ua == ub) & (np.abs(ua) >= 1.0)
+    kind = state.fade_kind[face]
+    zero = flat[:, 0] | ((kind == FADE_RECTANGLE) & flat[:, 1])
+    return (edges.other < 0) & (state.fade[face] > 0.0) & (kind != FADE_NONE) & zero
+
+
 def _edge_table(state: Any) -> _EdgeTable | None:
     """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
 
@@ -166,7 +183,7 @@ def _edge_table(state: Any) -> _EdgeTable | None:
     """
     emitters = np.asarray(detach(state.triangles))[state.emitters]
     edges = mesh_edges(emitters, state.shape_of[state.emitters])
-    keep = np.flatnonzero(edges.always | edges.crease)
+    keep = np.flatnonzero((edges.always | edges.crease) & ~_faded_out(state, edges))
     if keep.size == 0:
         return None
     edges = edges.take(keep)
