@@ -17,7 +17,9 @@ Three nested integrals per pixel (direct illumination only):
 
    - *emitter sampling*: a point y uniform on the emitters' area, its direction ω and
      the solid-angle density ``p_L = d² / (A cos θ_y)``; a method may rotate ω;
-     the emitter hit is re-attached to the triangle the sample lies on;
+     the emitter hit is re-attached to the triangle the sample lies on (without its
+     edges: a method that sets ``emitter_edges`` gets their boundary term added,
+     :mod:`sphere3d.emitter_edges`);
    - *cosine sampling*: ω ~ cos θ / π; the method owns this estimator (it may add a
      convolution kernel, Sec. 4.2) and calls back :meth:`Shading.evaluate_bsdf`
      for the integrand at rotated directions.

@@ -169,7 +169,8 @@ class ReparamTransforms:
         emitters: the samples then stay attached to a moving emitter (or to a static
         one seen from a moving point), so the derivative does not pick up the
         steep radiance fade at the emitter's border as noise. Any rotation is exact
-        for a continuous integrand; this one only lowers the variance.
+        for a continuous integrand; this one only lowers the variance. The emitters'
+        sharp edges are held fixed under any of them (``emitter_edges``).
         """
         state = shading.state
         m = len(shading)

@@ -31,7 +31,14 @@ def test01_api_exports_and_methods():
     assert image.batches == 4 and image.spp == 4 and image.scene == "shadow"
     g = s3.render_gradient(_small("shadow"), "occluder.translate.x", spp=8, seed=3, kappa=300.0)
     assert isinstance(g, s3.GradientImage) and g.derivative.shape == (12, 12)
-    assert dict(g.options) == {"kappa": 300.0, "probes": 4, "spread": 3.0, "refine": 3, "paired": False}
+    assert dict(g.options) == {
+        "kappa": 300.0,
+        "probes": 4,
+        "spread": 3.0,
+        "refine": 3,
+        "paired": False,
+        "emitter_edges": True,
+    }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
 
