@@ -17,7 +17,9 @@ Three nested integrals per pixel (direct illumination only):
 
    - *emitter sampling*: a point y uniform on the emitters' area, its direction ω and
      the solid-angle density ``p_L = d² / (A cos θ_y)``; a method may rotate ω;
-     the emitter hit is re-attached to the triangle the sample lies on;
+     the emitter hit is re-attached to the triangle the sample lies on (without its
+     edges: a method that sets ``emitter_edges`` gets their boundary term added,
+     :mod:`sphere3d.emitter_edges`);
    - *cosine sampling*: ω ~ cos θ / π; the method owns this estimator (it may add a
      convolution kernel, Sec. 4.2) and calls back :meth:`Shading.evaluate_bsdf`
      for the integrand at rotated directions.
@@ -42,6 +44,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
+from sphere3d.emitter_edges import add_tangent, sample_emitter_edges
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -250,12 +253,20 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     idx = np.flatnonzero(valid)
     blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
-    if vis.size == 0:
+    # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
+    edge = (
+        sample_emitter_edges(state, shading)
+        if state.dual and getattr(transforms, "emitter_edges", False)
+        else None
+    )
+    if vis.size == 0 and edge is None:
         return scatter(m, vis, 0.0, state.dual)
     # θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
     pdf = solid_angle_pdf(1.0 / float(detach(state.emitter_area)), dist[vis], cos_y[vis])
     sub = shading.take(vis)
-    rotated = transforms.emitter(sub).apply(w[vis])
+    need = vis if edge is None else np.union1d(vis, edge.index)  # one rotation per point, for both terms
+    rotation = transforms.emitter(shading.take(need))
+    rotated = rotation.take(np.searchsorted(need, vis)).apply(w[vis])
     # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
     it = intersect_triangles(sub.x, rotated, state.triangles[tri[vis]])
     cos_x_d = np.maximum(dot(sub.n, rotated), 0.0)
@@ -263,7 +274,10 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     p_light = solid_angle_pdf(1.0 / state.emitter_area, it.t, cos_y_d)
     p_cos = cos_x_d * INV_PI
     f = state.emitted(tri[vis], it.b1, it.b2) * cos_x_d
-    return scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
+    out = scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
+    if edge is None:
+        return out
+    return add_tangent(out, *edge.term(state, shading, rotation.take(np.searchsorted(need, edge.index))))
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:

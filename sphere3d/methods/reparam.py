@@ -117,6 +117,9 @@ class ReparamTransforms:
         it, >= 0 (:func:`~sphere3d.probes.select_points`).
     paired : bool
         Two kernel samples per outer sample share one rotation (theory/kernels).
+    emitter_edges : bool
+        Add the boundary term of the emitters' sharp edges to the emitter strategy
+        (:mod:`sphere3d.emitter_edges`), which holds them fixed under its rotation.
     """
 
     kappa: float | None
@@ -125,6 +128,7 @@ class ReparamTransforms:
     spread: float
     refine: int
     paired: bool
+    emitter_edges: bool = True
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
@@ -139,7 +143,8 @@ class ReparamTransforms:
         emitters: the samples then stay attached to a moving emitter (or to a static
         one seen from a moving point), so the derivative does not pick up the
         steep radiance fade at the emitter's border as noise. Any rotation is exact
-        for a continuous integrand; this one only lowers the variance.
+        for a continuous integrand; this one only lowers the variance. The emitters'
+        sharp edges are held fixed under any of them (``emitter_edges``).
         """
         state = shading.state
         m = len(shading)
@@ -262,6 +267,7 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("refine", REFINE, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
+    Option("emitter_edges", True, check_bool),
 )
 def reparam(
     task: ImageTask | PointTask,
@@ -271,6 +277,7 @@ def reparam(
     spread: float,
     refine: int,
     paired: bool,
+    emitter_edges: bool,
 ) -> Tally:
     """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
@@ -288,12 +295,13 @@ def reparam(
       (theory/pixel_filters), so a box filter is refused, as in flatland.
     - **emitter sampling**: one rotation per shading point following the mean of the
       attached hits of the occluded ones among ``probes`` shadow rays (the authors'
-      implementation), else the mean attached probe point on the emitters. Exact
-      when one rigid occluder shadows a small emitter; biased when occluders moving
-      differently share the emitter's solid angle, and at an emitter's own border
-      unless its radiance fades there (``fade``, theory/probes): a 0.6 × 0.4 light moving
-      sideways 1.5 above a point got 73 % of its derivative lost without a fade, none
-      with it (tests/sphere3d/test_closed_forms.py).
+      implementation), else the mean attached probe point on the emitters. The
+      emitters' sharp edges are held fixed: ``emitter_edges`` (default True) adds their
+      boundary term (:mod:`sphere3d.emitter_edges`, theory/probes), so a 0.6 × 0.4 light
+      moving sideways 1.5 above a point gets -0.3003 ± 0.0019 (exact -0.3007; 73 % lost
+      without the term, tests/sphere3d/test_closed_forms.py). Still biased where the
+      rotation does not hold an occluder's shadow edge still (occluders moving
+      differently, or one whose outline lies at several depths).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
       with concentration ``kappa``: a kernel centre ω ~ vMF(μ, κ) per sample, probes
       on a ring of ``spread`` kernel widths around it, weight
@@ -314,27 +322,29 @@ def reparam(
     d/d ``occluder.translate.x``, default options, 4 seeds x 256 spp against the
     Richardson finite-difference reference of ``benchmarks/reference``; regions as in
     ``tests/sphere3d/test_hard_shadow.py``), as the least-squares fraction of the
-    reference kept, Σ g·ref / Σ ref², and the share of the squared per-pixel bias:
+    reference kept, Σ g·ref / Σ ref², and the region's part of the bias floor (the rms
+    per-pixel bias over the image, noise subtracted, ``benchmarks/bench_hard_shadow.py``):
 
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
     ================  ===========================  ===========================
-    penumbra          3.2 ± 0.2 % kept (92 %)      3.3 ± 0.2 % kept (86 %)
-    silhouette        95.5 ± 1.4 % kept (9 %)      97.3 ± 1.1 % kept (9 %)
-    occluder          116 ± 6 % kept (0 %)         100.3 ± 1.9 % kept (4 %)
-    bias floor        0.30 rms per pixel           0.34 rms per pixel
+    penumbra          98.0 ± 0.4 % kept (0.09)     102.3 ± 0.3 % kept (0.11)
+    silhouette        95.6 ± 1.4 % kept (0.11)     95.7 ± 1.8 % kept (0.18)
+    occluder          95 ± 6 % kept (< noise)      100.1 ± 1.9 % kept (0.10)
+    bias floor        0.12 rms per pixel           0.24 rms per pixel
     ================  ===========================  ===========================
 
-    The penumbra's derivative (the soft-shadow term) is lost: the emitter rotation
-    follows the occluder, and in its frame the light's unfaded edge moves, which the
-    re-attachment to the light's plane does not see (the emitter-border bias above).
-    On the sphere the silhouette loss sits where its silhouette crosses the ground's far
-    edge (one pixel holds 86 % of the region's squared bias): a film kernel there holds two
-    edges moving differently, which one rotation cannot follow. On the
-    cube's faces the error has both signs (0.30 rms per pixel; the edges between faces
-    inside a footprint); the lit ground and the umbra have none.
-    ``tests/sphere3d/test_hard_shadow.py`` tests the penumbra and silhouette fractions
-    as biases.
+    Without ``emitter_edges`` the penumbra kept 3.2 / 3.3 % (bias floor 0.31 / 0.38): the
+    emitter rotation follows the occluder, and in its frame the light's sharp edge moves.
+    What remains there is the occluder's shadow edge, which one rotation per shading
+    point holds still only approximately (the emitter strategy alone: 98.7 / 103.3 %;
+    the cosine strategy, whose per-sample rotations may drag the light's edge too, with
+    a balance weight of a few % here, moves the fractions by about 1 %).
+    The silhouette loss sits where the occluder's silhouette and the ground's far edge
+    share a footprint: one rotation per pixel cannot follow two edges. On the cube's
+    faces the error has both signs (the edges between faces inside a footprint); the lit
+    ground and the umbra have none. ``tests/sphere3d/test_hard_shadow.py`` tests these
+    fractions.
 
     Samples whose integrand is 0 with a zero derivative whatever the rotation (a
     shadow ray blocked, a cosine ray hitting a dark surface) get no probes. The
@@ -349,4 +359,7 @@ def reparam(
         check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
-    return task.evaluate(variable(0.0), ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired))
+    return task.evaluate(
+        variable(0.0),
+        ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired, emitter_edges),
+    )

@@ -259,22 +259,28 @@ def kept_fraction(g, ref, mask):
 
 
 REPARAM = {
-    # scene: {region: (documented kept fraction, its standard error)}, from
-    # benchmarks/bench_hard_shadow.py-style runs: 4 seeds x 256 spp against the stored reference
-    "hard_shadow": {"penumbra": (0.032, 0.002), "silhouette": (0.955, 0.014)},
-    "hard_shadow_cube": {"penumbra": (0.033, 0.002), "silhouette": (0.973, 0.011)},
+    # scene: {region: (documented kept fraction, its standard error)}: 8 seeds x REPARAM_SPP against
+    # the stored reference (the larger of the seeds' spread and the propagated per-pixel errors);
+    # the docstring's table, at 256 spp, agrees within 1.7 standard errors
+    "hard_shadow": {"penumbra": (0.984, 0.003), "silhouette": (0.983, 0.016)},
+    "hard_shadow_cube": {"penumbra": (1.030, 0.003), "silhouette": (0.961, 0.011)},
 }
 """reparam's per-region bias as documented in :func:`sphere3d.methods.reparam.reparam`."""
 REPARAM_SPP = 128
+PENUMBRA_TOLERANCE = 0.05
+"""Largest |kept - 1| in the penumbra: the soft-shadow term of the light's sharp edge is there
+(:mod:`sphere3d.emitter_edges`; without it 3 % was kept); what remains (-2 % sphere, +2 % cube)
+is the occluder's shadow edge, which one emitter rotation per shading point holds still only
+approximately."""
 
 
 @pytest.mark.parametrize("name", SCENES)
-def test04_reparam_loses_the_penumbra_as_documented(name, masks):
-    # The documented biases of reparam (its docstring): the soft-shadow term of a sharp light is
-    # lost in the penumbra (3 % kept), and a few % of the silhouette term. Tested as biases: the
-    # penumbra's kept fraction is significantly below 1 (by more than the Šidák quantile of the
-    # regions in standard errors) and both fractions lie within the quantile of their documented
-    # values (the documented value's error and the test's combined).
+def test04_reparam_keeps_the_penumbra_and_its_documented_fractions(name, masks):
+    # The documented per-region fractions of reparam (its docstring), at another seed and spp:
+    # each within the Šidák quantile of the regions in standard errors (the documented value's
+    # and the test's combined). The penumbra keeps the soft-shadow term within PENUMBRA_TOLERANCE
+    # (3 % of it was kept before the emitter-edge term); the silhouette loses a few % (one camera
+    # rotation per pixel cannot follow two edges).
     ref = _reference(name)
     g = s3.render_gradient(name, PARAM, method="reparam", spp=REPARAM_SPP, seed=11)
     q = sidak_quantile(2 * len(SCENES) * len(REPARAM[name]), np.inf)
@@ -282,4 +288,4 @@ def test04_reparam_loses_the_penumbra_as_documented(name, masks):
         k, se = kept_fraction(g, ref, masks[name][key])
         assert abs(k - documented) < q * np.hypot(se, doc_se), (key, k, se)
         if key == "penumbra":
-            assert (1.0 - k) / se > q, (k, se)
+            assert abs(k - 1.0) < PENUMBRA_TOLERANCE, (k, se)

@@ -39,6 +39,7 @@ def test01_api_exports_and_methods():
         "spread": 3.0,
         "refine": 3,
         "paired": False,
+        "emitter_edges": True,
     }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 

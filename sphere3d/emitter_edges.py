@@ -1,0 +1,258 @@
+"""The boundary term of the emitter-sampling strategy: the light's own edges, held fixed.
+
+The emitter strategy of :mod:`sphere3d.integrator` samples a point y uniformly on the
+emitters' area A (at θ0), turns its direction w(y) by one rotation R(θ) per shading
+point (:meth:`~sphere3d.integrator.Transforms.emitter`) and re-attaches it to the plane
+of the sampled triangle: T_θ(y), the identity at θ0. The re-attachment has no edge
+(its barycentrics are not clamped), so the estimator differentiates
+
+    E_L(θ) = ∫_A F(T_θ(y), θ) 1[T_θ(y) ∈ A] |J| dA(y)
+
+without the indicator. F is the area-measure integrand
+``L_e V cos θ_x cos θ_y / d² · w_L`` (w_L the balance weight of the emitter strategy).
+Where the rotation follows an occluder and the light's edge is sharp (no ``fade``),
+the edge moves in the rotated frame, and its term is lost: the soft-shadow gradient.
+By Leibniz's rule (Loubet et al. 2019, Sec. 4.3: an emitter's border is a
+discontinuity like any other, to be followed or held fixed; theory/leibniz) the
+missing term is
+
+    - ∫_∂A F_in(y) (V_T(y) · n_out(y)) dl(y),
+
+F_in the integrand just inside, n_out the outward unit normal of A in its plane, and
+V_T = dT/dθ the velocity of the re-attached point relative to the emitter, read from
+the tangents of the re-attached barycentrics, ``V_T = ḃ₁ e₁ + ḃ₂ e₂`` (e₁, e₂ the
+triangle's edge vectors): it is computed by the same Dual re-attachment
+(:func:`~sphere3d.tracing.intersect_triangles`) along the rotated direction of the edge
+point. Its value is 0, so the primal is unchanged; with it the emitter strategy's
+derivative is unbiased for whatever rotation is chosen (the visibility it treats as
+fixed aside, as the interior term does).
+
+The edges are the emitters' **boundary edges** (one face among the emitter triangles),
+edges between two emitter shapes and creases (two non-coplanar faces); for a
+two-face edge both faces' terms are summed at the same point (each only if its front
+faces the shading point). An edge shared by three or more emitter triangles gets the
+term of one face only (no built-in scene has one). Each shading point draws
+:data:`POINTS` points uniform in length on these edges, an antithetic pair (arc lengths
+s and s + P/2 along their loops), one shadow ray each.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach, tangent
+from sphere3d.edges import mesh_edges
+from sphere3d.rotation import Rotation
+from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
+from sphere3d.tracing import face_normals, intersect_triangles
+from sphere3d.vector import cross, dot, norm
+
+__all__ = ["POINTS", "EmitterEdgeSamples", "add_tangent", "sample_emitter_edges"]
+
+INV_PI = 1.0 / np.pi
+POINTS = 2
+"""Points on the edges per shading point, at arc lengths s and s + P/2 (one shadow ray each)."""
+
+
+@dataclass(frozen=True)
+class _EdgeTable:
+    """The emitters' edges that carry a term, in loop order, with per-face data (small arrays, θ0)."""
+
+    a: np.ndarray  # (E, 3) start, in face 0's winding order
+    b: np.ndarray  # (E, 3) end
+    faces: np.ndarray  # (E, 2) global triangle indices, -1: no second face
+    normals: np.ndarray  # (E, 2, 3) the faces' unit normals
+    outward: np.ndarray  # (E, 2, 3) outward unit normal of each face at the edge, in its plane
+    cdf: np.ndarray  # (E,) cumulative length in loop order
+
+
+@dataclass(frozen=True)
+class EmitterEdgeSamples:
+    """Points on the emitters' edges, :data:`POINTS` per shading point (plain arrays, θ0).
+
+    Attributes
+    ----------
+    index : ndarray of int, shape (k,)
+        The shading point (row of the :class:`~sphere3d.integrator.Shading`) of each edge
+        point above its surface and in front of a face of the edge (a shading point
+        appears up to :data:`POINTS` times); visibility is traced by :meth:`term`.
+    w : ndarray, shape (k, 3)
+        Unit direction from the shading point to the edge point.
+    edge : ndarray of int, shape (k,)
+        The edge each point lies on (a row of ``table``).
+    front : ndarray of bool, shape (k, 2)
+        Which of the edge's (up to two) emitter triangles faces the shading point (the
+        emitter strategy samples only those).
+    dist, cos_x : ndarray, shape (k,)
+        Distance to the edge point and cos θ_x there.
+    table : _EdgeTable
+        The edges: endpoints, triangles, normals, outward normals in the triangles' planes.
+    weight : float
+        The edges' total length P over :data:`POINTS`: each point's weight.
+    """
+
+    index: np.ndarray
+    w: np.ndarray
+    edge: np.ndarray
+    front: np.ndarray
+    dist: np.ndarray
+    cos_x: np.ndarray
+    table: _EdgeTable
+    weight: float
+
+    def take(self, rows: np.ndarray) -> EmitterEdgeSamples:
+        """The edge points at ``rows``."""
+        fields = [getattr(self, f)[rows] for f in self.__dataclass_fields__ if f not in ("table", "weight")]
+        return EmitterEdgeSamples(*fields, self.table, self.weight)
+
+    def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
+        """The shading points and the boundary term's tangents, given each edge point's emitter rotation.
+
+        V_T is exactly 0 where the rotation is the identity (no point followed) and neither
+        the shading point nor an emitter moves: those edge points are dropped untraced
+        (on ``hard_shadow`` the lit ground). The others get their shadow ray, and the
+        visible ones the estimate of :meth:`tangent_term`.
+        """
+        x_moves = np.any(tangent(shading.x)[self.index] != 0.0, axis=1)
+        emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
+        k = np.flatnonzero(rotation.active | x_moves | emitters_move)
+        tmax = self.dist[k] - 2.0 * state.epsilon
+        k = k[~state.tracer.occluded(shading.origin[self.index[k]], self.w[k], tmax)]
+        sub = self.take(k)
+        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
+
+    def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
+        """The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
+
+        ``x``: the points ``index`` (Dual positions); ``rotation``: their emitter rotations.
+        Estimate ``- P/POINTS · Σ_faces F_in (V_T · n_out)`` per edge point (module docstring).
+        """
+        rotated = rotation.apply(self.w)
+        area = float(detach(state.emitter_area))
+        tri0 = np.asarray(detach(state.triangles))
+        out = np.zeros(len(self.index))
+        for j in range(2):  # the edge's two faces (not a loop over samples)
+            s = np.flatnonzero(self.front[:, j])
+            if s.size == 0:
+                continue
+            f = self.table.faces[self.edge[s], j]
+            it = intersect_triangles(x[s], rotated[s], state.triangles[f])
+            t0 = tri0[f]
+            # velocity of the re-attached point relative to the emitter, V_T = ḃ₁ e₁ + ḃ₂ e₂
+            v = tangent(it.b1)[:, None] * (t0[:, 1] - t0[:, 0]) + tangent(it.b2)[:, None] * (
+                t0[:, 2] - t0[:, 0]
+            )
+            speed = dot(v, self.table.outward[self.edge[s], j])
+            cos_y = -dot(face_normals(t0), self.w[s])
+            d = self.dist[s]
+            p_light = d * d / (area * cos_y)  # solid-angle density of the emitter strategy
+            p_cos = self.cos_x[s] * INV_PI
+            # F_in: L_e (just inside: the border fade, if any, is 0 there) cos_x cos_y / d² w_L
+            emitted = np.asarray(detach(state.emitted(f, detach(it.b1), detach(it.b2))), dtype=np.float64)
+            f_in = emitted * self.cos_x[s] * cos_y / (d * d) * (p_light / (p_light + p_cos))
+            out[s] -= self.weight * f_in * speed
+        return out
+
+
+def _faded_out(state: Any, edges: Any) -> np.ndarray:
+    """Boundary edges along which the emitted radiance is 0 (a ``fade`` border): no term there.
+
+    The fade factor (:func:`~sphere3d.shapes.fade_weight`) is 0 where a fade coordinate has
+    |c| >= 1; along an edge the coordinates interpolate linearly, so it is 0 on the whole
+    edge when one coordinate (u for both kinds, v too for rectangles) has the same value,
+    of modulus >= 1, at both ends. Two-face edges are kept (their other face may glow).
+    """
+    face = state.emitters[edges.face]
+    ua, ub = state.uv[face, edges.ia], state.uv[face, edges.ib]
+    flat = (ua == ub) & (np.abs(ua) >= 1.0)
+    kind = state.fade_kind[face]
+    zero = flat[:, 0] | ((kind == FADE_RECTANGLE) & flat[:, 1])
+    return (edges.other < 0) & (state.fade[face] > 0.0) & (kind != FADE_NONE) & zero
+
+
+def _edge_table(state: Any) -> _EdgeTable | None:
+    """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
+
+    Ordered along their loops (each edge followed by the one starting where it ends, a
+    walk over the few edges, not over samples) so that arc length ``s`` and ``s + P/2``
+    are opposite points of a loop: on a parallelogram light, reflections through its
+    centre (the antithetic pair of :func:`sample_emitter_edges`).
+    """
+    emitters = np.asarray(detach(state.triangles))[state.emitters]
+    edges = mesh_edges(emitters, state.shape_of[state.emitters])
+    keep = np.flatnonzero((edges.always | edges.crease) & ~_faded_out(state, edges))
+    if keep.size == 0:
+        return None
+    edges = edges.take(keep)
+    starts = {tuple(p): i for i, p in enumerate(edges.a)}
+    order, seen, i = [], np.zeros(len(edges), dtype=bool), 0
+    while len(order) < len(edges):
+        order.append(i)
+        seen[i] = True
+        i = starts.get(tuple(edges.b[i]), -1)
+        if i < 0 or seen[i]:  # a loop closed (or a chain ended): start the next one
+            i = int(np.argmin(seen))
+    edges = edges.take(np.array(order))
+    local = np.stack([edges.face, edges.other], axis=1)
+    tri = emitters[np.maximum(local, 0)]  # (E, 2, 3, 3)
+    normals = np.stack([edges.n1, edges.n2], axis=1)
+    outward = cross((edges.b - edges.a)[:, None], normals)
+    outward = outward / norm(outward)[..., None]
+    away = dot(outward, edges.a[:, None] - tri.mean(axis=2)) > 0.0  # away from the face's centroid
+    return _EdgeTable(
+        a=edges.a,
+        b=edges.b,
+        faces=np.where(local >= 0, state.emitters[np.maximum(local, 0)], -1),
+        normals=normals,
+        outward=np.where(away[..., None], outward, -outward),
+        cdf=np.cumsum(norm(edges.b - edges.a)),
+    )
+
+
+def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
+    """:data:`POINTS` points per shading point on the emitters' edges (module docstring).
+
+    Each is uniform in length (density 1 / perimeter P): arc lengths ``s`` and
+    ``s + P/2`` along the loops (antithetic: the terms of opposite edges nearly cancel
+    when the light's image moves as a whole, and the pair samples them together).
+    ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
+    (stream ``"emitter.edge"``), so the primary samples are untouched. None when the
+    emitters have no such edge (a closed mesh without creases) or no point faces one.
+    No ray is traced here (:meth:`EmitterEdgeSamples.term` traces the shadow rays).
+    """
+    table = _edge_table(state)
+    if table is None:
+        return None
+    perimeter = float(table.cdf[-1])
+    u = shading.draws.uniforms("emitter.edge")
+    arc = (np.add.outer(u, np.arange(POINTS) / POINTS) % 1.0).ravel() * perimeter
+    point = np.repeat(np.arange(len(shading)), POINTS)
+    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
+    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
+    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
+    y = table.a[e] + along[:, None] * (table.b[e] - table.a[e])
+    to = y - detach(shading.x)[point]
+    dist = norm(to)
+    w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
+    cos_x = dot(detach(shading.n)[point], w)
+    front = np.zeros((len(e), 2), dtype=bool)
+    for j in np.flatnonzero(np.any(table.faces >= 0, axis=0)):  # the edges' one or two faces
+        # facing the point: the emitter strategy's own test, cos θ_y > 1e-9
+        front[:, j] = (-dot(table.normals[e, j], w) > 1e-9) & (table.faces[e, j] >= 0)
+    valid = front.any(axis=1) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
+    idx = np.flatnonzero(valid)
+    if idx.size == 0:
+        return None
+    return EmitterEdgeSamples(
+        point[idx], w[idx], e[idx], front[idx], dist[idx], cos_x[idx], table, perimeter / POINTS
+    )
+
+
+def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:
+    """``estimate`` with ``term`` added to the tangents at ``index``: the value, bit for bit, unchanged."""
+    t = estimate.tangent.copy()
+    np.add.at(t, index, term)
+    return Dual(estimate.value, t)
