@@ -341,7 +341,7 @@ def reparam(
     the cosine strategy, whose per-sample rotations may drag the light's edge too, with
     a balance weight of a few % here, moves the fractions by about 1 %).
     The silhouette loss sits where the occluder's silhouette and the ground's far edge
-    share a footprint: one rotation per pixel cannot follow two edges. On the cube's
+    share a film kernel: one rotation cannot follow two edges. On the cube's
     faces the error has both signs (the edges between faces inside a footprint); the lit
     ground and the umbra have none. ``tests/sphere3d/test_hard_shadow.py`` tests these
     fractions.
