@@ -168,9 +168,10 @@ SHARED_OPTIONS = {
 """Gradient methods both packages have, and their options in order (2D-only options aside)."""
 ONLY_2D_OPTIONS = {"reparam": ("kappa_film",)}
 """Options flatland's methods have beyond the shared ones (the film kernel of a 1D film)."""
-ONLY_3D_OPTIONS = {"boundary": ("rate",)}
+ONLY_3D_OPTIONS = {"boundary": ("rate", "secondary")}
 """Options sphere3d's methods have beyond the shared ones (flatland's boundary terms are exact
-sums over endpoints and tangent points; sphere3d's are sampled along edges at a ``rate``)."""
+sums over endpoints and tangent points; sphere3d's are sampled along edges at a ``rate`` on the
+film and ``secondary`` times per shading point)."""
 FD_STEP = {"flatland": 1e-3, "sphere3d": 1e-2}
 """Default finite-difference steps h, documented (with the reason) in each method's docstring."""
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from flatland.core.contract import Option
 from flatland.core.dual import Dual, variable
-from flatland.core.validate import check_positive
+from flatland.core.validate import check_int, check_positive
 from sphere3d.camera_edges import camera_edge_term
 from sphere3d.edges import Edges, mesh_edges
 from sphere3d.integrator import Identity, Shading
@@ -36,23 +36,27 @@ class BoundaryTransforms(Identity):
     ----------
     edges : Edges
         The scene's edges at θ0 (:func:`~sphere3d.edges.mesh_edges`).
+    per_point : int
+        Edge samples per shading point (the method's ``secondary`` option).
     """
 
     edges: Edges
+    per_point: int = 1
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The identity's estimate plus, as a tangent on a zero value, one edge sample of the boundary
-        term of E (:func:`~sphere3d.shading_edges.shading_edge_term`; uniforms ``"boundary.edge"``)."""
+        """The identity's estimate plus, as a tangent on a zero value, the mean of ``per_point`` edge
+        samples of the boundary term of E (:func:`~sphere3d.shading_edges.shading_edge_term`;
+        uniforms ``"boundary.edge"``)."""
         estimate = super().bsdf(shading, mu, pdf)
         if not shading.state.dual:
             return estimate
-        u = shading.draws.uniforms("boundary.edge", 2)
+        u = shading.draws.uniforms("boundary.edge", 2, self.per_point)
         term = shading_edge_term(shading, self.edges, u)
         return estimate + Dual(np.zeros(len(shading)), term)  # the value is untouched (+ 0.0)
 
 
-@GRADIENT_METHODS.register("boundary", Option("rate", 1.0, check_positive))
-def boundary(task: ImageTask | PointTask, rate: float) -> Tally:
+@GRADIENT_METHODS.register("boundary", Option("rate", 1.0, check_positive), Option("secondary", 1, check_int))
+def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     """Naive interior term plus the boundary terms of the pixel and shading integrals (edge sampling).
 
     Every integral the renderer differentiates has the form ``∫ f(θ, y) dy`` with f
@@ -67,19 +71,20 @@ def boundary(task: ImageTask | PointTask, rate: float) -> Tally:
     - **pixel integrals** (:mod:`sphere3d.camera_edges`): the film images of silhouette,
       boundary and crease edges (of flat-shaded shapes), ``rate · spp/batches`` points per pixel of projected
       edge length per batch, each splatted to the pixels whose filter covers it;
-    - **shading integrals** (:mod:`sphere3d.shading_edges`): at every shading point one
-      silhouette edge seen from it (occluders' outlines, emitters' borders), drawn ∝
-      its subtended angle, and one point on its arc.
+    - **shading integrals** (:mod:`sphere3d.shading_edges`): at every shading point
+      ``secondary`` draws among the moving silhouette edges seen from it (occluders'
+      outlines, emitters' borders), each a part of an edge's arc inside an emitter's image
+      (under a black sky) drawn ∝ its angle, and one point on it.
 
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
     only discontinuities (see :mod:`sphere3d.edges` for what is not handled: partly
     overlapping edges, surfaces cutting through each other), up to the O(δ) offsets
     of the rays traced beside the edges. Cost: two rays per edge point on the film,
-    and per shading point two rays plus a silhouette test against every edge.
+    and per shading point ``2 secondary`` rays plus a silhouette test against every edge.
     """
     plain = task.scene.state(task.param, 0.0, task.tracer)
     edges = mesh_edges(plain.triangles, plain.shape_of)
-    tally = task.evaluate(variable(0.0), BoundaryTransforms(edges))
+    tally = task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary))
     if not isinstance(task, ImageTask):
         return tally
     state = task.scene.state(task.param, variable(0.0), task.tracer)
