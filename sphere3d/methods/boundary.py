@@ -25,7 +25,7 @@ from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.shading_edges import shading_edge_term
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
-__all__ = ["BoundaryTransforms", "boundary"]
+__all__ = ["RATE", "SECONDARY", "BoundaryTransforms", "boundary"]
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,20 @@ class BoundaryTransforms(Identity):
         return estimate + Dual(np.zeros(len(shading)), term)  # the value is untouched (+ 0.0)
 
 
-@GRADIENT_METHODS.register("boundary", Option("rate", 1.0, check_positive), Option("secondary", 1, check_int))
+RATE = 2.0
+"""Default film edge points per pixel of projected edge length and sample."""
+SECONDARY = 4
+"""Default edge samples per shading point. With RATE, measured on ``hard_shadow`` at 48 spp
+(4 seeds, CPU time of both threads): (MSE - reference variance) × CPU seconds 0.0115, against
+0.0258 at (1.0, 1): rate 1 → 2 halves the camera term's variance (0.0024 → 0.0011 per pixel,
+averaged over the film), 1 → 4 draws quarter the shading term's (0.0076 → 0.0018), each for
+5-15 % more time (the silhouette test, shared by the draws, dominates); 2 or 8 draws, rate 3
+or 4 are within the noise of this choice."""
+
+
+@GRADIENT_METHODS.register(
+    "boundary", Option("rate", RATE, check_positive), Option("secondary", SECONDARY, check_int)
+)
 def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     """Naive interior term plus the boundary terms of the pixel and shading integrals (edge sampling).
 

@@ -45,6 +45,7 @@ from tests.sphere3d.test_closed_forms import (
     _light_scene,
     _triangle_exact,
     _triangle_scene,
+    lambert,
 )
 from tests.sphere3d.test_hard_shadow import regions
 
@@ -309,3 +310,47 @@ def test08_hard_shadow_smooth_creases_add_nothing_and_regions_match_the_referenc
         z = (sums.mean() - ref["derivative"][mask].sum()) / se
         print(f"{key}: {sums.mean():.2f} vs {ref['derivative'][mask].sum():.2f}, z {z:.2f} <= {limit:.2f}")
         assert abs(z) <= limit, key
+
+
+SHADE = np.array([[0.2, 0.05, 1.0], [0.6, -0.1, 1.0], [0.35, 0.3, 1.0]])
+"""A black triangle between the origin and the light of ``_light_scene(0.0)`` (x 0.2-0.8, y 0-0.4 at
+z = 1.5), covering part of it as seen from the origin."""
+
+
+def _shaded_light_exact(theta: float) -> float:
+    """E at the origin: the light's projected solid angle minus that of its part behind the triangle
+    moved by θ in x (Lambert's formula; the part by clipping the triangle's central projection on
+    the light's plane z = 1.5 to the light's rectangle, Sutherland-Hodgman)."""
+    poly = [p * 1.5 / p[2] for p in SHADE + np.array([theta, 0.0, 0.0])]
+    for axis, bound, keep in ((0, 0.2, 1.0), (0, 0.8, -1.0), (1, 0.0, 1.0), (1, 0.4, -1.0)):
+        inside = [keep * (p[axis] - bound) >= 0.0 for p in poly]
+        clipped = []
+        for i, p in enumerate(poly):
+            q = poly[(i + 1) % len(poly)]
+            if inside[i]:
+                clipped.append(p)
+            if inside[i] != inside[(i + 1) % len(poly)]:
+                clipped.append(p + (bound - p[axis]) / (q[axis] - p[axis]) * (q - p))
+        poly = clipped
+    light = np.array([[0.2, 0.0, 1.5], [0.8, 0.0, 1.5], [0.8, 0.4, 1.5], [0.2, 0.4, 1.5]])
+    return 5.0 * (lambert(light) - lambert(np.array(poly)))
+
+
+def test09_a_black_triangle_shading_a_light_under_a_black_sky_matches_lambert():
+    """Secondary edges clipped to the light's image: under a black sky the triangle's arcs count only
+    where they cross the light's spherical image (:func:`sphere3d.shading_edges._clip_to_emitters`),
+    and the light's own border does not move (culled). Exact derivative: central differences
+    (h = 1e-5) of the closed form above, whose truncation error (~1e-9) is far below the stderr.
+    Measured (2^16 samples): z 1.55 here; the mean of 8 other seeds z 0.3, and with a 1e-9 sky
+    (arcs not clipped) z 0.8 with 1.3 × the stderr. naive gives exactly 0 (the triangle is black)."""
+    scene = _light_scene(0.0)
+    scene["shapes"].append({"name": "tri", "type": "mesh", "vertices": SHADE.tolist(), "faces": [[0, 1, 2]]})
+    scene["shapes"][-1]["albedo"] = 0.0
+    h = 1e-5
+    exact = (_shaded_light_exact(h) - _shaded_light_exact(-h)) / (2.0 * h)
+    e = s3.irradiance(scene, ORIGIN, UP, "tri.translate.x", method="boundary", n=1 << 16, seed=4)
+    print(f"{e.derivative:.4f} ± {e.derivative_stderr:.4f} vs {exact:.4f}")
+    assert abs(e.derivative - exact) <= _z(1) * e.derivative_stderr
+    assert (
+        s3.irradiance(scene, ORIGIN, UP, "tri.translate.x", method="naive", n=4096, seed=4).derivative == 0.0
+    )
