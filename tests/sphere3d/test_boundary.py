@@ -138,7 +138,8 @@ def test01_edges_of_the_builtin_meshes():
 def test02_non_manifold_and_unwelded_meshes_and_degenerate_triangles():
     """Three triangles on one edge: one edge of count 3, a candidate from every viewpoint (the jump
     across it is traced, so any number of faces is handled). Duplicated vertices weld by position.
-    A zero-length edge means a zero-area triangle, which the scene refuses."""
+    A zero-length edge means a zero-area triangle, which the scene refuses; a sliver of nonzero area
+    is accepted and gives finite results (its normal is a normalized nonzero cross product)."""
     fin = [[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-0.5, 0.8, 0.5], [-0.5, -0.8, 0.5]]
     faces = [[0, 1, 2], [1, 0, 3], [0, 1, 4]]
     state = s3.load_scene(_black_triangle(fin, faces)).state()
@@ -159,6 +160,17 @@ def test02_non_manifold_and_unwelded_meshes_and_degenerate_triangles():
     assert abs(g.derivative.sum() - ref.derivative.sum()) <= _z(1) * se
     with pytest.raises(ValidationError, match="degenerate"):
         s3.load_scene(_black_triangle([[0, 0, 0], [0, 0, 0], [1, 0, 0]]))
+    # under a black sky and a light (arcs clipped to its image, but not the non-manifold edge's),
+    # the fin and a sliver 1e-9 high (accepted: its area is not 0) give finite derivatives
+    light = {"name": "light", "type": "rectangle", "size": [1.0, 1.0], "translate": [0.0, -0.5, 2.5]}
+    light.update(rotate=[np.pi, 0.0, 0.0], emission=20.0, fade=0.0, albedo=0.0)
+    ground = {"name": "ground", "type": "rectangle", "size": [5.0, 5.0], "translate": [0, 0, -0.2]}
+    for vertices, tris in ((fin, faces), ([[0, 0, 0], [0.5, 0, 1e-9], [1, 0, 0]], [(0, 1, 2)])):
+        lit = _black_triangle(vertices, tris)
+        lit["shapes"][0]["albedo"] = 0.5
+        lit.update(sky=0.0, shapes=[*lit["shapes"], light, ground])
+        g = s3.render_gradient(lit, "tri.translate.x", method="boundary", spp=16, seed=1)
+        assert np.all(np.isfinite(g.derivative)) and np.all(np.isfinite(g.derivative_stderr))
 
 
 @pytest.mark.parametrize("param", ["tri.translate.x", "tri.translate.z", "tri.scale", "camera.translate.x"])
