@@ -184,9 +184,10 @@ def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np
 
 
 def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np.ndarray, ...]:
-    """The points with a moving silhouette edge above the horizon, and for each: one sub-arc of such an
-    edge drawn ∝ its angle, its edge, its arc's ends and s0, s1, the sub-arc's start and angle, the
-    ends ``lo``, ``hi`` of all sub-arcs of its arc (P, T), and Γ = Σ angles.
+    """The draws (flat index ``i k + c`` for column c of ``u``, shape (m, k)) of the points with a
+    moving silhouette edge above the horizon, and for each: one sub-arc of such an edge drawn ∝ its
+    angle, its edge, its arc's ends and s0, s1, the sub-arc's start and angle, the ends ``lo``,
+    ``hi`` of all sub-arcs of its arc (draws, T), and the point's Γ = Σ angles.
 
     A sub-arc is the part of an arc inside one emitter triangle's image under a black sky with at
     most :data:`MAX_EMITTER_TRIANGLES` of them, except on the emitters' own edges (whose arcs lie
