@@ -1,7 +1,7 @@
 """sphere3d accuracy on the ``hard_shadow`` scenes: bias floor, RMSE and time per method, per pixel.
 
 For ``hard_shadow`` (icosphere occluder) and ``hard_shadow_cube`` and the methods
-``naive``, ``finite_difference`` and ``reparam`` (default options), the derivative image
+``naive``, ``finite_difference``, ``reparam`` and ``boundary`` (default options), the derivative image
 d/d ``occluder.translate.x`` is compared pixel by pixel with the stored reference
 (:mod:`benchmarks.hard_shadow_reference`: Richardson-extrapolated finite differences).
 
@@ -21,6 +21,24 @@ never to be ranked above an unbiased one by its RMSE alone):
 
 Next to them the numbers issue 11 quotes for Mitsuba 3.4.1 ``direct_reparam`` on the
 same scene (RMSE 16/64/256 and bias), the target the project's ``reparam`` aims below.
+
+``boundary`` (edge sampling, unbiased), measured with its defaults (rate 2, 4 edge samples per
+shading point), CPU time of both threads (time.process_time, a loaded machine: wall-clock
+seconds there say nothing), 832 spp per scene in all:
+
+============================  ===========  ===========  ==========  ===========  =============
+scene                         RMSE 16 spp  RMSE 64 spp  RMSE 256    bias floor   CPU s / 64 spp
+============================  ===========  ===========  ==========  ===========  =============
+``hard_shadow``               0.126        0.069        0.045       0.016        2.9
+``hard_shadow_cube``          0.096        0.052        0.031       0.0          1.8
+============================  ===========  ===========  ==========  ===========  =============
+
+The bias floors are below the references' own noise (rms se 0.020 and 0.024). Before the
+secondary edges were clipped to the light's image and the fixed ones culled
+(:mod:`sphere3d.shading_edges`), with rate 1 and one edge sample: 0.169 at 32 spp for 2.7 CPU s
+on ``hard_shadow`` (RMSE ≈ 0.9 / sqrt(spp)); now 0.069 at 64 spp for 2.9 CPU s, within the
+0.075 in 3 s on 2 cores issue 12 asks (a process's CPU seconds on two threads bound its
+wall-clock time on an idle 2-core machine from above).
 """
 
 from __future__ import annotations
@@ -36,7 +54,7 @@ from sphere3d import render_gradient
 SEEDS = {16: (1, 2, 3, 4), 64: (1, 2, 3, 4), 256: (1, 2)}
 SPPS = tuple(SEEDS)
 BIAS_SPP = 256
-METHODS = ("naive", "finite_difference", "reparam")
+METHODS = ("naive", "finite_difference", "reparam", "boundary")
 MITSUBA = {
     "hard_shadow": {16: 0.73, 64: 0.43, 256: 0.27, "bias": 0.21},
     "hard_shadow_cube": {16: 0.83, 64: 0.48, 256: 0.32, "bias": 0.25},
@@ -112,5 +130,6 @@ def run() -> list[Row]:
                         f"Mitsuba {target[spp]}",
                     )
                 )
-            rows.append(Row("hard_shadow", f"{case}: 64 spp", result["seconds"], "s", "issue target <= 0.45"))
+            note = "issue target <= 0.45" if method == "reparam" else ""
+            rows.append(Row("hard_shadow", f"{case}: 64 spp", result["seconds"], "s", note))
     return rows

@@ -93,7 +93,8 @@ def render_gradient(
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
         see :func:`sphere3d.methods.reparam.reparam`); ``rate``
-        (boundary: edge points per pixel of projected edge length and sample).
+        (boundary: edge points per pixel of projected edge length and sample) and
+        ``secondary`` (boundary: edge samples per shading point).
 
     Returns
     -------

@@ -20,17 +20,23 @@ the Reynolds transport theorem
     dE/dθ = ∫ ∂f/∂θ dω  +  Σ_edges ∫_C [f(ω⁻) - f(ω⁺)] (m·ω̇) dℓ,
 
 ω∓ = ω ∓ δ m just beside the arc, dℓ its arc length (radians). The first term is the
-``naive`` estimator. For the second, each shading point draws **one** edge among its
-silhouette edges with probability ∝ the angle γ_e it subtends above the horizon (the
-arc clipped to n·(P - x) > 0, a linear condition in s), then a point uniform in angle
-on that arc: density ``1/Γ`` per radian, Γ = Σ_e γ_e, and the estimate is
-``Γ [f(ω⁻) - f(ω⁺)] (m·ω̇)``. Under a black sky f vanishes outside the emitters'
-directions on both sides of every arc, so the arcs are first clipped to the cone around
-the emitters' bounding sphere (:func:`_emitter_cone`): the same expectation, 20-27 % less
-standard error at the shadow scene's penumbra points. The 3D point P behind ω on the edge is found in the
-plane of the arc; ω̇ comes from forward AD of ``normalize(P(θ) - x(θ))`` with the
-edge's Dual vertices. Both sides are traced (two rays per shading point); L_i along a
-ray is deterministic, so the jump is exact up to the offset δ = :data:`EPS_ANGLE`.
+``naive`` estimator. For the second, only the silhouette edges that can contribute are
+candidates (:func:`_pairs`): an edge that does not move, seen from a point that does not
+move, has ``m·ω̇ = 0`` exactly (with ``occluder.translate.x`` the emitter's own border, which
+drew 91 % of the samples on ``hard_shadow`` before this cull); and under a black sky f
+vanishes outside the emitters' directions on both sides of every arc, so an arc counts only
+where it crosses an emitter's spherical image: each arc above the horizon (n·(P - x) > 0, a
+linear condition in s) is clipped to the image of every emitter triangle
+(:func:`_clip_to_emitters`; emitters' own edges, whose arcs are the images' borders, are not
+clipped). Each shading point draws k sub-arcs among its candidates' with probability ∝ their
+angle (Γ = Σ angles), then a point uniform in angle on each: density ``c/Γ`` per radian,
+c the number of sub-arcs of that arc holding the point (1 unless emitters overlap as seen
+from x), and the estimate is the mean over the k draws of ``(Γ/c) [f(ω⁻) - f(ω⁺)] (m·ω̇)``.
+On ``hard_shadow`` 99.8 % of the drawn points have a nonzero jump, against 10 % with the
+arcs clipped to a cone around the emitters' bounding sphere and no cull. The 3D point P
+behind ω on the edge is found in the plane of the arc; ω̇ comes from forward AD of
+``normalize(P(θ) - x(θ))`` with the edge's Dual vertices. Both sides are traced (two rays
+per draw); L_i along a ray is deterministic, so the jump is exact up to the offset δ = :data:`EPS_ANGLE`.
 
 Vectorized over shading points × edges, in blocks of at most :data:`MAX_PAIRS`.
 """
@@ -44,13 +50,15 @@ from sphere3d.edges import Edges
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["EPS_ANGLE", "MAX_PAIRS", "shading_edge_term"]
+__all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "MAX_PAIRS", "shading_edge_term"]
 
 EPS_ANGLE = 1e-5
 """Angle (radians) between the sampled edge direction and the two rays traced beside it."""
 MAX_PAIRS = 1 << 16
 """Shading points × edges of one block of the silhouette test (its arrays stay in cache: 5 × faster
 than blocks of 2^20 on 65536 points × 1925 edges)."""
+MAX_EMITTER_TRIANGLES = 64
+"""Emitter triangles up to which the arcs are clipped to the emitters' images (cost: pairs × this)."""
 
 
 def _incident(state, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -66,35 +74,47 @@ def _incident(state, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
     return out
 
 
-def _emitter_cone(state, o: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per point, the cone (unit axis, cos of the half-angle) holding every emitter, or None.
+def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The emitter triangles (T, 3, 3) at θ0, their bounding sphere's centre and radius, or None.
 
     Only when the sky is black (and not the parameter): then f is 0 outside the emitters'
-    directions on both sides of any edge, so the arcs can be restricted to the cone around the
-    emitters' bounding sphere without bias. None (no restriction) when the point lies within
-    twice that sphere's radius, or there is no emitter.
+    directions on both sides of any edge, so the arcs can be restricted to the emitters'
+    spherical images without changing any expectation (:func:`_pairs`, :func:`_clip_to_emitters`).
+    None (no restriction) otherwise or without emitters.
     """
     sky = float(detach(state.sky)) != 0.0 or state.param == "sky.emission"
     if sky or len(state.emitters) == 0:
         return None
-    vertices = np.asarray(detach(state.triangles))[state.emitters].reshape(-1, 3)
-    centre = vertices.mean(axis=0)
-    radius = 1.001 * float(np.max(norm(vertices - centre)))  # margin: the side rays lie 1e-5 off the arc
-    to = centre - o
-    dist = norm(to)
-    far = dist > 2.0 * radius
-    if not far.all():
-        return None
-    return to / dist[:, None], np.sqrt(1.0 - (radius / dist) ** 2)
+    triangles = np.asarray(detach(state.triangles))[state.emitters]
+    centre = triangles.reshape(-1, 3).mean(axis=0)
+    radius = 1.001 * float(np.max(norm(triangles.reshape(-1, 3) - centre)))  # margin for rounding
+    return triangles, centre, radius
 
 
-def _pairs(edges: Edges, o: np.ndarray, n0: np.ndarray, cone) -> tuple[np.ndarray, ...]:
-    """The (point, edge) pairs where the edge is a silhouette seen from the point and rises above its
-    horizon: their rows, edges, clipped ends (relative to ``o``), parameters s0 and s1, and the arc
-    of each to sample, its start angle and length γ (inside ``cone``, per point, if given).
+def _reach(edges: Edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, bounds) -> np.ndarray:
+    """Whether the cone from o around each edge's bounding sphere meets the cone around the
+    emitters' bounding sphere (pairs whose arcs cannot meet an emitter's image: False)."""
+    _, centre, radius = bounds
+    mid = 0.5 * (edges.a + edges.b)[cols] - o[rows]
+    half_edge = 0.5 * norm(edges.b - edges.a)[cols]
+    to = centre - o[rows]
+    d_mid, d_to = norm(mid), norm(to)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = dot(mid, to) / (d_mid * d_to)
+        spread = np.arcsin(np.minimum(1.0, half_edge / d_mid)) + np.arcsin(np.minimum(1.0, radius / d_to))
+    return (d_mid <= half_edge) | (d_to <= radius) | (np.arccos(np.clip(cos, -1.0, 1.0)) <= spread)
+
+
+def _pairs(edges: Edges, o, n0, moving, point_moves, bounds) -> tuple[np.ndarray, ...]:
+    """The (point, edge) pairs where the edge is a silhouette seen from the point, moves or is seen
+    from a moving point, may meet the emitters (under a black sky) and rises above the point's
+    horizon: their rows, edges, clipped ends (relative to ``o``), parameters s0 and s1, and the
+    arc angle γ.
 
     The silhouette test is two matrix products per block of points; everything else is computed
-    on the pairs that pass it only (a few per cent of a fine mesh's edges).
+    on the pairs that pass it only (a few per cent of a fine mesh's edges). A pair whose edge and
+    point are both fixed has ``m·ω̇ = 0`` exactly, and a pair whose arc cannot meet an emitter's
+    image has ``f = 0`` on both sides: culled here, so they are never drawn.
     """
     rows, cols = [], []
     step = max(1, MAX_PAIRS // len(edges))
@@ -105,10 +125,14 @@ def _pairs(edges: Edges, o: np.ndarray, n0: np.ndarray, cone) -> tuple[np.ndarra
         s1, s2 = blk @ n1, blk @ n2
         s1 -= c1  # n₁·(o - a)
         s2 -= c2
-        r, c = np.nonzero(edges.always | ((s1 > 0.0) != (s2 > 0.0)))
+        live = (edges.always | ((s1 > 0.0) != (s2 > 0.0))) & (moving | point_moves[lo : lo + step, None])
+        r, c = np.nonzero(live)
         rows.append(r + lo)
         cols.append(c)
     rows, cols = np.concatenate(rows), np.concatenate(cols)
+    if bounds is not None:
+        keep = _reach(edges, o, rows, cols, bounds)
+        rows, cols = rows[keep], cols[keep]
     qa_all, e = edges.a[cols] - o[rows], (edges.b - edges.a)[cols]
     ha = dot(qa_all, n0[rows])
     hb = ha + dot(e, n0[rows])
@@ -120,10 +144,7 @@ def _pairs(edges: Edges, o: np.ndarray, n0: np.ndarray, cone) -> tuple[np.ndarra
     qa = qa_all + s0[:, None] * e
     qb = qa_all + s1[:, None] * e
     gamma = np.where(s1 > s0, np.arctan2(norm(cross(qa, qb)), dot(qa, qb)), 0.0)
-    start = np.zeros_like(gamma)
-    if cone is not None:  # keep the part of each arc inside the emitters' cone seen from its point
-        start, gamma = _clip_to_cone(qa, qb, gamma, cone[0][rows], cone[1][rows])
-    return rows, cols, qa, qb, s0, s1, start, gamma
+    return rows, cols, qa, qb, s0, s1, gamma
 
 
 def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -133,38 +154,77 @@ def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return wa, perp / np.where(norm(perp) > 0.0, norm(perp), 1.0)[:, None]
 
 
-def _clip_to_cone(qa, qb, gamma, axis, cos_half) -> tuple[np.ndarray, np.ndarray]:
-    """The sub-arc [start, start + length] of [0, γ] inside the cone (unit ``axis``, ``cos_half``).
+def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np.ndarray]:
+    """Per arc and emitter triangle, the sub-arc [lo, hi] of [0, γ] inside the triangle's spherical
+    image seen from the arc's point ``o[rows]`` (empty, hi <= lo, where it sees the back): (P, T).
 
-    On the arc, ``w(φ)·axis = R cos(φ - φ₀)``: inside for |φ - φ₀| <= acos(cos_half / R)
-    (a cone of half-angle below π/2 meets a great circle in one arc).
+    Seen from o, triangle L₀L₁L₂ (q_i = L_i - o) covers the directions with
+    ``w·(q_{i+1} × q_i) >= 0`` for i = 0, 1, 2 when o is in front of it
+    (``det(q₀, q₁, q₂) < 0``, the side ``face_normals`` points to). On the arc,
+    ``w(φ)·c = R cos(φ - φ_c)``: each condition keeps the half-circle
+    ``|φ - φ_c| <= π/2``, and as γ <= π the arc meets it in one interval, found with
+    φ_c taken in (-π/2, 3π/2] (for φ_c <= -π/2 the half-circle around φ_c meets
+    [0, π] in {0} at most, the one around φ_c + 2π in the rest). The vectors c depend on
+    the point and the triangle only: computed once per point.
     """
     wa, perp = _arc_frame(qa, qb)
-    a, b = dot(wa, axis), dot(perp, axis)
-    r = np.hypot(a, b)
-    phi0 = np.arctan2(b, a)
-    half = np.arccos(np.clip(cos_half / np.where(r > 0.0, r, 1.0), -1.0, 1.0))
-    lo = np.clip(phi0 - half, 0.0, gamma)
-    hi = np.clip(phi0 + half, 0.0, gamma)
-    length = np.where(r > cos_half, hi - lo, 0.0)
-    return lo, length
+    q = triangles[None] - o[:, None, None, :]  # (points, T, 3 vertices, 3)
+    sides = np.cross(q[:, :, [1, 2, 0]], q)  # c_i = q_{i+1} × q_i
+    front = np.einsum("ptk,ptk->pt", q[:, :, 0], sides[:, :, 1]) > 0.0  # q₀·(q₂ × q₁) = -det
+    lo = np.zeros((rows.size, len(triangles)))
+    hi = np.repeat(gamma[:, None], len(triangles), axis=1)
+    for t in range(len(triangles)):  # a few emitter triangles (at most MAX_EMITTER_TRIANGLES)
+        for i in range(3):
+            c = sides[rows, t, i]
+            phi_c = np.arctan2(dot(perp, c), dot(wa, c))
+            phi_c = np.where(phi_c <= -0.5 * np.pi, phi_c + 2.0 * np.pi, phi_c)
+            lo[:, t] = np.maximum(lo[:, t], phi_c - 0.5 * np.pi)
+            hi[:, t] = np.minimum(hi[:, t], phi_c + 0.5 * np.pi)
+    return lo, np.where(front[rows], hi, lo)
 
 
-def _choose(edges: Edges, o: np.ndarray, n0: np.ndarray, u: np.ndarray, cone) -> tuple[np.ndarray, ...]:
-    """The points with a silhouette edge above the horizon, and for each: one such edge drawn ∝ its
-    angle γ, its clipped ends, s0, s1, γ, and Γ = Σ γ."""
+def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np.ndarray, ...]:
+    """The draws (flat index ``i k + c`` for column c of ``u``, shape (m, k)) of the points with a
+    moving silhouette edge above the horizon, and for each: one sub-arc of such an edge drawn ∝ its
+    angle, its edge, its arc's ends and s0, s1, the sub-arc's start and angle, the ends ``lo``,
+    ``hi`` of all sub-arcs of its arc (draws, T), and the point's Γ = Σ angles.
+
+    A sub-arc is the part of an arc inside one emitter triangle's image under a black sky with at
+    most :data:`MAX_EMITTER_TRIANGLES` of them, except on the emitters' own edges (whose arcs lie
+    on their images' borders: ``unclipped``); otherwise the whole arc above the horizon.
+    """
     m = len(o)
-    rows, cols, qa, qb, s0, s1, start, gamma = _pairs(edges, o, n0, cone)
-    if rows.size == 0:
-        return (np.zeros(0, dtype=np.int64),) * 2 + (np.zeros((0, 3)),) * 2 + (np.zeros(0),) * 5
-    total = np.bincount(rows, weights=gamma, minlength=m)
-    cdf = np.cumsum(gamma)
-    first = np.concatenate([[0.0], cdf])[np.searchsorted(rows, np.arange(m))]  # pairs are sorted by row
-    # the pair whose cdf interval holds first + u Γ (zero-angle pairs are never chosen)
-    j = np.minimum(np.searchsorted(cdf, first + u * total, side="right"), len(cdf) - 1)
-    live = np.flatnonzero((total > 0.0) & (rows[j] == np.arange(m)))
+    rows, cols, qa, qb, s0, s1, gamma = _pairs(edges, o, n0, moving, point_moves, bounds)
+    lo, hi = np.zeros((rows.size, 1)), gamma[:, None]
+    if bounds is not None and len(bounds[0]) <= MAX_EMITTER_TRIANGLES:
+        clip = ~unclipped[cols]
+        clip_lo, clip_hi = _clip_to_emitters(qa[clip], qb[clip], gamma[clip], o, rows[clip], bounds[0])
+        lo, hi = np.zeros((rows.size, len(bounds[0]))), np.zeros((rows.size, len(bounds[0])))
+        lo[clip], hi[clip] = clip_lo, clip_hi
+        hi[~clip, 0] = gamma[~clip]
+    pair, sub = np.nonzero(hi > lo)  # sub-arcs, sorted by pair, hence by row
+    angle = (hi - lo)[pair, sub]
+    owner = rows[pair]
+    if pair.size == 0:
+        return (
+            (np.zeros(0, dtype=np.int64),) * 2
+            + (np.zeros((0, 3)),) * 2
+            + (np.zeros(0),) * 4
+            + (np.zeros((0, lo.shape[1])),) * 2
+            + (np.zeros(0),)
+        )
+    total = np.bincount(owner, weights=angle, minlength=m)
+    cdf = np.cumsum(angle)
+    first = np.concatenate([[0.0], cdf])[np.searchsorted(owner, np.arange(m))]
+    # per draw (point i, column c: flat index i k + c), the sub-arc whose cdf interval holds
+    # first + u Γ (zero-angle sub-arcs are never chosen)
+    target = (first[:, None] + u * total[:, None]).ravel()
+    j = np.minimum(np.searchsorted(cdf, target, side="right"), len(cdf) - 1)
+    row = np.repeat(np.arange(m), u.shape[1])
+    live = np.flatnonzero((total[row] > 0.0) & (owner[j] == row))
     j = j[live]
-    return live, cols[j], qa[j], qb[j], s0[j], s1[j], start[j], gamma[j], total[live]
+    p = pair[j]
+    return live, cols[p], qa[p], qb[p], s0[p], s1[p], lo[p, sub[j]], angle[j], lo[p], hi[p], total[row[live]]
 
 
 def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
@@ -176,13 +236,13 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
         Shading points of a state with θ as a Dual.
     edges : Edges
         The scene's edges at θ0.
-    u : ndarray, shape (m, 2)
-        Uniforms: the edge, the point on its arc.
+    u : ndarray, shape (m, 2, k)
+        Uniforms of k edge samples per point: the sub-arc, the point on it.
 
     Returns
     -------
     ndarray, shape (m,)
-        The tangent to add to the points' irradiance estimates.
+        The tangent to add to the points' irradiance estimates: the mean of the k samples'.
     """
     state = shading.state
     m = len(shading)
@@ -191,12 +251,23 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
         return out
     o = shading.origin
     n0 = np.asarray(detach(shading.n), dtype=np.float64)
-    live, k, qa, qb, s0, s1, start, gamma, total = _choose(edges, o, n0, u[:, 0], _emitter_cone(state, o))
-    if live.size == 0:
+    a, b = edges.endpoints(state.triangles)
+    moving = np.any(tangent(a) != 0.0, axis=-1) | np.any(tangent(b) != 0.0, axis=-1)
+    point_moves = np.any(tangent(shading.x) != 0.0, axis=-1)
+    unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
+    per_point = u.shape[2]
+    draw, k, qa, qb, s0, s1, start, angle, lo, hi, total = _choose(
+        edges, o, n0, u[:, 0], moving, point_moves, _emitter_bounds(state), unclipped
+    )
+    if draw.size == 0:
         return out
-    # a direction uniform in angle on the arc from qa to qb
+    live = draw // per_point  # the draws' shading points
+    # a direction uniform in angle on the drawn sub-arc of the arc from qa to qb
     wa, perp = _arc_frame(qa, qb)
-    phi = start + u[live, 1] * gamma
+    phi = start + u[:, 1].ravel()[draw] * angle
+    # density of φ: (number of the arc's sub-arcs holding it) / Γ; sub-arcs of two emitter
+    # triangles overlap where one emitter is seen behind another, else they only touch
+    overlap = np.maximum(np.sum((lo <= phi[:, None]) & (phi[:, None] <= hi) & (hi > lo), axis=1), 1)
     w = np.cos(phi)[:, None] * wa + np.sin(phi)[:, None] * perp
     normal = cross(qa, qb)
     normal = normal / norm(normal)[:, None]  # m: the arc's normal on S²
@@ -204,7 +275,6 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     den = dot(cross(qb - qa, w), normal)  # 0 only for an arc of zero angle, never drawn (rounding aside)
     t = -dot(cross(qa, w), normal) / np.where(den != 0.0, den, 1.0)
     s = s0 + np.clip(t, 0.0, 1.0) * (s1 - s0)
-    a, b = edges.endpoints(state.triangles)
     point = a[k] + s[:, None] * (b[k] - a[k])
     x = shading.x[live]
     # from the ray origin o = x + ε n (value), moving with x (tangent)
@@ -216,6 +286,5 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     f = _incident(state, np.concatenate([o[live], o[live]]), side)
     jump = f[: live.size] - f[live.size :]
     cos = np.maximum(dot(n0[live], w), 0.0)
-    # Reynolds on S²: the side ω⁻ grows into ω⁺ at m·ω̇, density 1/Γ per radian of arc
-    out[live] = total * jump * cos * speed
-    return out
+    # Reynolds on S²: the side ω⁻ grows into ω⁺ at m·ω̇, density overlap/Γ per radian of arc
+    return np.bincount(live, weights=total / overlap * jump * cos * speed, minlength=m) / per_point

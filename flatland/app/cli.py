@@ -81,14 +81,18 @@ class Package:
     reference_factor : int
         Sample multiplier of the demo's reference.
     reference_options : tuple of (name, value) pairs
-        Options of the reference method (e.g. a larger finite-difference step ``h``,
+        Options of the demo's reference method (e.g. a larger finite-difference step ``h``,
         trading an O(h²) bias for less variance).
     demo_methods : tuple of str, optional
         The panel's gradient methods, in order; None: those of
         :data:`~flatland.app.commands.DEMO_METHODS` the package has.
     reference_method : str, optional
-        The method of the demo's reference and a study's default reference; None:
-        ``boundary`` if the package has it, else ``finite_difference``.
+        A study's default reference method, and the demo's unless ``demo_reference`` is
+        given; None: ``boundary`` if the package has it, else ``finite_difference``.
+    demo_reference : str, optional
+        The method of the demo's reference when it differs from a study's: a study's
+        reference judges small pixel integrals at many samples, where a method that is
+        cheap on a whole film can be the costly one (None: as ``reference_method``).
     demo_sections : tuple of callables
         Extra text sections printed by ``demo``, each called with the parsed arguments.
     studies : mapping
@@ -125,6 +129,7 @@ class Package:
     reference_options: tuple[tuple[str, Any], ...] = ()
     demo_methods: tuple[str, ...] | None = None
     reference_method: str | None = None
+    demo_reference: str | None = None
     demo_sections: tuple[Callable[[argparse.Namespace], str], ...] = ()
     studies: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     integrals: Mapping[str, Any] | None = None

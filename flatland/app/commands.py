@@ -132,8 +132,10 @@ def verb_demo(pkg: Package, args: argparse.Namespace) -> int:
     scene = _load_scene(pkg, pkg.demo_scene)
     table = pkg.methods
     methods = list(pkg.demo_methods or [m for m in DEMO_METHODS if m in table.names])
-    reference_method = pkg.reference_method or (
-        "boundary" if "boundary" in table.names else "finite_difference"
+    reference_method = (
+        pkg.demo_reference
+        or pkg.reference_method
+        or ("boundary" if "boundary" in table.names else "finite_difference")
     )
     out = Path(args.out)
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from flatland.core.contract import Option
 from flatland.core.dual import Dual, variable
-from flatland.core.validate import check_positive
+from flatland.core.validate import check_int, check_positive
 from sphere3d.camera_edges import camera_edge_term
 from sphere3d.edges import Edges, mesh_edges
 from sphere3d.integrator import Identity, Shading
@@ -25,7 +25,7 @@ from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.shading_edges import shading_edge_term
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
-__all__ = ["BoundaryTransforms", "boundary"]
+__all__ = ["RATE", "SECONDARY", "BoundaryTransforms", "boundary"]
 
 
 @dataclass(frozen=True)
@@ -36,23 +36,40 @@ class BoundaryTransforms(Identity):
     ----------
     edges : Edges
         The scene's edges at θ0 (:func:`~sphere3d.edges.mesh_edges`).
+    per_point : int
+        Edge samples per shading point (the method's ``secondary`` option).
     """
 
     edges: Edges
+    per_point: int = 1
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The identity's estimate plus, as a tangent on a zero value, one edge sample of the boundary
-        term of E (:func:`~sphere3d.shading_edges.shading_edge_term`; uniforms ``"boundary.edge"``)."""
+        """The identity's estimate plus, as a tangent on a zero value, the mean of ``per_point`` edge
+        samples of the boundary term of E (:func:`~sphere3d.shading_edges.shading_edge_term`;
+        uniforms ``"boundary.edge"``)."""
         estimate = super().bsdf(shading, mu, pdf)
         if not shading.state.dual:
             return estimate
-        u = shading.draws.uniforms("boundary.edge", 2)
+        u = shading.draws.uniforms("boundary.edge", 2, self.per_point)
         term = shading_edge_term(shading, self.edges, u)
         return estimate + Dual(np.zeros(len(shading)), term)  # the value is untouched (+ 0.0)
 
 
-@GRADIENT_METHODS.register("boundary", Option("rate", 1.0, check_positive))
-def boundary(task: ImageTask | PointTask, rate: float) -> Tally:
+RATE = 2.0
+"""Default film edge points per pixel of projected edge length and sample."""
+SECONDARY = 4
+"""Default edge samples per shading point. With RATE, measured on ``hard_shadow`` at 48 spp
+(4 seeds, CPU time of both threads): (MSE - reference variance) × CPU seconds 0.0115, against
+0.0258 at (1.0, 1): rate 1 → 2 halves the camera term's variance (0.0024 → 0.0011 per pixel,
+averaged over the film), 1 → 4 draws quarter the shading term's (0.0076 → 0.0018), each for
+5-15 % more time (the silhouette test, shared by the draws, dominates); 2 or 8 draws, rate 3
+or 4 are within the noise of this choice."""
+
+
+@GRADIENT_METHODS.register(
+    "boundary", Option("rate", RATE, check_positive), Option("secondary", SECONDARY, check_int)
+)
+def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     """Naive interior term plus the boundary terms of the pixel and shading integrals (edge sampling).
 
     Every integral the renderer differentiates has the form ``∫ f(θ, y) dy`` with f
@@ -67,19 +84,20 @@ def boundary(task: ImageTask | PointTask, rate: float) -> Tally:
     - **pixel integrals** (:mod:`sphere3d.camera_edges`): the film images of silhouette,
       boundary and crease edges (of flat-shaded shapes), ``rate · spp/batches`` points per pixel of projected
       edge length per batch, each splatted to the pixels whose filter covers it;
-    - **shading integrals** (:mod:`sphere3d.shading_edges`): at every shading point one
-      silhouette edge seen from it (occluders' outlines, emitters' borders), drawn ∝
-      its subtended angle, and one point on its arc.
+    - **shading integrals** (:mod:`sphere3d.shading_edges`): at every shading point
+      ``secondary`` draws among the moving silhouette edges seen from it (occluders'
+      outlines, emitters' borders), each a part of an edge's arc inside an emitter's image
+      (under a black sky) drawn ∝ its angle, and one point on it.
 
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
     only discontinuities (see :mod:`sphere3d.edges` for what is not handled: partly
     overlapping edges, surfaces cutting through each other), up to the O(δ) offsets
     of the rays traced beside the edges. Cost: two rays per edge point on the film,
-    and per shading point two rays plus a silhouette test against every edge.
+    and per shading point ``2 secondary`` rays plus a silhouette test against every edge.
     """
     plain = task.scene.state(task.param, 0.0, task.tracer)
     edges = mesh_edges(plain.triangles, plain.shape_of)
-    tally = task.evaluate(variable(0.0), BoundaryTransforms(edges))
+    tally = task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary))
     if not isinstance(task, ImageTask):
         return tally
     state = task.scene.state(task.param, variable(0.0), task.tracer)
