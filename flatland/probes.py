@@ -35,6 +35,12 @@ Three refinements, each measured to matter in flatland and each keeping the choi
 - *Bisection* (``refine`` steps): the bracket between that hit and its neighbour is
   halved by tracing its midpoint, moving the followed point toward the
   discontinuity; each step costs one ray per sample that has a bracket.
+- *A primitive between two probes* (film only, :func:`film_gap_probe`): a segment or
+  circle whose whole image lies between two neighbouring probes (narrower than their
+  spacing, 0.57 px at the defaults) is seen by none, and the identity would drop both
+  its edges' terms (measured: 1 - width / spacing of them, -83 % at 0.1 px). Where the
+  probes chose nothing, one more probe is traced at the middle of such a primitive's
+  image (the one nearest the kernel centre) and the choice is made again with it.
 
 The chosen point is *attached* (:func:`flatland.tracing.attached_points`): it moves
 with its shape, and the intersection of two tangent lines is recomputed from the
@@ -54,10 +60,11 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core.dual import detach
 from flatland.state import SceneState
 from flatland.tracing import attached_points, zeros
 
-__all__ = ["PARALLEL", "Choice", "select_points"]
+__all__ = ["PARALLEL", "Choice", "film_gap_probe", "select_points"]
 
 PARALLEL = 0.99
 """|n0·n1| above which two tangent lines count as parallel (Loubet et al. 2019, Sec. 4.3)."""
@@ -198,3 +205,55 @@ def select_points(
         # attached corner: its derivative follows both moving tangent lines
         point[corner] = p0 + (_dot(p1 - p0, n1) / _dot(e0, n1))[:, None] * e0
     return Choice(point, code)
+
+
+def film_gap_probe(geom: SceneState, probes: np.ndarray) -> np.ndarray:
+    """Per row, a film coordinate inside a primitive's image that lies wholly between two probes.
+
+    Film coordinates (θ-free, from the detached ``geom``) of every segment's endpoints and
+    every circle's two tangent directions give each primitive's image [lo, hi] on the
+    film (primitives reaching behind the camera are skipped: their image is not thin).
+    A row's candidate overlaps the probes' span [probes[0], probes[-1]] and contains no
+    probe; the one whose middle is nearest the span's centre is returned, its middle
+    clipped to the span. NaN where a row has none.
+
+    Parameters
+    ----------
+    geom : SceneState
+        The scene (values only).
+    probes : ndarray, shape (n, P)
+        The rows' probe film coordinates, in film order.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    o, f, r = (np.asarray(detach(v), dtype=np.float64) for v in (geom.cam_o, geom.cam_f, geom.cam_r))
+    ends = [np.asarray(detach(geom.seg_a)) - o, np.asarray(detach(geom.seg_b)) - o]
+    c = np.asarray(detach(geom.circ_c)) - o
+    dist = np.hypot(c[:, 0], c[:, 1])
+    radius = np.asarray(detach(geom.circ_r))
+    outside = dist > radius
+    sin_a = np.where(outside, radius / np.where(outside, dist, 1.0), 0.0)
+    cos_a = np.sqrt(1.0 - sin_a**2)
+    u = c / np.where(dist > 0.0, dist, 1.0)[:, None]
+    normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    # a circle's image is bounded by its two tangent directions, cos α u ± sin α n (sin α = r / |c - o|)
+    tangents = [cos_a[:, None] * u + side * sin_a[:, None] * normal for side in (1.0, -1.0)]
+    a = np.concatenate([ends[0], tangents[0]])
+    b = np.concatenate([ends[1], tangents[1]])
+    depth_a, depth_b = a @ f, b @ f
+    ahead = (depth_a > 0.0) & (depth_b > 0.0) & np.concatenate([np.ones(len(ends[0]), bool), outside])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (a @ r) / depth_a, (b @ r) / depth_b
+    lo, hi = np.minimum(ta, tb)[ahead], np.maximum(ta, tb)[ahead]
+    first, last = probes[:, :1], probes[:, -1:]
+    # (n, J): the image overlaps the span and no probe falls inside it
+    seen = np.any((probes[:, :, None] >= lo) & (probes[:, :, None] <= hi), axis=1)
+    gap = (hi > first) & (lo < last) & ~seen
+    mid = 0.5 * (np.maximum(lo, first) + np.minimum(hi, last))
+    dist_mid = np.where(gap, np.abs(mid - 0.5 * (first + last)), np.inf)
+    if not lo.size:
+        return np.full(len(probes), np.nan)
+    rows, best = np.arange(len(probes)), np.argmin(dist_mid, axis=1)
+    return np.where(np.isfinite(dist_mid[rows, best]), mid[rows, best], np.nan)
