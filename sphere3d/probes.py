@@ -232,13 +232,17 @@ def select_points(
     mv = cross(d0, d1)
     m_len = norm(mv)
     mv = mv / np.where(m_len > 0.0, m_len, 1.0)[:, None]
-    n1xm = cross(n1, mv)
-    det = dot(n0, n1xm)
-    ok = (np.abs(detach(det)) > DEGENERATE) & (m_len > 1e-12)
-    safe_det = np.where(ok, det, 1.0)
-    crossing = (dot(n0, p0)[:, None] * n1xm + dot(n1, p1)[:, None] * cross(mv, n0)
-                + dot(mv, o)[:, None] * cross(n0, n1)) / safe_det[:, None]  # fmt: skip
-    ok = ok & (dot(detach(crossing) - ov, d0 + d1) > 0.0)
+
+    def crossing_of(n0, n1, p0, p1, o, mv):  # the same expression on values (all rows) and Duals (used rows)
+        n1xm = cross(n1, mv)
+        det = dot(n0, n1xm)
+        safe_det = np.where(np.abs(detach(det)) > DEGENERATE, det, 1.0)
+        return (dot(n0, p0)[:, None] * n1xm + dot(n1, p1)[:, None] * cross(mv, n0)
+                + dot(mv, o)[:, None] * cross(n0, n1)) / safe_det[:, None], det  # fmt: skip
+
+    crossing, det = crossing_of(n0v, n1v, p0v, p1v, ov, mv)
+    ok = (np.abs(det) > DEGENERATE) & (m_len > 1e-12)
+    ok = ok & (dot(crossing - ov, d0 + d1) > 0.0)
 
     both = hit0 & hit1
     use_cross = both & ~(occ0 ^ occ1) & ~parallel & ok
@@ -257,7 +261,10 @@ def select_points(
         moved = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
         p0[single] = np.where(first[:, None], moved, p0[single])
         p1[single] = np.where(first[:, None], p1[single], moved)
-    point = np.where(use_cross[:, None], crossing, np.where(use_p1[:, None], p1, p0))
+    point = np.where(use_p1[:, None], p1, p0)
+    c = np.flatnonzero(use_cross)
+    if c.size:  # with tangents only where the crossing is used (row by row the same numbers)
+        point[c] = crossing_of(n0[c], n1[c], p0[c], p1[c], o[c], mv[c])[0]
     return point, hit0 | hit1
 
 
