@@ -23,7 +23,7 @@ from flatland.core.rng import Draws
 from flatland.integrator import Context
 from flatland.lights import Lights
 from flatland.methods.reparam import ReparamTransforms, default_kappa_film
-from flatland.sampling import filter_value
+from flatland.sampling import filter_value, sample_von_mises
 from flatland.scene import load_scene
 from flatland.state import build_state
 
@@ -105,3 +105,42 @@ def test02_a_thin_sticks_edge_terms_are_kept():
         var += np.sum(g.derivative_stderr**2)
     lost, stderr = 1.0 - num / den, math.sqrt(var) / den
     assert abs(lost) <= stats.norm.ppf(1.0 - 0.5 * ALPHA) * stderr
+
+
+def test03_every_shading_kernel_whose_probes_span_a_thin_stick_follows_it():
+    """A stick seen under 0.02 rad from a shading point, below the probes' spacing 2 / √κ = 0.063 rad:
+    every direction sample whose probe span [ω - 3σ, ω + 3σ] (σ = 1 / √κ) overlaps the stick's image
+    is translated like the stick (a nonzero angle tangent, ``flatland.probes.angle_gap_probe``)."""
+    x0, height, angle = 0.3, 1.0, 0.02
+    w = angle * (1.0 + x0**2)  # the stick's length for that angle at x0 (dφ/dx = 1 / (1 + x²) at height 1)
+    scene = {
+        "name": "thin",
+        "camera": {
+            "position": [0.0, -3.0],
+            "direction": [0.0, 1.0],
+            "fov": 0.5,
+            "pixels": 8,
+            "filter": "tent",
+        },
+        "sky": 1.0,
+        "shapes": [
+            {"name": "stick", "type": "segment", "points": [[x0 - w / 2, height], [x0 + w / 2, height]]}
+        ],
+        "parameters": [PARAM],
+    }
+    sc = load_scene(scene)
+    state = build_state(sc, PARAM, variable(0.0))
+    state0 = state.detached()
+    kappa = 1000.0
+    transforms = ReparamTransforms(kappa, 1.0, 4, 3.0, 2, False)
+    n = 20000
+    phi = np.random.default_rng(2).uniform(1.2, 1.45, n)  # around the stick's direction, atan2(1, 0.3) = 1.28
+    draws = Draws.of(6, np.arange(n))
+    ctx = Context(state, state0, Lights.of(state0), transforms)
+    members = transforms.directions(ctx, np.zeros((n, 2)), np.full(n, -1), phi, draws)
+    centre = sample_von_mises(draws.uniforms("kernel.directions"), phi, kappa)  # the centres ω it drew
+    sigma = 1.0 / math.sqrt(kappa)
+    ends = np.arctan2(height, np.array([x0 + w / 2, x0 - w / 2]))
+    overlaps = (centre + 3.0 * sigma > ends[0]) & (centre - 3.0 * sigma < ends[1])
+    assert overlaps.sum() > 1000
+    assert np.all(np.asarray(tangent(members.points))[overlaps, 0] != 0.0)
