@@ -220,9 +220,10 @@ def select_points(
     t1 = state.triangles[np.maximum(h1.triangle, 0)]
     p0 = attached_points(t0, h0.u, h0.v)
     p1 = attached_points(t1, h1.u, h1.v)
-    n0, n1 = face_normals(t0), face_normals(t1)
+    # the normals' values for every row; their tangents only where the crossing is used (below)
+    n0v, n1v = face_normals(detach(t0)), face_normals(detach(t1))
     o = origin + 0.0 * p0  # broadcast to (m, 3)
-    p0v, p1v, n0v, n1v, ov = detach(p0), detach(p1), detach(n0), detach(n1), detach(o)
+    p0v, p1v, ov = detach(p0), detach(p1), detach(o)
     # tangent plane k separates the other hit from the origin: shape k occludes the other   (Sec. 4.3)
     occ0 = dot(n0v, p1v - p0v) * dot(n0v, ov - p0v) < 0.0
     occ1 = dot(n1v, p0v - p1v) * dot(n1v, ov - p1v) < 0.0
@@ -264,7 +265,7 @@ def select_points(
     point = np.where(use_p1[:, None], p1, p0)
     c = np.flatnonzero(use_cross)
     if c.size:  # with tangents only where the crossing is used (row by row the same numbers)
-        point[c] = crossing_of(n0[c], n1[c], p0[c], p1[c], o[c], mv[c])[0]
+        point[c] = crossing_of(face_normals(t0[c]), face_normals(t1[c]), p0[c], p1[c], o[c], mv[c])[0]
     return point, hit0 | hit1
 
 
