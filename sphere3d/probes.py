@@ -130,7 +130,7 @@ def pair_index(shape: np.ndarray) -> np.ndarray:
 def _towards(point: Any, origin: Any, found: np.ndarray) -> tuple[Any, np.ndarray]:
     """point - origin (Dual), and ``found`` cleared where its direction is undefined."""
     to = point - origin
-    length = detach(norm(to))
+    length = norm(detach(to))  # the value only
     return to, found & (length > 0.0) & np.isfinite(length)
 
 
