@@ -362,8 +362,8 @@ def camera_radiance(
     if hit.size:
         tri = hits.triangle[hit]
         it = intersect_triangles(cam.origin, rotated[hit], state.triangles[tri])
-        facing = dot(it.normal, rotated[hit])
-        front = detach(facing) < 0.0  # the ray arrives on the side the normal faces
+        facing = dot(detach(it.normal), detach(rotated)[hit])  # only its value is used
+        front = facing < 0.0  # the ray arrives on the side the normal faces
         side = np.where(front[:, None], 1.0, -1.0)
         geometric = it.normal * side
         # smooth shapes shade with interpolated vertex normals; face normals otherwise (the same object)

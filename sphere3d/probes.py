@@ -134,7 +134,7 @@ def pair_index(shape: np.ndarray) -> np.ndarray:
 def _towards(point: Any, origin: Any, found: np.ndarray) -> tuple[Any, np.ndarray]:
     """point - origin (Dual), and ``found`` cleared where its direction is undefined."""
     to = point - origin
-    length = detach(norm(to))
+    length = norm(detach(to))  # the value only
     return to, found & (length > 0.0) & np.isfinite(length)
 
 
@@ -231,9 +231,10 @@ def select_points(
     t1 = state.triangles[np.maximum(h1.triangle, 0)]
     p0 = attached_points(t0, h0.u, h0.v)
     p1 = attached_points(t1, h1.u, h1.v)
-    n0, n1 = face_normals(t0), face_normals(t1)
+    # the normals' values for every row; their tangents only where the crossing is used (below)
+    n0v, n1v = face_normals(detach(t0)), face_normals(detach(t1))
     o = origin + 0.0 * p0  # broadcast to (m, 3)
-    p0v, p1v, n0v, n1v, ov = detach(p0), detach(p1), detach(n0), detach(n1), detach(o)
+    p0v, p1v, ov = detach(p0), detach(p1), detach(o)
     # tangent plane k separates the other hit from the origin: shape k occludes the other   (Sec. 4.3)
     occ0 = dot(n0v, p1v - p0v) * dot(n0v, ov - p0v) < 0.0
     occ1 = dot(n1v, p0v - p1v) * dot(n1v, ov - p1v) < 0.0
@@ -243,13 +244,17 @@ def select_points(
     mv = cross(d0, d1)
     m_len = norm(mv)
     mv = mv / np.where(m_len > 0.0, m_len, 1.0)[:, None]
-    n1xm = cross(n1, mv)
-    det = dot(n0, n1xm)
-    ok = (np.abs(detach(det)) > DEGENERATE) & (m_len > 1e-12)
-    safe_det = np.where(ok, det, 1.0)
-    crossing = (dot(n0, p0)[:, None] * n1xm + dot(n1, p1)[:, None] * cross(mv, n0)
-                + dot(mv, o)[:, None] * cross(n0, n1)) / safe_det[:, None]  # fmt: skip
-    ok = ok & (dot(detach(crossing) - ov, d0 + d1) > 0.0)
+
+    def crossing_of(n0, n1, p0, p1, o, mv):  # the same expression on values (all rows) and Duals (used rows)
+        n1xm = cross(n1, mv)
+        det = dot(n0, n1xm)
+        safe_det = np.where(np.abs(detach(det)) > DEGENERATE, det, 1.0)
+        return (dot(n0, p0)[:, None] * n1xm + dot(n1, p1)[:, None] * cross(mv, n0)
+                + dot(mv, o)[:, None] * cross(n0, n1)) / safe_det[:, None], det  # fmt: skip
+
+    crossing, det = crossing_of(n0v, n1v, p0v, p1v, ov, mv)
+    ok = (np.abs(det) > DEGENERATE) & (m_len > 1e-12)
+    ok = ok & (dot(crossing - ov, d0 + d1) > 0.0)
 
     both = hit0 & hit1
     use_cross = both & ~(occ0 ^ occ1) & ~parallel & ok
@@ -269,7 +274,10 @@ def select_points(
         moved = attached_points(state.triangles[edge.triangle], u, v)
         p0[single] = np.where(first[:, None], moved, p0[single])
         p1[single] = np.where(first[:, None], p1[single], moved)
-    point = np.where(use_cross[:, None], crossing, np.where(use_p1[:, None], p1, p0))
+    point = np.where(use_p1[:, None], p1, p0)
+    c = np.flatnonzero(use_cross)
+    if c.size:  # with tangents only where the crossing is used (row by row the same numbers)
+        point[c] = crossing_of(face_normals(t0[c]), face_normals(t1[c]), p0[c], p1[c], o[c], mv[c])[0]
     return point, hit0 | hit1
 
 

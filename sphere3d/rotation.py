@@ -140,7 +140,16 @@ class Rotation:
         """
         omega = detach(omega)
         b = self.target
-        a = detach(b)
-        r = rotate(a, b, omega)
+        if np.shape(omega) == b.shape and not self.active.all():
+            # an identity row (inactive: target e_z with tangent +0) has the tangent +0 exactly, so only
+            # the active rows are rotated; each row's numbers are those of the whole-array call
+            rows = np.flatnonzero(self.active.ravel())
+            flat = omega.reshape(-1, 3)
+            t = np.zeros(flat.shape)
+            if rows.size:
+                active = b.reshape(-1, 3)[rows]
+                t[rows] = tangent(rotate(detach(active), active, flat[rows]))
+            return Dual(omega.copy(), t.reshape(omega.shape))
+        r = rotate(detach(b), b, omega)
         # value exactly ω (R is the identity at θ0 up to rounding in a·a); tangent dR/dθ ω
         return Dual(np.broadcast_to(omega, np.shape(r.value)).copy(), tangent(r))
