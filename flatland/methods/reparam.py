@@ -1,11 +1,11 @@
-"""Reparameterization of the pixel and shading integrals by translations chosen with probe rays.
+r"""Reparameterization of the pixel and shading integrals by translations chosen with probe rays.
 
 Where the integrator calls it: one ``task.evaluate(variable(0.0), ReparamTransforms(...))``.
 ``camera`` gets each chunk's film samples
-t ~ k_j before the camera rays are traced and returns the translated points T(t) with
+$t \sim k_j$ before the camera rays are traced and returns the translated points $T(t)$ with
 kernel weights; ``directions`` gets the cosine and emitter samples φ inside
 :func:`~flatland.integrator.shade`, before the shading rays are traced, and returns
-T(φ) likewise; both choose the translation with :mod:`flatland.probes`.
+$T(φ)$ likewise; both choose the translation with :mod:`flatland.probes`.
 The 2D-only extras stay ``None``.
 
 Loubet et al. 2019: Sec. 3.2 (change of variables), 4.1 (in 2D a rotation of
@@ -39,25 +39,26 @@ __all__ = ["ReparamTransforms", "default_kappa_film", "reparam"]
 
 
 def default_kappa_film(pixel_width: float) -> float:
-    """Film kernel concentration 2 / (0.4 Δt)²: a Gaussian of σ ≈ 0.28 pixel.
+    r"""Film kernel concentration $2 / (0.4 Δt)^2$: a Gaussian of $σ ≈ 0.28$ pixel.
 
-    The flat-film form of the authors' camera kernel κ = 1 / (1 - cos(0.4 · pixel
-    angle)) (Loubet et al. 2019, Sec. 4.2), since 1 - cos x ≈ x² / 2.
+    The flat-film form of the authors' camera kernel $κ = 1 / (1 - \cos(0.4 · \mathrm{pixel\ angle}))$
+    (Loubet et al. 2019, Sec. 4.2), since $1 - \cos x ≈ x^2 / 2$.
     """
     return 2.0 / (0.4 * pixel_width) ** 2
 
 
 class ReparamTransforms(Identity):
-    """Film and angle translations following the point the probes choose, inside convolution kernels.
+    r"""Film and angle translations following the point the probes choose, inside convolution kernels.
 
-    Film: kernel g = N(0, 1/κ_film) on t. Directions: von Mises of concentration κ on
+    Film: kernel $g = N(0, 1/κ_\mathrm{film})$ on t. Directions: von Mises of concentration κ on
     the angle. Unpaired, the kernel is read in the reverse order (the joint density
-    p(y) k(y, ω) of Loubet et al. 2019, Sec. 4.2, with y the primary sample, ω ~ k(·, y) the centre),
-    which keeps every evaluation point's value that of the naive estimator. Probes at
-    ω + σ · spread · linspace(-1, 1, probes) pick an attached point p (Loubet et al. 2019, Sec. 4.3), and
-    the sample is evaluated at ``T(y) = y + Δ`` with ``Δ = c_p(θ) - detach(c_p(θ))``,
-    c_p the film coordinate of p or its angle seen from the (moving) shading point.
-    The weight ``k(T y, ω) / detach(k(T y, ω))`` (value 1) carries the kernel's derivative.
+    $p(y) k(y, ω)$ of Loubet et al. 2019, Sec. 4.2, with y the primary sample,
+    $ω \sim k(·, y)$ the centre), which keeps every evaluation point's value that of the
+    naive estimator. Probes at $ω + σ · \mathrm{spread} · \mathrm{linspace}(-1, 1, \mathrm{probes})$
+    pick an attached point p (Loubet et al. 2019, Sec. 4.3), and
+    the sample is evaluated at $T(y) = y + Δ$ with $Δ = c_p(θ) - \mathrm{detach}(c_p(θ))$,
+    $c_p$ the film coordinate of p or its angle seen from the (moving) shading point.
+    The weight $k(T y, ω) / \mathrm{detach}(k(T y, ω))$ (value 1) carries the kernel's derivative.
     """
 
     def __init__(
@@ -186,12 +187,12 @@ def reparam(
     refine: int,
     paired: bool,
 ) -> Tally:
-    """Differentiate after translating every pixel and shading integral so its discontinuities stay put.
+    r"""Differentiate after translating every pixel and shading integral so its discontinuities stay put.
 
     Options
     -------
     kappa : float
-        Von Mises concentration of the shading kernel (default 1000, σ ≈ 1.8°).
+        Von Mises concentration of the shading kernel (default 1000, $σ ≈ 1.8°$).
     kappa_film : float, optional
         1 / variance of the Gaussian film kernel; default :func:`default_kappa_film`.
     probes : int
@@ -200,18 +201,18 @@ def reparam(
     spread : float
         Probe span in kernel standard deviations (default 3). The paper draws probes
         from the kernel itself; then for a lone edge all P probes land on the side
-        away from it with probability E[Φ(Z)^P] = 1 / (P + 1), a bias of 20% of the
-        edge's term at P = 4 (measured). A span of ±3σ misses an isolated edge only
-        beyond it, 2 (1 - Φ(3)) = 0.3%. Not so a primitive whose image is narrower than
-        the probes' spacing (2 · spread / (probes - 1) σ, 0.57 px on the film at the
+        away from it with probability $E[Φ(Z)^P] = 1 / (P + 1)$, a bias of 20% of the
+        edge's term at P = 4 (measured). A span of $±3σ$ misses an isolated edge only
+        beyond it, $2 (1 - Φ(3)) = 0.3\%$. Not so a primitive whose image is narrower than
+        the probes' spacing ($2 · \mathrm{spread} / (\mathrm{probes} - 1)\, σ$, 0.57 px on the film at the
         defaults): it lies between two probes for most kernel centres, which lost
-        1 - width / spacing of its edge terms (measured 83 ± 36 % at 0.1 px, 57 ± 10 %
+        $1 - \mathrm{width} / \mathrm{spacing}$ of its edge terms (measured 83 ± 36 % at 0.1 px, 57 ± 10 %
         at 0.2 px). On the film one more probe is then traced at its image
         (:func:`~flatland.probes.film_gap_probe`): a 0.2 px stick keeps its edge terms
         (loss -6.6 ± 9.8 %, tests/flatland/test_thin_occluder). Directions get the same
-        probe (:func:`~flatland.probes.angle_gap_probe`; spacing 2 / √κ = 0.063 rad).
+        probe (:func:`~flatland.probes.angle_gap_probe`; spacing $2 / \sqrt{κ} = 0.063$ rad).
         Measured loss of a black stick's terms under the sky (irradiance at a point,
-        2^24 samples), before / after: 0.02 rad 84 ± 17 / 44 ± 22 %, 0.04 rad 77 ± 14 /
+        $2^{24}$ samples), before / after: 0.02 rad 84 ± 17 / 44 ± 22 %, 0.04 rad 77 ± 14 /
         51 ± 11 %; wider than the spacing the probe never fires and a loss of another
         origin remains: 0.1 rad 30 ± 5 %, 0.5 rad 4 ± 3 %, 1 rad 1 ± 2 %.
     refine : int
@@ -221,11 +222,11 @@ def reparam(
         Two evaluations share one transform and serve as each other's control
         variate (theory/kernels), at twice the cost per level. The kernel is then used in
         the paper's order (ω is the outer sample), so the value is a different
-        estimate from the naive one. On the film ω = t + σz with its closed-form
-        density k_j ⊛ g (sampling ω from k_j itself would miss the blurred integrand
+        estimate from the naive one. On the film $ω = t + σz$ with its closed-form
+        density $k_j ⊛ g$ (sampling ω from $k_j$ itself would miss the blurred integrand
         outside a tent's support: measured 34% bias). For directions ω is the
         cosine or emitter sample; the blurred integrand reaching behind the horizon
-        is then missed, a bias of order 1/κ relative (cos ~ σ there).
+        is then missed, a bias of order $1/κ$ relative ($\cos \sim σ$ there).
 
     Every film sample (pixel integral, translation of t) and every direction sample,
     cosine- or emitter-sampled (shading integral, translation of the angle), gets its
@@ -246,9 +247,9 @@ def reparam(
     differently inside one kernel (``two_occluders``), a wrong pick by the heuristic,
     an attached point moving unlike the silhouette (first order in its distance from
     it, exact under translation), an edge beyond the probes. The bias falls as the
-    kernels narrow, while the variance of the weights' derivatives (about √κ per
+    kernels narrow, while the variance of the weights' derivatives (about $\sqrt{κ}$ per
     affected sample) grows: the trade-off of Loubet et al. 2019, Sec. 4.2. The tent filter's
-    log-derivative grows like 1 / distance near its support's end (a mildly heavy
+    log-derivative grows like $1 / \mathrm{distance}$ near its support's end (a mildly heavy
     tail); the Gaussian filter's does not.
     """
     if isinstance(task, ImageTask):

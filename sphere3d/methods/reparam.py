@@ -26,8 +26,8 @@ seed 11, 16 batches; ± one standard error); tested as biases in
 
 **Shading: the cosine-sampled integral with the vMF kernel.** The irradiance at the origin
 (normal +z) under a constant sky with a black triangle above it
-(:func:`~sphere3d.closed_form.occluded_sky_irradiance`, Lambert's formula); share of dE/dθ
-lost, 1 - d / g. The triangle (-0.2, -0.5, 1), (0.9, 0.1, 1.1), (0.1, 0.6, 0.9) moves about
+(:func:`~sphere3d.closed_form.occluded_sky_irradiance`, Lambert's formula); share of $dE/dθ$
+lost, $1 - d / g$. The triangle (-0.2, -0.5, 1), (0.9, 0.1, 1.1), (0.1, 0.6, 0.9) moves about
 its centroid; "near the horizon": a large triangle whose lower edge lies 20, 10 or 5 degrees
 above the horizon, its apex high (``horizon_triangle`` in the benchmark), moving sideways:
 
@@ -91,7 +91,7 @@ __all__ = ["KAPPA_MAX", "ReparamTransforms", "reparam"]
 
 @dataclass(frozen=True)
 class ReparamTransforms:
-    """The rotations of the three integrals of :mod:`sphere3d.integrator`.
+    r"""The rotations of the three integrals of :mod:`sphere3d.integrator`.
 
     Attributes
     ----------
@@ -101,7 +101,7 @@ class ReparamTransforms:
         None: no kernel, one rotation per sample from probes drawn from the cosine
         density itself (Sec. 4.1 over a support too large for it: biased).
     kappa_film : float
-        1 / variance of the Gaussian film kernel of the pixel integral, pixels⁻²
+        1 / variance of the Gaussian film kernel of the pixel integral, $\mathrm{pixels}^{-2}$
         (:mod:`sphere3d.camera_kernel`).
     probes : int
         Probe rays per transform, >= 1. With one probe (the kernel's centre, the pixel
@@ -196,7 +196,8 @@ class ReparamTransforms:
         return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal, self.refine)
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
-        """w = k(Rμ, ω) / detach(k(Rμ, ω)) in log space: value exactly 1 (Loubet et al. 2019, Sec. 4.2)."""
+        r"""$w = k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$ in log space: value exactly 1
+        (Loubet et al. 2019, Sec. 4.2)."""
         return unit_weight(self.kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
@@ -221,7 +222,8 @@ class ReparamTransforms:
         return scatter(len(mu), live, est, shading.state.dual)
 
     def _paired(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The paper's order: outer ω = μ ~ p, two kernel samples share one rotation (theory/kernels)."""
+        r"""The paper's order: outer $ω = μ \sim p$, two kernel samples share one rotation
+        (theory/kernels)."""
         rotation = self._probe_rotation(shading, mu)
         u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
         e, w = [], []
@@ -279,17 +281,17 @@ def reparam(
     paired: bool,
     emitter_edges: bool,
 ) -> Tally:
-    """Rotate the samples of every integral so that the discontinuity they straddle stops moving.
+    r"""Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
-    Each integral's samples ω are evaluated at R(θ)·ω, R the identity at θ0 that moves
-    like one chosen occluder point (Loubet et al. 2019, Sec. 4.1), |det J| = 1:
+    Each integral's samples ω are evaluated at $R(θ)·ω$, R the identity at θ0 that moves
+    like one chosen occluder point (Loubet et al. 2019, Sec. 4.1), $|\det J| = 1$:
 
     - **pixel integral** (support: the filter footprint): the Gaussian film kernel of
-      concentration ``kappa_film`` (default the authors' camera kernel, σ ≈ 0.28 px),
+      concentration ``kappa_film`` (default the authors' camera kernel, $σ ≈ 0.28$ px),
       an antithetic pair of kernel centres per camera sample, each with its rotation
       from :func:`~sphere3d.camera_kernel.film_probes` probes on a ring around it
       (:mod:`sphere3d.camera_kernel`, Sec. 4.2, 4.3). The filter and kernel weights carry
-      the derivative of k·J·g under the rotation, with a zero-mean control variate
+      the derivative of $k·J·g$ under the rotation, with a zero-mean control variate
       (:class:`~sphere3d.tasks.ImageTask`); it needs a continuous filter (tent,
       gaussian): with ``box`` the footprint's edge would move and bias the gradient
       (theory/pixel_filters), so a box filter is refused, as in flatland.
@@ -303,13 +305,13 @@ def reparam(
       rotation does not hold an occluder's shadow edge still (occluders moving
       differently, or one whose outline lies at several depths).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
-      with concentration ``kappa``: a kernel centre ω ~ vMF(μ, κ) per sample, probes
+      with concentration ``kappa``: a kernel centre $ω \sim \mathrm{vMF}(μ, κ)$ per sample, probes
       on a ring of ``spread`` kernel widths around it, weight
-      ``k(Rμ, ω) / detach(k(Rμ, ω))``. Biased where a kernel reaches a discontinuity
+      $k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$. Biased where a kernel reaches a discontinuity
       that no probe detects (near corners) or that the rotation does not follow
       (several in one kernel): a black triangle rising above a point, -7.6 % with 4
       probes, -2.9 % with 8; the bias falls as κ grows, the variance of a sample near
-      an edge grows like √κ. ``kappa=None``: no kernel, probes from the cosine
+      an edge grows like $\sqrt{κ}$. ``kappa=None``: no kernel, probes from the cosine
       density (one rotation for the whole hemisphere: strongly biased, for study).
 
     ``refine`` (an integer >= 0, default :data:`~sphere3d.probes.REFINE` = 3): where the
@@ -322,7 +324,7 @@ def reparam(
     d/d ``occluder.translate.x``, default options, 4 seeds x 256 spp against the
     Richardson finite-difference reference of ``benchmarks/reference``; regions as in
     ``tests/sphere3d/test_hard_shadow.py``), as the least-squares fraction of the
-    reference kept, Σ g·ref / Σ ref², and the region's part of the bias floor (the rms
+    reference kept, $Σ g·\mathrm{ref} / Σ \mathrm{ref}^2$, and the region's part of the bias floor (the rms
     per-pixel bias over the image, noise subtracted, ``benchmarks/bench_hard_shadow.py``):
 
     ================  ===========================  ===========================
