@@ -1,35 +1,35 @@
-"""The film kernel of the pixel integral: rotations per camera sample, chosen inside small kernels.
+r"""The film kernel of the pixel integral: rotations per camera sample, chosen inside small kernels.
 
-The pixel integral ``∫ k(s) L(ω(s)) ds`` is convolved with a Gaussian film kernel
-g(s - c) of variance 1 / ``kappa_film`` (pixels⁻²), ``∫ g(s - c) dc = 1`` for every s
+The pixel integral $∫ k(s) L(ω(s)) ds$ is convolved with a Gaussian film kernel
+$g(s - c)$ of variance 1 / ``kappa_film`` ($\mathrm{pixels}^{-2}$), $∫ g(s - c) dc = 1$ for every s
 (Loubet et al. 2019, Sec. 4.2). Each camera sample s (drawn from the filter, the naive
-estimator's own sample) gets a kernel centre c ~ g(· - s), the reverse order of the
-paper's ω ~ p, μ ~ k(·, ω) (theory/kernels), which keeps every evaluation at s itself
+estimator's own sample) gets a kernel centre $c \sim g(· - s)$, the reverse order of the
+paper's $ω \sim p$, $μ \sim k(·, ω)$ (theory/kernels), which keeps every evaluation at s itself
 and the primal bit-identical to ``naive``'s; around c a ring of probes
 (:func:`~sphere3d.probes.ring_offsets`, radius ``spread`` kernel standard deviations)
 chooses the point the sample's rotation follows (Sec. 4.3, :mod:`sphere3d.probes`,
 with the ``refine`` bisection that moves a single probe's hit onto the silhouette between
-it and its partner). The sample is evaluated along R·ω(s) with the weight
-``g(film(Rω) - c) / detach(g(film(Rω) - c))`` (value exactly 1,
+it and its partner). The sample is evaluated along $R·ω(s)$ with the weight
+$g(\mathrm{film}(Rω) - c) / \mathrm{detach}(g(\mathrm{film}(Rω) - c))$ (value exactly 1,
 :func:`~flatland.core.translation.unit_weight`), next to the filter's own
-``k J (Rω) / detach(k J (Rω))`` (:func:`~sphere3d.integrator.pixel_samples`).
+$k J (Rω) / \mathrm{detach}(k J (Rω))$ (:func:`~sphere3d.integrator.pixel_samples`).
 
-Each sample gets two centres, c = s + σz and its mirror image c' = s - σz, each with its
+Each sample gets two centres, $c = s + σz$ and its mirror image $c' = s - σz$, each with its
 own probes and rotation, and the estimate is the mean of the two (an antithetic pair, not
 the authors' paired samples: those share one rotation between two evaluation points and
 change the primal; ``paired`` leaves the film kernel as it is). Where both rotations
-follow the same motion, the kernel weights' derivatives κ (c - s)·ḟ and κ (c' - s)·ḟ
+follow the same motion, the kernel weights' derivatives $κ (c - s)·\dot f$ and $κ (c' - s)·\dot f$
 cancel; the radiance is evaluated once, along the mean of the two rotated directions'
 tangents (exact: the derivative is linear in them).
 
 Unbiased for a silhouette that the rotation follows: for a fixed centre the rotation is
 one change of variables of the whole film integral, and integrating over c restores
 the pixel integral. The product of the two weights keeps a zero-mean derivative,
-``d/dθ ∫ dc ∫ k(film Rω) J g(film Rω - c) dω = d/dθ 1 = 0``, so the filter-weight
+$d/dθ ∫ dc ∫ k(\mathrm{film}\, Rω) J g(\mathrm{film}\, Rω - c) dω = d/dθ\, 1 = 0$, so the filter-weight
 control variate of :class:`~sphere3d.tasks.ImageTask` stays exact.
 
-The default concentration is the authors' camera kernel κ = 1 / (1 - cos(0.4 · pixel
-angle)) read on the film, 1 - cos x ≈ x² / 2: a Gaussian of σ = 0.4 / √2 ≈ 0.28 px,
+The default concentration is the authors' camera kernel $κ = 1 / (1 - \cos(0.4 · \mathrm{pixel\ angle}))$
+read on the film, $1 - \cos x ≈ x^2 / 2$: a Gaussian of $σ = 0.4 / \sqrt{2} ≈ 0.28$ px,
 flatland's :func:`~flatland.methods.reparam.default_kappa_film` in pixel units. The
 kernel being a fraction of a pixel wide, the probes see the silhouette next to each
 sample rather than somewhere on the pixel's footprint: two edges or a corner in one
@@ -46,7 +46,7 @@ tested as biases in ``tests/sphere3d/test_triangle_closed_form.py`` (test10).
 A black triangle about s pixels across against a constant sky
 (:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian filter), moving sideways
 (``translate.x``) or away from the camera (``translate.z``).
-Share of the silhouette term lost, 1 - Σ sign(g) d / Σ |g| over the film (g the exact
+Share of the silhouette term lost, $1 - Σ \mathrm{sign}(g) d / Σ |g|$ over the film (g the exact
 derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
 
 ========  ==================  ==================  ==================
@@ -107,19 +107,19 @@ KAPPA_FILM_MAX = 1e12
 
 
 def film_probes(probes: int) -> int:
-    """Probes per film kernel, ``2 probes - 1``: the centre and twice the ring of a shading kernel.
+    r"""Probes per film kernel, ``2 probes - 1``: the centre and twice the ring of a shading kernel.
 
-    A ring of n probes at radius r detects every straight edge within r cos(π/n) of the
+    A ring of n probes at radius r detects every straight edge within $r \cos(π/n)$ of the
     centre, one beyond it only for some phases: with the 3 ring probes of ``probes=4``,
-    edges past 1.5 σ of a spread-3 ring went undetected often enough to lose 17 % of a 2 px
-    triangle's silhouette term (sideways), with 6 (2.6 σ) 2.4 ± 1.5 %. Camera probes are
+    edges past $1.5 σ$ of a spread-3 ring went undetected often enough to lose 17 % of a 2 px
+    triangle's silhouette term (sideways), with 6 ($2.6 σ$) 2.4 ± 1.5 %. Camera probes are
     traced once per camera sample, from one origin.
     """
     return 2 * probes - 1
 
 
 def check_kappa_film(name: str, value: Any) -> float:
-    """0 < ``kappa_film`` <= :data:`KAPPA_FILM_MAX` (pixels⁻²), one error naming the option otherwise."""
+    r"""0 < ``kappa_film`` <= :data:`KAPPA_FILM_MAX` (pixels⁻²), one error naming the option otherwise."""
     kappa = check_positive(name, value)
     if kappa > KAPPA_FILM_MAX:
         raise ValidationError(
@@ -138,11 +138,11 @@ def film_transform(
     spread: float,
     refine: int,
 ) -> FilmTransform:
-    """Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
+    r"""Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
 
-    The centres c = s + σz and c' = s - σz are both distributed as g(· - s), so the mean
+    The centres $c = s + σz$ and $c' = s - σz$ are both distributed as $g(· - s)$, so the mean
     of the two estimates is unbiased; where both rotations follow the same motion their
-    kernel weights' derivatives κ (c - s)·ḟ and κ (c' - s)·ḟ cancel (module docstring).
+    kernel weights' derivatives $κ (c - s)·\dot f$ and $κ (c' - s)·\dot f$ cancel (module docstring).
 
     Parameters
     ----------
@@ -153,7 +153,7 @@ def film_transform(
     draws : Draws
         One row per sample: z from ``"kernel.film"``, the rings' phases from ``"probes.film"``.
     kappa_film : float
-        1 / variance of the Gaussian kernel, pixels⁻².
+        1 / variance of the Gaussian kernel, $\mathrm{pixels}^{-2}$.
     probes, spread, refine
         As the ``reparam`` options: the centre and a ring of :func:`film_probes` ``- 1`` at
         ``spread`` kernel standard deviations; bisection rays toward the silhouette.
@@ -218,14 +218,14 @@ def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.
 
 
 def silhouette_snap(state: SceneState, centre: np.ndarray, radius: float) -> Snap:
-    """Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
+    r"""Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
 
     The hook ``snap`` of :func:`~sphere3d.probes.select_points`. After bisection the hit
-    lies up to 1/2^refine of the probe gap inside its triangle T; the point followed is
+    lies up to $1/2^\mathrm{refine}$ of the probe gap inside its triangle T; the point followed is
     instead where the segment of directions from ``inside`` (hits T) to ``outside`` (misses
-    the shape) leaves T. With ``e_k(d) = ((V_{k+1} - o) × (V_{k+2} - o)) · d``, linear in d and
-    proportional to the barycentric weight of V_k of the hit along d, that exit is the
-    smallest λ in (0, 1] with ``e_k((1 - λ) a + λ b) = 0``. A film rotation (locally a
+    the shape) leaves T. With $e_k(d) = ((V_{k+1} - o) × (V_{k+2} - o)) · d$, linear in d and
+    proportional to the barycentric weight of $V_k$ of the hit along d, that exit is the
+    smallest λ in (0, 1] with $e_k((1 - λ) a + λ b) = 0$. A film rotation (locally a
     translation of the film) that follows a point on a straight edge's line follows the
     whole edge under translation and motion in depth (the edge's normal velocity is
     affine in the point and constant along the line), while one following a point inside

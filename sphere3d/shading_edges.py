@@ -1,9 +1,9 @@
-"""The boundary term of the shading integrals: edge sampling on S² at each shading point (secondary edges).
+r"""The boundary term of the shading integrals: edge sampling on S² at each shading point (secondary edges).
 
-At a shading point x with normal n the renderer integrates ``E = ∫ f(ω) dω`` over
-the sphere, ``f = L_i(ω) max(0, n·ω)`` (both MIS strategies together: their weights
+At a shading point x with normal n the renderer integrates $E = ∫ f(ω) dω$ over
+the sphere, $f = L_i(ω) \max(0, n·ω)$ (both MIS strategies together: their weights
 sum to 1, so the jumps of the two weighted integrands add up to the jumps of f).
-With direct illumination L_i(ω) is what the ray from x along ω meets first: the sky,
+With direct illumination $L_i(ω)$ is what the ray from x along ω meets first: the sky,
 the front of an emitter (its radiance times the border fade), or 0. It jumps where
 that changes, on the spherical images of the **silhouette edges seen from x**: the
 occluders' outlines (shadow edges) and the emitters' own borders (sharp unless they
@@ -12,31 +12,31 @@ the surface it meets), and f is continuous at the horizon (the cosine is 0 there
 
 Boundary term (Loubet et al. 2019, Sec. 3; Li et al. 2018, Sec. 4, written on S²
 rather than on the edge). An edge AB seen from x is an arc C of the great circle
-with unit normal ``m = (A - x) × (B - x) / |…|``. When θ moves the edge (or x), a
-point ω(θ) = (P - x)/|P - x| of the arc, P = A + s (B - A) at fixed s, moves with
-``ω̇`` and the arc sweeps solid angle at the rate ``m·ω̇`` per unit arc length, so by
+with unit normal $m = (A - x) × (B - x) / |…|$. When θ moves the edge (or x), a
+point $ω(θ) = (P - x)/|P - x|$ of the arc, $P = A + s (B - A)$ at fixed s, moves with
+$\dot ω$ and the arc sweeps solid angle at the rate $m·\dot ω$ per unit arc length, so by
 the Reynolds transport theorem
 
-    dE/dθ = ∫ ∂f/∂θ dω  +  Σ_edges ∫_C [f(ω⁻) - f(ω⁺)] (m·ω̇) dℓ,
+    $dE/dθ = ∫ ∂f/∂θ\, dω + Σ_\mathrm{edges} ∫_C [f(ω^-) - f(ω^+)] (m·\dot ω)\, dℓ$,
 
-ω∓ = ω ∓ δ m just beside the arc, dℓ its arc length (radians). The first term is the
+$ω^∓ = ω ∓ δ m$ just beside the arc, dℓ its arc length (radians). The first term is the
 ``naive`` estimator. For the second, only the silhouette edges that can contribute are
 candidates (:func:`_pairs`): an edge that does not move, seen from a point that does not
-move, has ``m·ω̇ = 0`` exactly (with ``occluder.translate.x`` the emitter's own border, which
+move, has $m·\dot ω = 0$ exactly (with ``occluder.translate.x`` the emitter's own border, which
 drew 91 % of the samples on ``hard_shadow`` before this cull); and under a black sky f
 vanishes outside the emitters' directions on both sides of every arc, so an arc counts only
-where it crosses an emitter's spherical image: each arc above the horizon (n·(P - x) > 0, a
+where it crosses an emitter's spherical image: each arc above the horizon ($n·(P - x) > 0$, a
 linear condition in s) is clipped to the image of every emitter triangle
 (:func:`_clip_to_emitters`; emitters' own edges, whose arcs are the images' borders, are not
 clipped). Each shading point draws k sub-arcs among its candidates' with probability ∝ their
-angle (Γ = Σ angles), then a point uniform in angle on each: density ``c/Γ`` per radian,
+angle ($Γ = Σ \mathrm{angles}$), then a point uniform in angle on each: density $c/Γ$ per radian,
 c the number of sub-arcs of that arc holding the point (1 unless emitters overlap as seen
-from x), and the estimate is the mean over the k draws of ``(Γ/c) [f(ω⁻) - f(ω⁺)] (m·ω̇)``.
+from x), and the estimate is the mean over the k draws of $(Γ/c) [f(ω^-) - f(ω^+)] (m·\dot ω)$.
 On ``hard_shadow`` 99.8 % of the drawn points have a nonzero jump, against 10 % with the
 arcs clipped to a cone around the emitters' bounding sphere and no cull. The 3D point P
-behind ω on the edge is found in the plane of the arc; ω̇ comes from forward AD of
+behind ω on the edge is found in the plane of the arc; $\dot ω$ comes from forward AD of
 ``normalize(P(θ) - x(θ))`` with the edge's Dual vertices. Both sides are traced (two rays
-per draw); L_i along a ray is deterministic, so the jump is exact up to the offset δ = :data:`EPS_ANGLE`.
+per draw); $L_i$ along a ray is deterministic, so the jump is exact up to the offset δ = :data:`EPS_ANGLE`.
 
 Vectorized over shading points × edges, in blocks of at most :data:`MAX_PAIRS`.
 """
@@ -106,15 +106,15 @@ def _reach(edges: Edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, boun
 
 
 def _pairs(edges: Edges, o, n0, moving, point_moves, bounds) -> tuple[np.ndarray, ...]:
-    """The (point, edge) pairs where the edge is a silhouette seen from the point, moves or is seen
+    r"""The (point, edge) pairs where the edge is a silhouette seen from the point, moves or is seen
     from a moving point, may meet the emitters (under a black sky) and rises above the point's
     horizon: their rows, edges, clipped ends (relative to ``o``), parameters s0 and s1, and the
     arc angle γ.
 
     The silhouette test is two matrix products per block of points; everything else is computed
     on the pairs that pass it only (a few per cent of a fine mesh's edges). A pair whose edge and
-    point are both fixed has ``m·ω̇ = 0`` exactly, and a pair whose arc cannot meet an emitter's
-    image has ``f = 0`` on both sides: culled here, so they are never drawn.
+    point are both fixed has $m·\dot ω = 0$ exactly, and a pair whose arc cannot meet an emitter's
+    image has $f = 0$ on both sides: culled here, so they are never drawn.
     """
     rows, cols = [], []
     step = max(1, MAX_PAIRS // len(edges))
@@ -148,23 +148,24 @@ def _pairs(edges: Edges, o, n0, moving, point_moves, bounds) -> tuple[np.ndarray
 
 
 def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit vectors (w_a, w_⊥) with the arc from qa to qb at angles φ ∈ [0, γ]: cos φ w_a + sin φ w_⊥."""
+    r"""Unit vectors $(w_a, w_⊥)$ with the arc from qa to qb at angles $φ ∈ [0, γ]$:
+    $\cos φ\, w_a + \sin φ\, w_⊥$."""
     wa = qa / norm(qa)[:, None]
     perp = qb - wa * dot(qb, wa)[:, None]
     return wa, perp / np.where(norm(perp) > 0.0, norm(perp), 1.0)[:, None]
 
 
 def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np.ndarray]:
-    """Per arc and emitter triangle, the sub-arc [lo, hi] of [0, γ] inside the triangle's spherical
+    r"""Per arc and emitter triangle, the sub-arc [lo, hi] of [0, γ] inside the triangle's spherical
     image seen from the arc's point ``o[rows]`` (empty, hi <= lo, where it sees the back): (P, T).
 
-    Seen from o, triangle L₀L₁L₂ (q_i = L_i - o) covers the directions with
-    ``w·(q_{i+1} × q_i) >= 0`` for i = 0, 1, 2 when o is in front of it
-    (``det(q₀, q₁, q₂) < 0``, the side ``face_normals`` points to). On the arc,
-    ``w(φ)·c = R cos(φ - φ_c)``: each condition keeps the half-circle
-    ``|φ - φ_c| <= π/2``, and as γ <= π the arc meets it in one interval, found with
-    φ_c taken in (-π/2, 3π/2] (for φ_c <= -π/2 the half-circle around φ_c meets
-    [0, π] in {0} at most, the one around φ_c + 2π in the rest). The vectors c depend on
+    Seen from o, triangle $L_0 L_1 L_2$ ($q_i = L_i - o$) covers the directions with
+    $w·(q_{i+1} × q_i) ≥ 0$ for i = 0, 1, 2 when o is in front of it
+    ($\det(q_0, q_1, q_2) < 0$, the side ``face_normals`` points to). On the arc,
+    $w(φ)·c = R \cos(φ - φ_c)$: each condition keeps the half-circle
+    $|φ - φ_c| ≤ π/2$, and as $γ ≤ π$ the arc meets it in one interval, found with
+    $φ_c$ taken in $(-π/2, 3π/2]$ (for $φ_c ≤ -π/2$ the half-circle around $φ_c$ meets
+    $[0, π]$ in $\{0\}$ at most, the one around $φ_c + 2π$ in the rest). The vectors c depend on
     the point and the triangle only: computed once per point.
     """
     wa, perp = _arc_frame(qa, qb)
@@ -184,10 +185,10 @@ def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np
 
 
 def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np.ndarray, ...]:
-    """The draws (flat index ``i k + c`` for column c of ``u``, shape (m, k)) of the points with a
+    r"""The draws (flat index ``i k + c`` for column c of ``u``, shape (m, k)) of the points with a
     moving silhouette edge above the horizon, and for each: one sub-arc of such an edge drawn ∝ its
     angle, its edge, its arc's ends and s0, s1, the sub-arc's start and angle, the ends ``lo``,
-    ``hi`` of all sub-arcs of its arc (draws, T), and the point's Γ = Σ angles.
+    ``hi`` of all sub-arcs of its arc (draws, T), and the point's $Γ = Σ \mathrm{angles}$.
 
     A sub-arc is the part of an arc inside one emitter triangle's image under a black sky with at
     most :data:`MAX_EMITTER_TRIANGLES` of them, except on the emitters' own edges (whose arcs lie
