@@ -1,26 +1,26 @@
-"""The renderer's integrals, written once, with the change of variables left to the method.
+r"""The renderer's integrals, written once, with the change of variables left to the method.
 
 Three nested integrals per pixel (direct illumination only):
 
-1. **Pixel integral** over the film, ``∫ k(s) L(ω(s)) ds``, written over directions
-   ``∫ k(film(ω)) J(ω) L(ω) dω`` (J: film area per solid angle). Film offsets are
-   drawn from :func:`~sphere3d.sampling.sample_filter` and weighted by k / p; a
-   method may rotate their directions, ω → R·ω_i, and the factor
-   ``k J (Rω) / detach(k J (Rω))`` (value exactly 1) carries the change of the
+1. **Pixel integral** over the film, $∫ k(s) L(ω(s)) ds$, written over directions
+   $∫ k(\mathrm{film}(ω)) J(ω) L(ω) dω$ (J: film area per solid angle). Film offsets are
+   drawn from :func:`~sphere3d.sampling.sample_filter` and weighted by $k / p$; a
+   method may rotate their directions, $ω → R·ω_i$, and the factor
+   $k J (Rω) / \mathrm{detach}(k J (Rω))$ (value exactly 1) carries the change of the
    filter under the rotation (Loubet et al. 2019, Sec. 4.1; theory/pixel_filters). Its
    tangent has zero mean, which :class:`~sphere3d.tasks.ImageTask` uses as a
    control variate.
 2. **Radiance** along the ray: the sky where it misses; at a hit, front-side emission
-   (with the border fade) plus ``ρ/π · E`` for diffuse surfaces.
-3. **Irradiance** ``E = ∫ L_i(ω) cos θ dω`` at the hit point, by multiple importance
+   (with the border fade) plus $ρ/π · E$ for diffuse surfaces.
+3. **Irradiance** $E = ∫ L_i(ω) \cos θ\, dω$ at the hit point, by multiple importance
    sampling (balance heuristic) of two strategies:
 
    - *emitter sampling*: a point y uniform on the emitters' area, its direction ω and
-     the solid-angle density ``p_L = d² / (A cos θ_y)``; a method may rotate ω;
+     the solid-angle density $p_L = d^2 / (A \cos θ_y)$; a method may rotate ω;
      the emitter hit is re-attached to the triangle the sample lies on (without its
      edges: a method that sets ``emitter_edges`` gets their boundary term added,
      :mod:`sphere3d.emitter_edges`);
-   - *cosine sampling*: ω ~ cos θ / π; the method owns this estimator (it may add a
+   - *cosine sampling*: $ω \sim \cos θ / π$; the method owns this estimator (it may add a
      convolution kernel, Sec. 4.2) and calls back :meth:`Shading.evaluate_bsdf`
      for the integrand at rotated directions.
 
@@ -124,14 +124,14 @@ class Shading:
         return up & ((~hits.hit & sky) | (emitting & front))
 
     def evaluate_bsdf(self, mu: np.ndarray, rotated: Any, hits: Hits) -> Any:
-        """The cosine-strategy integrand ``L_i(Rμ) cos θ(Rμ) w_C(Rμ)`` at rotated directions.
+        r"""The cosine-strategy integrand $L_i(Rμ) \cos θ(Rμ) w_C(Rμ)$ at rotated directions.
 
         Parameters
         ----------
         mu : ndarray, shape (m, 3)
             Directions drawn independently of θ, along which ``hits`` were traced.
         rotated : Dual or ndarray, shape (m, 3)
-            R·μ (value μ); the integrand is re-attached along it.
+            $R·μ$ (value μ); the integrand is re-attached along it.
         hits : Hits, shape (m,)
             :meth:`trace` of ``mu``.
         """
@@ -157,7 +157,7 @@ class Shading:
 
 @dataclass(frozen=True)
 class PixelSamples:
-    """Per camera sample: the radiance L(Rω) and the filter weight ``k/p · kJ(Rω)/detach(kJ(Rω))``.
+    r"""Per camera sample: the radiance $L(Rω)$ and the filter weight $k/p · kJ(Rω)/\mathrm{detach}(kJ(Rω))$.
 
     The estimate of the pixel integral is ``radiance * weight``; the weight's tangent
     has zero mean for a continuous filter (the filter integrates to 1 whatever the
@@ -214,7 +214,7 @@ class Transforms(Protocol):
         ...
 
     def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The per-sample estimate of the cosine-sampled integral (samples μ ~ cos, density ``pdf``),
+        r"""The per-sample estimate of the cosine-sampled integral (samples $μ \sim \cos$, density ``pdf``),
         using :meth:`Shading.trace` and :meth:`Shading.evaluate_bsdf` for the integrand (a method
         that evaluates it elsewhere than along μ need not trace μ). Random numbers come from
         ``shading.draws``, keyed on each point's camera sample."""
@@ -281,7 +281,8 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
-    """One MIS estimate of ``E = ∫ L_i cos θ dω`` per shading point (uniforms ``u``: 3 emitter + 2 cosine)."""
+    r"""One MIS estimate of $E = ∫ L_i \cos θ\, dω$ per shading point
+    (uniforms ``u``: 3 emitter + 2 cosine)."""
     state = shading.state
     total = 0.0
     if len(state.emitters):
@@ -345,9 +346,9 @@ def camera_radiance(
     draws: Draws,
     hits: Hits | None = None,
 ) -> Any:
-    """Radiance arriving at the camera along unit directions ``d`` (plain), re-attached along ``rotated``.
+    r"""Radiance arriving at the camera along unit directions ``d`` (plain), re-attached along ``rotated``.
 
-    Emission of the first hit's front side plus ``ρ/π E`` at diffuse hits, E estimated
+    Emission of the first hit's front side plus $ρ/π\, E$ at diffuse hits, E estimated
     with the shading uniforms ``u`` (n, 5) under ``transforms``; the sky where a ray misses.
     ``hits``: the rays' hits if the caller knows them (only ``shape`` and ``triangle`` are
     read), else they are traced.
