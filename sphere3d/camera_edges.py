@@ -1,37 +1,38 @@
-"""The boundary term of the pixel integrals: edge sampling on the film (primary edges).
+r"""The boundary term of the pixel integrals: edge sampling on the film (primary edges).
 
-Pixel p integrates ``I_p = ∫ k(x - p) L(x) dx`` over film positions x (pixels). Where
-L jumps along a curve C(θ) that moves with θ, the Leibniz (Reynolds) rule adds to the
-interior derivative ``∫ k ∂L/∂θ dx`` (the ``naive`` estimator) the term
+Pixel p integrates $I_p = ∫ k(x - p) L(x) dx$ over film positions x (pixels). Where
+L jumps along a curve $C(θ)$ that moves with θ, the Leibniz (Reynolds) rule adds to the
+interior derivative $∫ k\, ∂L/∂θ\, dx$ (the ``naive`` estimator) the term
 
-    ∫_C k(x - p) [L(x⁻) - L(x⁺)] (v · n) dl,
+    $∫_C k(x - p) [L(x^-) - L(x^+)] (v · n)\, dl$,
 
-n the curve's unit normal on the film, x∓ the points just before and after x along
-n, v = dx/dθ the velocity of the curve point (Loubet et al. 2019, Sec. 3.2; Li et
+n the curve's unit normal on the film, $x^∓$ the points just before and after x along
+n, $v = dx/dθ$ the velocity of the curve point (Loubet et al. 2019, Sec. 3.2; Li et
 al. 2018, Sec. 3). The filter k is static on the film and adds no term, even the box.
 
 The curves are the projections of mesh edges (:mod:`sphere3d.edges`): every
 boundary, non-manifold and crease edge (a crease between faces of a shape with zero
 albedo, or of a smooth-shaded shape, has no jump and is skipped). An edge is clipped
-to the part in front of the camera (depth > ε) and its projection to the film
+to the part in front of the camera ($\mathrm{depth} > ε$) and its projection to the film
 widened by the filter radius;
-points are drawn *stratified along the total projected length* Λ, ``N =
-ceil(rate · spp/batches · Λ)`` per batch (``rate`` points per pixel of projected
-length per camera sample per pixel), each weighted Λ/N. At each point:
+points are drawn *stratified along the total projected length* Λ,
+$N = \lceil \mathrm{rate} · \mathrm{spp}/\mathrm{batches} · Λ \rceil$ per batch
+(``rate`` points per pixel of projected length per camera sample per pixel), each weighted $Λ/N$.
+At each point:
 
-- its 3D position on the edge, P = A + s (B - A) with A, B the edge's Dual vertices
+- its 3D position on the edge, $P = A + s (B - A)$ with A, B the edge's Dual vertices
   and s fixed, projected to the film with Duals: the tangent of the film position
   is v (the component along the edge, which s-fixed points also carry, does not
-  matter: only v · n enters);
+  matter: only $v · n$ enters);
 - the edge point must be seen by the camera: a shadow ray to it, blocked more than
   2ε before it, makes the point contribute 0;
-- L(x ∓ δn) by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
+- $L(x ∓ δn)$ by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
   with the same shading uniforms on both sides (common random numbers), δ =
   :data:`EPS_FILM` pixels;
-- the contribution ``Λ/N [L⁻ - L⁺] (v · n)`` goes to every pixel whose filter
-  support covers the point, weighted by k(x - p).
+- the contribution $Λ/N\, [L^- - L^+] (v · n)$ goes to every pixel whose filter
+  support covers the point, weighted by $k(x - p)$.
 
-Unbiased for these curves; the side rays are δ off the curve (a bias of O(δ) in the
+Unbiased for these curves; the side rays are δ off the curve (a bias of $O(δ)$ in the
 shading, and where two curves come within δ of each other).
 """
 

@@ -1,26 +1,26 @@
-"""The boundary term of the emitter-sampling strategy: the light's own edges, held fixed.
+r"""The boundary term of the emitter-sampling strategy: the light's own edges, held fixed.
 
 The emitter strategy of :mod:`sphere3d.integrator` samples a point y uniformly on the
-emitters' area A (at θ0), turns its direction w(y) by one rotation R(θ) per shading
+emitters' area A (at θ0), turns its direction $w(y)$ by one rotation $R(θ)$ per shading
 point (:meth:`~sphere3d.integrator.Transforms.emitter`) and re-attaches it to the plane
-of the sampled triangle: T_θ(y), the identity at θ0. The re-attachment has no edge
+of the sampled triangle: $T_θ(y)$, the identity at θ0. The re-attachment has no edge
 (its barycentrics are not clamped), so the estimator differentiates
 
-    E_L(θ) = ∫_A F(T_θ(y), θ) 1[T_θ(y) ∈ A] |J| dA(y)
+    $E_L(θ) = ∫_A F(T_θ(y), θ)\, 1[T_θ(y) ∈ A]\, |J|\, dA(y)$
 
 without the indicator. F is the area-measure integrand
-``L_e V cos θ_x cos θ_y / d² · w_L`` (w_L the balance weight of the emitter strategy).
+$L_e V \cos θ_x \cos θ_y / d^2 · w_L$ ($w_L$ the balance weight of the emitter strategy).
 Where the rotation follows an occluder and the light's edge is sharp (no ``fade``),
 the edge moves in the rotated frame, and its term is lost: the soft-shadow gradient.
 By Leibniz's rule (Loubet et al. 2019, Sec. 4.3: an emitter's border is a
 discontinuity like any other, to be followed or held fixed; theory/leibniz) the
 missing term is
 
-    - ∫_∂A F_in(y) (V_T(y) · n_out(y)) dl(y),
+    $-∫_{∂A} F_\mathrm{in}(y) (V_T(y) · n_\mathrm{out}(y))\, dl(y)$,
 
-F_in the integrand just inside, n_out the outward unit normal of A in its plane, and
-V_T = dT/dθ the velocity of the re-attached point relative to the emitter, read from
-the tangents of the re-attached barycentrics, ``V_T = ḃ₁ e₁ + ḃ₂ e₂`` (e₁, e₂ the
+$F_\mathrm{in}$ the integrand just inside, $n_\mathrm{out}$ the outward unit normal of A in its plane, and
+$V_T = dT/dθ$ the velocity of the re-attached point relative to the emitter, read from
+the tangents of the re-attached barycentrics, $V_T = \dot b_1 e_1 + \dot b_2 e_2$ ($e_1$, $e_2$ the
 triangle's edge vectors): it is computed by the same Dual re-attachment
 (:func:`~sphere3d.tracing.intersect_triangles`) along the rotated direction of the edge
 point. Its value is 0, so the primal is unchanged; with it the emitter strategy's
@@ -71,7 +71,7 @@ class _EdgeTable:
 
 @dataclass(frozen=True)
 class EmitterEdgeSamples:
-    """Points on the emitters' edges, :data:`POINTS` per shading point (plain arrays, θ0).
+    r"""Points on the emitters' edges, :data:`POINTS` per shading point (plain arrays, θ0).
 
     Attributes
     ----------
@@ -87,7 +87,7 @@ class EmitterEdgeSamples:
         Which of the edge's (up to two) emitter triangles faces the shading point (the
         emitter strategy samples only those).
     dist, cos_x : ndarray, shape (k,)
-        Distance to the edge point and cos θ_x there.
+        Distance to the edge point and $\cos θ_x$ there.
     table : _EdgeTable
         The edges: endpoints, triangles, normals, outward normals in the triangles' planes.
     weight : float
@@ -125,10 +125,11 @@ class EmitterEdgeSamples:
         return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
 
     def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
-        """The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
+        r"""The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
 
         ``x``: the points ``index`` (Dual positions); ``rotation``: their emitter rotations.
-        Estimate ``- P/POINTS · Σ_faces F_in (V_T · n_out)`` per edge point (module docstring).
+        Estimate $-P/\mathrm{POINTS} · Σ_\mathrm{faces} F_\mathrm{in} (V_T · n_\mathrm{out})$ per edge point
+        (module docstring).
         """
         rotated = rotation.apply(self.w)
         area = float(detach(state.emitter_area))

@@ -19,11 +19,11 @@ Then:
 - only one of the pair hits: its hit point, moved to the silhouette between the
   two probes by bisection (``refine`` rays, default :data:`REFINE`, the option
   ``refine`` of the ``reparam`` method; a refinement argued in :func:`select_points`);
-- both hit: the tangent plane (p_k, n_k) of one *occludes* the other when it
+- both hit: the tangent plane $(p_k, n_k)$ of one *occludes* the other when it
   separates that point from the ray origin o,
-  ``(n0·(p1 - p0)) (n0·(o - p0)) < 0``; if exactly one occludes the other, the point
+  $(n_0·(p_1 - p_0)) (n_0·(o - p_0)) < 0$; if exactly one occludes the other, the point
   on the occluder (moved to its silhouette in the same way);
-- otherwise, nearly parallel normals (|n0·n1| > 0.99): p0;
+- otherwise, nearly parallel normals ($|n_0·n_1| > 0.99$): p0;
 - otherwise the intersection of the two tangent planes with the plane through o
   spanned by the two probe directions (where the two surfaces would meet between
   the probes: a silhouette or crease), falling back to p0 when that 3×3 system is
@@ -76,13 +76,14 @@ REFINE = 3
 
 
 def vmf_spread_angle(kappa: float, spread: float) -> float:
-    """Polar angle of the ring of probes: ``spread`` standard deviations of a vMF(κ) kernel.
+    r"""Polar angle of the ring of probes: ``spread`` standard deviations of a $\mathrm{vMF}(κ)$ kernel.
 
-    The angle r with P(angle <= r) equal to the Rayleigh probability ``1 - e^{-spread²/2}``
-    of ``spread`` σ (a vMF is a 2D Gaussian of σ = 1/√κ for large κ): from the vMF's
-    radial inverse CDF, ``1 - cos r = -log1p(P expm1(-2κ)) / κ``; r ≈ spread / √κ.
+    The angle r with $P(\mathrm{angle} ≤ r)$ equal to the Rayleigh probability $1 - e^{-\mathrm{spread}^2/2}$
+    of ``spread`` σ (a vMF is a 2D Gaussian of $σ = 1/\sqrt{κ}$ for large κ): from the vMF's
+    radial inverse CDF, $1 - \cos r = -\mathrm{log1p}(P\, \mathrm{expm1}(-2κ)) / κ$;
+    $r ≈ \mathrm{spread} / \sqrt{κ}$.
     Defined for every spread >= 0: r grows from 0 to π (the ring closes on the
-    antipode once the vMF's mass beyond the Rayleigh level is below e^{-2κ}).
+    antipode once the vMF's mass beyond the Rayleigh level is below $e^{-2κ}$).
     """
     tail = -0.5 * spread * spread  # log(1 - P), the Rayleigh tail beyond ``spread`` σ (-inf: none)
     level = -math.expm1(tail)
@@ -99,7 +100,7 @@ def vmf_spread_angle(kappa: float, spread: float) -> float:
 def ring_directions(centre: np.ndarray, angle: float, count: int, u: np.ndarray) -> np.ndarray:
     """``count`` probe directions around unit ``centre`` (m, 3): the centre, then a ring at ``angle``.
 
-    Ring probes are evenly spaced in azimuth from the phase 2π ``u`` (m,). Returns (m, count, 3).
+    Ring probes are evenly spaced in azimuth from the phase $2π u$ (m,). Returns (m, count, 3).
     """
     t, b = frame(centre)
     phi = 2.0 * np.pi * (u[:, None] + np.arange(count - 1)[None, :] / max(count - 1, 1))
@@ -110,7 +111,7 @@ def ring_directions(centre: np.ndarray, angle: float, count: int, u: np.ndarray)
 
 
 def ring_offsets(radius: float, count: int, u: np.ndarray) -> np.ndarray:
-    """Film offsets (m, count, 2) in pixels: the pixel centre, then a ring of ``radius`` (phase 2π ``u``)."""
+    """Film offsets (m, count, 2) in pixels: the pixel centre, then a ring of ``radius`` (phase $2π u$)."""
     phi = 2.0 * np.pi * (u[:, None] + np.arange(count - 1)[None, :] / max(count - 1, 1))
     ring = radius * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
     return np.concatenate([np.zeros((len(u), 1, 2)), ring], axis=1)
@@ -212,9 +213,9 @@ def select_points(
       by ``refine`` bisection rays (:func:`_bisect`). A rotation that follows a
       point on a moving object matches the silhouette's motion only to first order
       in their distance, and the apparent motion of a translating object changes by
-      about its own size per radian: following a ring probe's hit, up to 3 σ inside
+      about its own size per radian: following a ring probe's hit, up to $3 σ$ inside
       the shape, cost 14 % of the boundary term under a translating triangle
-      (κ = 1000; -0.0106 ± 0.0002 of 0.077, the difference of 12 M paired samples).
+      ($κ = 1000$; -0.0106 ± 0.0002 of 0.077, the difference of 12 M paired samples).
     - The plane-intersection point is replaced by p0 when it lies behind the
       origin: a tangent-plane line crossing the probe plane behind o says nothing
       about the silhouette between the two probes, and its direction would be
