@@ -6,7 +6,7 @@ direct illumination those curves are images of mesh edges (Li et al. 2018,
 "Differentiable Monte Carlo Ray Tracing through Edge Sampling", Sec. 3-4):
 
 - **silhouette edges** seen from a viewpoint o: the two faces of the edge face o on
-  opposite sides (``n₁·(o - a)`` and ``n₂·(o - a)`` of opposite signs);
+  opposite sides ($n_1·(o - a)$ and $n_2·(o - a)$ of opposite signs);
 - **boundary edges** (one face): a silhouette from every viewpoint;
 - **crease edges** (two non-coplanar faces): a flat-shaded face is shaded with its own
   normal, so the reflected radiance of a diffuse shape jumps across them (not on a

@@ -1,10 +1,10 @@
-"""Figures of sphere3d results: matplotlib only, no numerics.
+r"""Figures of sphere3d results: matplotlib only, no numerics.
 
 A sphere3d film is a (height, width) image. Images are drawn in grey; derivatives on
 the diverging map ``RdBu_r`` centred on zero, one symmetric scale shared by all
 methods of a figure. The panel puts "primal | naive | reparam | finite differences"
 side by side (the demo's methods, :mod:`sphere3d.__main__`). Study figures: RMSE against
-wall time per estimate (log-log, a biased method's floor next to the 1/√t fall of
+wall time per estimate (log-log, a biased method's floor next to the $1/\sqrt{t}$ fall of
 the unbiased ones), bias ± CI and standard deviation against κ, and equal-time
 efficiency bars (unbiased cells only). The drawing code is shared with flatland
 (:mod:`flatland.plotting.films`, :mod:`flatland.plotting.study`), which draws its 1D

@@ -137,12 +137,12 @@ def irradiance(
     batches: int | None = None,
     **options: Any,
 ) -> Estimate:
-    """Irradiance ``E = ∫ L_i(ω) cos θ dω`` at a fixed point and normal, and its derivative.
+    r"""Irradiance $E = ∫ L_i(ω) \cos θ\, dω$ at a fixed point and normal, and its derivative.
 
     The integral the renderer evaluates at every diffuse hit (there multiplied by
-    albedo / π), by the same emitter/cosine MIS estimator and the same methods; the
+    $\mathrm{albedo} / π$), by the same emitter/cosine MIS estimator and the same methods; the
     point and normal do not move with θ. Used for closed-form checks (a black
-    triangle under a constant sky: E = L (π - Lambert's polygon formula)).
+    triangle under a constant sky: $E = L (π - \mathrm{Lambert's\ polygon\ formula})$).
 
     Returns
     -------

@@ -84,7 +84,7 @@ class CameraState:
         return x, y
 
     def log_jacobian(self, omega: Any) -> Any:
-        """log of film area per solid angle, ``-3 log cos θ`` (up to a constant); Dual-aware."""
+        r"""log of film area per solid angle, $-3 \log \cos θ$ (up to a constant); Dual-aware."""
         return -3.0 * np.log(dot(omega, self.forward))
 
 
@@ -192,7 +192,7 @@ def check_world(
     still make a triangle collapse in world space: scaled by 1e-13 and placed at
     x = 600, where float64 coordinates are 1.1e-13 apart, its vertices round to one
     point, and its unit normal would be 0/0. Every world triangle must have a nonzero
-    ``|e1 × e2|`` (the very expression its normal is divided by), and every vertex and
+    $|e_1 × e_2|$ (the very expression its normal is divided by), and every vertex and
     the camera must lie within ±:data:`COORD_MAX`.
 
     Parameters

@@ -96,40 +96,40 @@ class ImageTask:
         check_choice("cv_scope", self.cv_scope, CV_SCOPES)
 
     def _control_variate(self, samples: PixelSamples, batches: int, per_batch: int) -> Any:
-        """Per-sample estimates (batches × pixels × samples) with the filter-weight control variate.
+        r"""Per-sample estimates (batches × pixels × samples) with the filter-weight control variate.
 
-        With a continuous filter, the tangent of each sample's filter weight w_i has
-        zero mean given its pixel's rotation (∫ k = 1 for every θ; Loubet et al. 2019,
-        Sec. 4.2, theory/kernels), so ``e_i - c_{-i} (w_i - detach(w_i))`` keeps the
+        With a continuous filter, the tangent of each sample's filter weight $w_i$ has
+        zero mean given its pixel's rotation ($∫ k = 1$ for every θ; Loubet et al. 2019,
+        Sec. 4.2, theory/kernels), so $e_i - c_{-i} (w_i - \mathrm{detach}(w_i))$ keeps the
         expectation of every batch mean, value and derivative, while cancelling the term
-        ``L ẇ_i`` that a rotated pixel integral adds even where the radiance is flat. The
+        $L \dot w_i$ that a rotated pixel integral adds even where the radiance is flat. The
         value is untouched, bit for bit (an exact zero is subtracted). Not applied to the
         box filter, whose weight derivative does not have zero mean (theory/pixel_filters).
 
-        The scale ``c_{-i}`` is the mean radiance (primal) of the pixel's *other*
+        The scale $c_{-i}$ is the mean radiance (primal) of the pixel's *other*
         samples, ``cv_scope="pixel"`` (default): all ``spp - 1`` of them, in every
         batch. It is a function of samples independent of sample i (its own rotation
         included: each sample's film kernel and rotation come from its own streams, and
-        the radiance's value does not depend on them), and ẇ_i has zero mean given
-        everything else, so every batch mean stays unbiased. ``"batch"`` takes the other samples of the same batch only: with one
-        sample per batch (16 spp in 16 batches) it has none and the control variate is
-        off; ``"off"`` never applies it (both for comparison).
+        the radiance's value does not depend on them), and $\dot w_i$ has zero mean given
+        everything else, so every batch mean stays unbiased. ``"batch"`` takes the other samples
+        of the same batch only: with one sample per batch (16 spp in 16 batches) it has none and
+        the control variate is off; ``"off"`` never applies it (both for comparison).
 
-        Batches are then weakly correlated: batch b's term ``c_{-i} ẇ_i`` holds the
-        radiance of batch b' and vice versa. With γ = Cov(L, ẇ) (zero where the radiance
-        is flat) and N = spp, Cov(D_b, D_b') = γ² / (N - 1)² for the derivative's batch
-        means D_b (every other cross term has zero mean: ẇ_i is centred given the rest),
-        against Var D_b = σ² / n (n = N / batches, σ² the controlled per-sample variance,
-        usually of the order of E[((L - E L) ẇ)²] >= γ²). The batch spread thus
-        understates the variance of the image by a relative (batches - 1) n γ² / ((N - 1)²
-        σ²) ≈ γ² / (σ² N), at most about 1 / N. Measured on ``hard_shadow`` at 16 spp
-        (reparam, 32 seeds): mean correlation of two batches -0.0002 (per-batch scope
+        Batches are then weakly correlated: batch b's term $c_{-i} \dot w_i$ holds the
+        radiance of batch b' and vice versa. With $γ = \mathrm{Cov}(L, \dot w)$ (zero where the
+        radiance is flat) and $N = \mathrm{spp}$, $\mathrm{Cov}(D_b, D_{b'}) = γ^2 / (N - 1)^2$ for the
+        derivative's batch means $D_b$ (every other cross term has zero mean: $\dot w_i$ is centred given the rest),
+        against $\mathrm{Var}\, D_b = σ^2 / n$ ($n = N / \mathrm{batches}$, $σ^2$ the controlled per-sample
+        variance, usually of the order of $E[((L - E L) \dot w)^2] ≥ γ^2$). The batch spread thus
+        understates the variance of the image by a relative
+        $(\mathrm{batches} - 1) n γ^2 / ((N - 1)^2 σ^2) ≈ γ^2 / (σ^2 N)$, at most about $1 / N$.
+        Measured on ``hard_shadow`` at 16 spp (reparam, 32 seeds): mean correlation of two batches -0.0002 (per-batch scope
         -0.0008), variance over seeds / mean squared standard error 0.998 (0.987). The
         pooled scale also has less noise of its own than a batch's (N - 1 samples instead
         of n - 1). Pixel RMSE of ``reparam`` on ``hard_shadow`` (sphere / cube) at
         16 / 64 / 256 spp: 0.99 / 0.58 / 0.41 and 1.55 / 0.83 / 0.53, against 2.02 /
         0.64 / 0.42 and 3.24 / 0.92 / 0.54 per batch. A regression coefficient
-        (Σ ė ẇ / Σ ẇ² over the others) was no better there (1.04 / 0.58 / 0.41).
+        ($Σ \dot e \dot w / Σ \dot w^2$ over the others) was no better there (1.04 / 0.58 / 0.41).
         """
         est = samples.estimate.reshape(batches, -1, per_batch)
         axes, n = ((0, 2), batches * per_batch) if self.cv_scope == "pixel" else ((2,), per_batch)
@@ -176,7 +176,7 @@ class ImageTask:
 
 @dataclass(frozen=True)
 class PointTask:
-    """The irradiance ``E = ∫ L_i cos θ dω`` at a fixed point with a fixed unit normal: ``n`` samples."""
+    r"""The irradiance $E = ∫ L_i \cos θ\, dω$ at a fixed point with a fixed unit normal: ``n`` samples."""
 
     scene: Scene
     param: str | None

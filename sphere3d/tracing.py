@@ -267,13 +267,13 @@ class Intersection:
 
 
 def intersect_triangles(origin: Any, direction: Any, tri: Any) -> Intersection:
-    """Intersection of rays with the planes of given triangles (Möller–Trumbore), Dual-aware.
+    r"""Intersection of rays with the planes of given triangles (Möller–Trumbore), Dual-aware.
 
     Parameters
     ----------
     origin, direction : array_like or Dual, shape (..., 3)
         Rays; the direction need not be the one Embree traced (a reparameterized
-        R · detach(ω) has the same value but carries Ṙ ω).
+        $R · \mathrm{detach}(ω)$ has the same value but carries $\dot R ω$).
     tri : array_like or Dual, shape (..., 3, 3)
         The hit triangles' vertices at θ (gathered from the scene's Dual vertices).
 

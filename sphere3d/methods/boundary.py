@@ -70,13 +70,13 @@ or 4 are within the noise of this choice."""
     "boundary", Option("rate", RATE, check_positive), Option("secondary", SECONDARY, check_int)
 )
 def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
-    """Naive interior term plus the boundary terms of the pixel and shading integrals (edge sampling).
+    r"""Naive interior term plus the boundary terms of the pixel and shading integrals (edge sampling).
 
-    Every integral the renderer differentiates has the form ``∫ f(θ, y) dy`` with f
+    Every integral the renderer differentiates has the form $∫ f(θ, y) dy$ with f
     jumping along curves that move with θ; by the Leibniz (Reynolds transport) rule
-    its derivative is the interior term ``∫ ∂f/∂θ dy`` — the ``naive`` estimator,
+    its derivative is the interior term $∫ ∂f/∂θ\, dy$ — the ``naive`` estimator,
     obtained here from the same integrator with the same primary samples — plus, for
-    every curve, ``∫ [f⁻ - f⁺] (v·n) dl``: the jump across the curve times its normal
+    every curve, $∫ [f^- - f^+] (v·n)\, dl$: the jump across the curve times its normal
     velocity (Loubet et al. 2019, Sec. 3.2, the term their reparameterization avoids;
     Li et al. 2018, Sec. 3-4, estimate it by sampling the edges). Both boundary terms
     are included:
@@ -91,7 +91,7 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
 
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
     only discontinuities (see :mod:`sphere3d.edges` for what is not handled: partly
-    overlapping edges, surfaces cutting through each other), up to the O(δ) offsets
+    overlapping edges, surfaces cutting through each other), up to the $O(δ)$ offsets
     of the rays traced beside the edges. Cost: two rays per edge point on the film,
     and per shading point ``2 secondary`` rays plus a silhouette test against every edge.
     """
