@@ -1,21 +1,21 @@
-"""The flatland integrator: pixel and shading integrals, with the change of variables left to the method.
+r"""The flatland integrator: pixel and shading integrals, with the change of variables left to the method.
 
-Radiometry (theory/radiometry). Pixel j of the 1D film is ``I_j = ∫ k_j(t) L(t) dt``, with
-k_j the pixel filter and L(t) the radiance arriving along film coordinate t; it is
-estimated with t ~ k_j (the filter is its own sampling density). At the first hit
-x, ``L = L_e(x) + (ρ/2) E(x)`` with the cosine-weighted incident radiance
+Radiometry (theory/radiometry). Pixel j of the 1D film is $I_j = ∫ k_j(t) L(t) dt$, with
+$k_j$ the pixel filter and $L(t)$ the radiance arriving along film coordinate t; it is
+estimated with $t \sim k_j$ (the filter is its own sampling density). At the first hit
+x, $L = L_e(x) + (ρ/2) E(x)$ with the cosine-weighted incident radiance
 
-    E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ,
+    $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$,
 
-L_i being the emission (or sky) the ray from x along φ meets: direct illumination.
+$L_i$ being the emission (or sky) the ray from x along φ meets: direct illumination.
 E is estimated with one cosine-weighted sample and one emitter sample combined by
 multiple importance sampling (balance heuristic): each sample φ contributes
-``f(φ) / (p_cos(φ) + p_light(φ))``. All proposals are θ-free (evaluated on the
+$f(φ) / (p_\mathrm{cos}(φ) + p_\mathrm{light}(φ))$. All proposals are θ-free (evaluated on the
 detached geometry), so the estimators differentiate cleanly (Loubet et al. 2019, Sec. 3.2).
 
 Transforms. A gradient method changes *where* the integrands are evaluated, never the
-samples: its :class:`Transforms` maps each film sample t to evaluation points ``T(t)``
-(``camera``) and each direction sample φ to ``T(φ)`` (``directions``), with a weight
+samples: its :class:`Transforms` maps each film sample t to evaluation points $T(t)$
+(``camera``) and each direction sample φ to $T(φ)$ (``directions``), with a weight
 of value 1 that carries kernel derivatives, and may replace one sample by a pair
 (theory/kernels). Two extension points exist in 2D only, for the boundary method: a
 derivative-only term per shading point (``shading_extra``) and per pixel
@@ -171,9 +171,9 @@ class Context:
 
 # ------------------------------------------------------------------ radiance
 def emitted(geom: SceneState, prim: np.ndarray, u: Any, normal0: np.ndarray, dirs0: np.ndarray) -> Any:
-    """Radiance L_e leaving primitives ``prim`` at coordinate ``u`` toward the ray origins.
+    r"""Radiance $L_e$ leaving primitives ``prim`` at coordinate ``u`` toward the ray origins.
 
-    Emission × the fade profile min(1, u / f, (1 - u) / f) × (one-sided emitters: 1 on
+    Emission × the fade profile $\min(1, u / f, (1 - u) / f)$ × (one-sided emitters: 1 on
     the side the geometric normal points to, 0 behind).
     """
     e = geom.emission[prim]
@@ -200,7 +200,8 @@ def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any
 
 
 def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, draws: Draws) -> Any:
-    """MIS estimate of E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ at shading points ``x`` (n, 2).
+    r"""MIS estimate of $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$
+    at shading points ``x`` (n, 2).
 
     ``normal`` (n, 2) is the unit normal on the side being shaded, ``ignore`` the
     primitive each point lies on (-1 for none), ``u`` (n, 3) the primary uniforms,
@@ -246,7 +247,7 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, 
 
 # ------------------------------------------------------------------ the pixel integral
 def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) -> Any:
-    """L(t) for film evaluation points ``t_eval`` (n,): emission at the hit + (ρ/2) E there."""
+    """$L(t)$ for film evaluation points ``t_eval`` (n,): emission at the hit + $(ρ/2) E$ there."""
     geom = ctx.geom
     d = film_direction(geom, t_eval)
     hits = cast(ctx.geom0, detach(geom.cam_o), detach(d))
@@ -270,7 +271,7 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
 
 
 def pixel_samples(ctx: Context, pixel: np.ndarray, u: np.ndarray, draws: Draws) -> Any:
-    """Per-sample pixel estimates k_j(T t) / k_j(t) · L(T t) · w (combined over members)."""
+    """Per-sample pixel estimates $k_j(T t) / k_j(t) · L(T t) · w$ (combined over members)."""
     cam = ctx.geom.camera
     centers = cam.pixel_centers()[pixel]
     width = cam.pixel_width

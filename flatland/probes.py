@@ -12,9 +12,9 @@ angular (film) order:
   counts as "no shape"); without such a probe, probe 0's hit is used;
 - if only one of the pair hits, its hit point is used;
 - if both hit, the tangent line (p0, n0) *occludes* p1 when it separates p1 from o:
-  ``(n0·(p1 − p0)) (n0·(o − p0)) < 0``, and likewise for (p1, n1); if exactly one
+  $(n_0·(p_1 − p_0)) (n_0·(o − p_0)) < 0$, and likewise for (p1, n1); if exactly one
   occludes the other, the point on the occluder is used;
-- otherwise, nearly parallel normals (``|n0·n1| > 0.99``) use p0, and else the two
+- otherwise, nearly parallel normals ($|n_0·n_1| > 0.99$) use p0, and else the two
   tangent lines are intersected (a corner where two shapes meet), falling back to
   p0 when they are parallel or the intersection lies behind o;
 - no probe hits: no point, the transform is the identity.

@@ -85,7 +85,7 @@ def _gradient(
 
 
 def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int | None = None) -> Image:
-    """Render the scene's pixels: ``I_j = ∫ k_j(t) L(t) dt`` with ``spp`` samples per pixel.
+    """Render the scene's pixels: $I_j = ∫ k_j(t) L(t) dt$ with ``spp`` samples per pixel.
 
     Raises
     ------
@@ -162,11 +162,11 @@ def irradiance(
     batches: int | None = None,
     **options: Any,
 ) -> Estimate:
-    """Estimate E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ at a fixed point and its derivative.
+    r"""Estimate $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$ at a fixed point and its derivative.
 
     The shading integral of the renderer on its own (same samplers, same methods),
     at a point that does not move with θ. Closed forms (theory/radiometry): a uniform emitter
-    of radiance L between angles φ_a < φ_b from the normal gives L (sin φ_b - sin φ_a);
+    of radiance L between angles $φ_a < φ_b$ from the normal gives $L (\sin φ_b - \sin φ_a)$;
     the unoccluded sky of radiance 1 gives 2. With ``param=None`` only the value is
     estimated (derivative 0).
     """

@@ -1,4 +1,4 @@
-"""Flatland scenes: shapes, materials, emitters, a pinhole camera and named parameters.
+r"""Flatland scenes: shapes, materials, emitters, a pinhole camera and named parameters.
 
 A scene is a plain dict (or a JSON file of the same shape), validated on load::
 
@@ -20,11 +20,11 @@ two-sided unless ``one_sided`` is true; a one-sided segment emits toward the rig
 its direction a → b (outward for a counter-clockwise polygon), a circle outward. A
 ``segment`` emitter may ``fade`` linearly to zero over that fraction (<= 0.5) of its
 length at both ends, so its own edge is not a moving discontinuity (theory/probes).
-Rays that escape see the constant ``sky`` radiance. The camera is a pinhole with a 1D
-film: film coordinate t looks along normalize(forward + t · right) (theory/radiometry), right
-being forward turned clockwise; the ``pixels`` cover t in [-tan(fov/2), tan(fov/2)]
-left to right, each integrated against its ``filter`` (``box`` one pixel wide,
-``tent`` of radius one pixel, ``gaussian`` of standard deviation half a pixel).
+Rays that escape see the constant ``sky`` radiance. The camera is a pinhole with a 1D film: film coordinate t
+looks along $\mathrm{normalize}(\mathrm{forward} + t · \mathrm{right})$ (theory/radiometry), right being
+forward turned clockwise; the ``pixels`` cover t in $[-\tan(\mathrm{fov}/2), \tan(\mathrm{fov}/2)]$ left to
+right, each integrated against its ``filter`` (``box`` one pixel wide, ``tent`` of radius one pixel,
+``gaussian`` of standard deviation half a pixel).
 
 Parameters bind a scalar θ to one scene quantity. θ is an offset applied to the
 scene as loaded, and gradients are taken at θ = 0:

@@ -82,8 +82,8 @@ class ImageTask:
 
 @dataclass(frozen=True)
 class PointTask:
-    """The irradiance E(x) = ∫ L_i(x, φ) max(0, cos(φ - φ_n)) dφ at a fixed ``point`` with unit
-    ``normal``: ``n`` samples in ``batches`` batches (one "pixel")."""
+    r"""The irradiance $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$
+    at a fixed ``point`` with unit ``normal``: ``n`` samples in ``batches`` batches (one "pixel")."""
 
     scene: Scene
     param: Parameter | None

@@ -58,23 +58,25 @@ def cross2(a: Any, b: Any) -> Any:
 
 
 def direction(phi: Any) -> Any:
-    """Unit vector(s) (cos φ, sin φ), shape ``phi.shape + (2,)``."""
+    r"""Unit vector(s) $(\cos φ, \sin φ)$, shape ``phi.shape + (2,)``."""
     return np.stack([np.cos(phi), np.sin(phi)], axis=-1)
 
 
 def angle_of(v: Any) -> Any:
-    """Angle atan2(v_y, v_x) of vectors ``v`` (shape (..., 2))."""
+    r"""Angle $\mathrm{atan2}(v_y, v_x)$ of vectors ``v`` (shape (..., 2))."""
     return np.arctan2(v[..., 1], v[..., 0])
 
 
 def film_direction(geom: SceneState, t: Any) -> Any:
-    """Unit ray direction normalize(forward + t · right) for film coordinates ``t`` (theory/radiometry)."""
+    r"""Unit ray direction $\mathrm{normalize}(\mathrm{forward} + t · \mathrm{right})$
+    for film coordinates ``t`` (theory/radiometry)."""
     d = geom.cam_f + t[..., None] * geom.cam_r
     return d / np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])[..., None]
 
 
 def film_coordinate(geom: SceneState, v: Any) -> Any:
-    """Film coordinate t = (v · right) / (v · forward) of direction vectors ``v`` from the camera."""
+    r"""Film coordinate $t = (v · \mathrm{right}) / (v · \mathrm{forward})$ of direction vectors ``v``
+    from the camera."""
     return (v[..., 0] * geom.cam_r[0] + v[..., 1] * geom.cam_r[1]) / (
         v[..., 0] * geom.cam_f[0] + v[..., 1] * geom.cam_f[1]
     )
@@ -252,10 +254,10 @@ def attach(geom: SceneState, hits: Hits, rows: np.ndarray, origins: Any, dirs: A
 
 
 def attached_points(geom: SceneState, prim: np.ndarray, coord: np.ndarray) -> tuple[Any, Any]:
-    """Points that follow the shape, and their normals, for hits ``(prim, coord)`` (all hits).
+    r"""Points that follow the shape, and their normals, for hits ``(prim, coord)`` (all hits).
 
-    Segment: a(θ) + u (b(θ) - a(θ)) with the barycentric u detached; circle:
-    c(θ) + r(θ) (cos α, sin α) with the world angle α detached (a rotation about its
+    Segment: $a(θ) + u (b(θ) - a(θ))$ with the barycentric u detached; circle:
+    $c(θ) + r(θ) (\cos α, \sin α)$ with the world angle α detached (a rotation about its
     centre leaves a circle unchanged). These are the points whose motion the
     reparameterization follows (Loubet et al. 2019, Sec. 4.3).
     """
@@ -283,7 +285,7 @@ def silhouette_angles(geom: SceneState, origins: Any) -> tuple[Any, np.ndarray]:
     """Angles of every candidate discontinuity seen from each origin (theory/boundary).
 
     The candidates are the shapes' vertices and the two tangent points of every
-    circle. Returns the angles φ_c(θ), shape (n, V + 2C) (a Dual when the geometry or
+    circle. Returns the angles $φ_c(θ)$, shape (n, V + 2C) (a Dual when the geometry or
     origins are), and a mask of candidates that exist (an origin on or inside a
     circle has no tangent points to it; an origin on a vertex has no direction to it).
     """
