@@ -82,7 +82,7 @@ class Package:
         Sample multiplier of the demo's reference.
     reference_options : tuple of (name, value) pairs
         Options of the demo's reference method (e.g. a larger finite-difference step ``h``,
-        trading an O(h²) bias for less variance).
+        trading an $O(h^2)$ bias for less variance).
     demo_methods : tuple of str, optional
         The panel's gradient methods, in order; None: those of
         :data:`~flatland.app.commands.DEMO_METHODS` the package has.

@@ -118,7 +118,7 @@ def _sketch(pkg: Package, scene: Any, param: str | None = None) -> dict[str, Any
 
 
 def _film_sum(g: Any) -> str:
-    """Σ_j dI_j/dθ ± its standard error (pixels estimated independently)."""
+    """$Σ_j dI_j/dθ$ ± its standard error (pixels estimated independently)."""
     total = float(np.sum(g.derivative))
     stderr = float(np.sqrt(np.sum(np.square(g.derivative_stderr))))
     return f"{total:+.4g} ± {stderr:.2g}"

@@ -1,4 +1,4 @@
-"""Study runner: a grid of methods × options × independent trials, measured against a reference.
+r"""Study runner: a grid of methods × options × independent trials, measured against a reference.
 
 A study answers "how biased, how noisy and how fast is each estimator here?" for one
 scalar derivative dI/dθ, the numbers behind the bias/variance trade-off of the
@@ -16,7 +16,7 @@ Problems
     ``render_gradient`` of its description (:class:`~flatland.app.cli.Package`). The
     scalar studied is a linear functional of the gradient
     image: by default (``"functional": "sum"``) the sum over all pixels, i.e. the
-    derivative of the image's total brightness d/dθ Σ_j I_j; with
+    derivative of the image's total brightness $d/dθ\, Σ_j I_j$; with
     ``"pixel": j`` (flatland) or ``"pixel": [row, col]`` (sphere3d) the derivative
     of that one pixel. The per-pixel error is reported as well, as the image error
     metric :func:`~flatland.core.image.relative_error` averaged over the trials.
@@ -42,7 +42,7 @@ cached) by :mod:`flatland.app.study_reference`, and the statistics, the table an
 Reference rule: a Monte Carlo reference's standard error must be at most 1/4 of
 the smallest standard error among the cells it does not flag as biased (a flag
 already counts the reference's noise in its z). :func:`run_study` checks this after
-the trials and recomputes the reference at (stderr / target)² × its sample count
+the trials and recomputes the reference at $(\mathrm{stderr} / \mathrm{target})^2$ × its sample count
 (× 1.25), or raises with that count (``grow_reference=False``); the table's footer
 states the reference's method, sample count, stderr and the ratio.
 

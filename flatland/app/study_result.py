@@ -1,4 +1,4 @@
-"""A study's results: per-cell statistics (:class:`CellResult`), their ranking, the table and the CSV.
+r"""A study's results: per-cell statistics (:class:`CellResult`), their ranking, the table and the CSV.
 
 Statistics per cell (T trials of ``samples`` integrand evaluations each)
 ------------------------------------------------------------------------
@@ -6,28 +6,28 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
     mean of the T trial estimates
 ``bias``
     mean - reference, with a Student-t interval (T - 1 degrees of freedom) of
-    half-width t · sqrt(s²/T + s_ref²) (plus a floating-point allowance of
-    :func:`~flatland.core.stats.rounding_floor` (64 ε) of the larger of mean and
+    half-width $t · \sqrt{s^2/T + s_\mathrm{ref}^2}$ (plus a floating-point allowance of
+    :func:`~flatland.core.stats.rounding_floor` ($64 ε$) of the larger of mean and
     reference; a spread of the trials below that counts as zero variance, the
     policy of :data:`flatland.core.stats.ROUNDING`)
 ``variance_per_sample``
-    s² · samples (s² the variance of the trial estimates), the variance a
+    $s^2 · \mathrm{samples}$ ($s^2$ the variance of the trial estimates), the variance a
     single-sample estimate would have
 ``seconds_per_sample``
     measured wall time (time.perf_counter) / (T · samples)
 ``rmse``
-    sqrt(mean_k (d_k - reference)²): the error of one trial
+    $\sqrt{\mathrm{mean}_k (d_k - \mathrm{reference})^2}$: the error of one trial
 ``bias_z``, ``biased``
-    z = bias / sqrt(stderr² + reference_stderr²) (0 within the floating-point
-    allowance, ±inf with no noise at all); ``biased`` when |z| > 3.3 (two-sided
+    $z = \mathrm{bias} / \sqrt{\mathrm{stderr}^2 + \mathrm{reference\_stderr}^2}$ (0 within the floating-point
+    allowance, ±inf with no noise at all); ``biased`` when $|z| > 3.3$ (two-sided
     99.9 %); for scenes the per-pixel test of the mean image over the
-    trials flags it (:mod:`flatland.core.bias`: |z_j| above the Student-t
+    trials flags it (:mod:`flatland.core.bias`: $|z_j|$ above the Student-t
     quantile with T - 1 degrees of freedom at the Sidak-corrected level
-    1 - 0.99^(1/m) over the m pixels, the stderr the larger of the trials' scatter
+    $1 - 0.99^{1/m}$ over the m pixels, the stderr the larger of the trials' scatter
     and their pooled batch stderrs; ``pixels_exceeding`` of ``pixels_tested``: shown, not
     a flag, as heavy-tailed pixels break its t law at 8-16 trials)
 ``efficiency``
-    1 / (variance_per_sample · seconds_per_sample), infinite for a zero-variance
+    $1 / (\mathrm{variance\_per\_sample} · \mathrm{seconds\_per\_sample})$, infinite for a zero-variance
     estimator; only for a cell that is not ``biased`` and whose interval contains
     0, else None (blank in the CSV, "biased" or "-" in the table): efficiency
     ignores bias, so a biased cell has none
@@ -38,8 +38,8 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
     seconds_per_sample · samples, the wall time of one estimate (the x axis of the
     error-versus-time figure)
 ``equal_time_rmse``
-    sqrt(bias² + variance_per_sample · seconds_per_sample / B): the error expected
-    from a time budget of B seconds (``"time_budget"``, default 1 s), which unlike
+    $\sqrt{\mathrm{bias}^2 + \mathrm{variance\_per\_sample} · \mathrm{seconds\_per\_sample} / B}$: the error
+    expected from a time budget of B seconds (``"time_budget"``, default 1 s), which unlike
     efficiency counts the bias
 
 For scenes a "sample" is one camera sample: spp × pixels. A study is run by

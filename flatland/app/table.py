@@ -45,7 +45,7 @@ def own_method_note(methods: Iterable[str], reference_method: str) -> str:
     """The footer line for a method judged by a reference made with that same method ('' if none).
 
     Finite differences against a finite-difference reference with the same step share
-    its O(h²) bias, which then cancels: the table cannot show it.
+    its $O(h^2)$ bias, which then cancels: the table cannot show it.
     """
     if reference_method not in set(methods):
         return ""

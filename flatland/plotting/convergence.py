@@ -1,4 +1,4 @@
-"""Error against time of gradient methods measured in a notebook: log-log, one line per method.
+r"""Error against time of gradient methods measured in a notebook: log-log, one line per method.
 
 The study runner draws the same picture from its result files
 (:func:`flatland.plotting.study.error_time_figure`); this helper draws measurements made in
@@ -7,7 +7,7 @@ root-mean-square error against a reference. Like :mod:`flatland.plotting.tutoria
 computes nothing and returns a :class:`~matplotlib.figure.Figure` made without pyplot.
 
 An unbiased method's mean squared error is its variance, which falls as 1/t with the
-time t spent on samples, so its RMSE falls as 1/√t (a straight line of slope -1/2 on
+time t spent on samples, so its RMSE falls as $1/\sqrt{t}$ (a straight line of slope -1/2 on
 log-log axes, the dotted guide). A biased method's RMSE levels off at its bias: the
 floor, if given, is drawn as a thin horizontal line in the method's colour.
 """
@@ -55,7 +55,7 @@ def plot_error_time(
     xlabel: str = "seconds per estimate",
     ylabel: str = "RMSE of dI/dθ",
 ) -> Figure:
-    """Draw each method's RMSE against its time per estimate, log-log, with a 1/√t guide.
+    r"""Draw each method's RMSE against its time per estimate, log-log, with a $1/\sqrt{t}$ guide.
 
     Parameters
     ----------

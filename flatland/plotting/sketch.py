@@ -1,4 +1,4 @@
-"""Scene sketches: the geometry behind a flatland film, drawn beside it.
+r"""Scene sketches: the geometry behind a flatland film, drawn beside it.
 
 A 1D film shows stripes; the sketch shows what makes them. :func:`draw_scene` draws,
 in scene coordinates with equal aspect:
@@ -8,10 +8,10 @@ in scene coordinates with equal aspect:
 * emitters in their own colour, with short ticks on the emitting side of a one-sided
   segment (its right, looking from its first point to its second);
 * the pinhole camera, its frustum (the field of view, film coordinates
-  t in [-tan(fov/2), tan(fov/2)]) and its film, with the end of pixel 0 marked;
+  t in $[-\tan(\mathrm{fov}/2), \tan(\mathrm{fov}/2)]$) and its film, with the end of pixel 0 marked;
 * with a parameter: the part θ moves (or whose emission or albedo θ changes) under a
-  translucent halo, arrows of its points' velocity dp/dθ scaled by a small step dθ,
-  and the part at θ + dθ dashed, to first order p + dθ · dp/dθ (the arrows end on it).
+  translucent halo, arrows of its points' velocity $dp/dθ$ scaled by a small step dθ,
+  and the part at $θ + dθ$ dashed, to first order $p + dθ · dp/dθ$ (the arrows end on it).
 
 The velocities are the tangents of the :class:`~flatland.state.SceneState` built
 with a Dual θ, the same forward-mode derivatives the gradient methods differentiate
@@ -111,10 +111,10 @@ def _parts(scene: Any, state: Any) -> list[dict[str, Any]]:
 
 
 def _camera(state: Any, reach: float, film: float) -> dict[str, Any]:
-    """The camera's position, frustum corners and film ends, with their velocities (Dual arithmetic).
+    r"""The camera's position, frustum corners and film ends, with their velocities (Dual arithmetic).
 
-    The frustum's edge rays point along (f ± h r) / sqrt(1 + h²), h = tan(fov/2), f ⟂ r unit;
-    the film is drawn at the distance ``film`` in front of the pinhole.
+    The frustum's edge rays point along $(f ± h r) / \sqrt{1 + h^2}$, $h = \tan(\mathrm{fov}/2)$, $f ⟂ r$
+    unit; the film is drawn at the distance ``film`` in front of the pinhole.
     """
     h = state.camera.half_width
     o, f, r = (

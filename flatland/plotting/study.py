@@ -110,7 +110,8 @@ def _linthresh(rows: Sequence[Any]) -> float:
 
 
 def efficiency_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
-    """Equal-time comparison: efficiency 1/(variance × time) bars and the RMSE a fixed budget buys.
+    r"""Equal-time comparison: efficiency $1/(\mathrm{variance} × \mathrm{time})$ bars
+    and the RMSE a fixed budget buys.
 
     Efficiency ignores bias, so a cell without one (``efficiency`` None: biased, or
     its interval excludes 0) gets no bar, only the label "biased" or "bias CI ∌ 0";

@@ -93,10 +93,10 @@ def plot_integrand(
     Parameters
     ----------
     x, values : array_like, shape (m,)
-        The grid and f(x, θ) on it (plain numbers: ``detach`` a Dual first).
+        The grid and $f(x, θ)$ on it (plain numbers: ``detach`` a Dual first).
     discontinuities : sequence of Discontinuity or float
         Where f jumps. A :class:`~flatland.integrals.Discontinuity` is labelled with
-        its jump f(c⁻) − f(c⁺) and velocity c'(θ) when ``annotate`` is true.
+        its jump $f(c^-) − f(c^+)$ and velocity $c'(θ)$ when ``annotate`` is true.
     label : str, optional
         Legend entry of the curve.
     annotate : bool

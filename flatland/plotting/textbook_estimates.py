@@ -163,12 +163,12 @@ def plot_kappa_tradeoff(
     level: float,
     title: str | None = None,
 ) -> Figure:
-    """Two panels over the kernel concentration κ: bias ± interval, and standard deviation.
+    r"""Two panels over the kernel concentration κ: bias ± interval, and standard deviation.
 
     The convolution kernel's trade-off (Loubet et al. 2019, Sec. 4.2):
     small κ (a wide kernel) reaches discontinuities one transform cannot follow, so
     the bias is large; large κ makes the derivative of log k large, so the standard
-    deviation grows (like √κ).
+    deviation grows (like $\sqrt{κ}$).
 
     Parameters
     ----------
@@ -180,7 +180,7 @@ def plot_kappa_tradeoff(
         smallest positive half-width of zero, so signs and orders of magnitude both
         show.
     std : array_like, shape (m,)
-        Measured standard deviation of one sample's derivative (stderr · √n).
+        Measured standard deviation of one sample's derivative ($\mathrm{stderr} · \sqrt{n}$).
     predicted_bias, predicted_std : (kappa_grid, values), optional
         Predicted curves, drawn as dashed lines.
     level : float
@@ -237,10 +237,11 @@ def plot_histogram_vs_normal(
     title: str | None = None,
     xlabel: str = "estimate",
 ) -> Figure:
-    """Draw repeated independent estimates as a histogram over the normal density predicted for them.
+    r"""Draw repeated independent estimates as a histogram over the normal density predicted for them.
 
-    By the central limit theorem a mean of N i.i.d. terms of variance σ² is nearly
-    N(mean, stderr²) with ``stderr = σ/√N`` (theory/monte_carlo): the bars should follow the curve.
+    By the central limit theorem a mean of N i.i.d. terms of variance $σ^2$ is nearly
+    $N(\mathrm{mean}, \mathrm{stderr}^2)$ with $\mathrm{stderr} = σ/\sqrt{N}$ (theory/monte_carlo):
+    the bars should follow the curve.
 
     Parameters
     ----------
