@@ -35,7 +35,7 @@ from sphere3d import closed_form
 from sphere3d.camera_edges import camera_edge_term
 from sphere3d.edges import mesh_edges
 from sphere3d.methods import GRADIENT_METHODS
-from sphere3d.sampling import GAUSSIAN_RADIUS, filter_value
+from sphere3d.sampling import filter_value
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
 from tests.sphere3d.test_closed_forms import (
@@ -48,7 +48,7 @@ from tests.sphere3d.test_closed_forms import (
     _triangle_scene,
     lambert,
 )
-from tests.sphere3d.test_hard_shadow import MARGIN, regions
+from tests.sphere3d.test_hard_shadow import footprint_rays, regions
 
 ALPHA = 1e-3
 SIZE = 16
@@ -375,12 +375,7 @@ def _crease_pixels(name: str) -> np.ndarray:
     scene = s3.load_scene(name)
     state = scene.state()
     cam = state.camera
-    reach = GAUSSIAN_RADIUS + MARGIN
-    g = np.arange(-reach, reach + 1e-9, 0.25)
-    gx, gy = np.meshgrid(g, g)
-    inside = gx**2 + gy**2 <= reach**2 + 1e-12
-    rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
-    d = cam.directions(cols[:, None] + 0.5 + gx[inside], rows[:, None] + 0.5 + gy[inside])
+    _, _, d = footprint_rays(state)
     hits = state.tracer.intersect(np.array(scene.camera.position), d)
     normals = face_normals(np.asarray(state.triangles)[hits.triangle])
     return (np.ptp(normals, axis=1).max(axis=-1) > 1e-6).reshape(cam.height, cam.width)

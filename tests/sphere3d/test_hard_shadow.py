@@ -116,10 +116,9 @@ def _blocked(scene, x, y, grow):
     return (near <= far) & (far >= 0.0) & (near <= 1.0)
 
 
-def regions(name):
-    """Boolean masks (height, width) of the regions of the module docstring."""
-    scene = load_scene(name)
-    state = scene.state()
+def footprint_rays(state):
+    """A 0.25 px grid over every pixel's filter footprint widened by MARGIN: the grid's offsets
+    (ox, oy) from the pixel centre, and the camera directions (pixels, points, 3) through them."""
     cam = state.camera
     reach = GAUSSIAN_RADIUS + MARGIN
     g = np.arange(-reach, reach + 1e-9, 0.25)
@@ -127,11 +126,20 @@ def regions(name):
     inside = gx**2 + gy**2 <= reach**2 + 1e-12
     rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
     d = cam.directions(cols[:, None] + 0.5 + gx[inside], rows[:, None] + 0.5 + gy[inside])
+    return gx[inside], gy[inside], d
+
+
+def regions(name):
+    """Boolean masks (height, width) of the regions of the module docstring."""
+    scene = load_scene(name)
+    state = scene.state()
+    cam = state.camera
+    ox, oy, d = footprint_rays(state)
     origin = np.array(scene.camera.position)
     hit = state.tracer.intersect(origin, d).shape
     on_occ, on_ground = hit == scene.shape_index("occluder"), hit == scene.shape_index("ground")
     # shadows on the ground: every other footprint point (a 0.5 px grid), on the plane z = 0
-    coarse = (np.abs(gx[inside] * 4) % 2 == 0) & (np.abs(gy[inside] * 4) % 2 == 0)
+    coarse = (np.abs(ox * 4) % 2 == 0) & (np.abs(oy * 4) % 2 == 0)
     x = origin + (-origin[2] / d[:, coarse, 2])[..., None] * d[:, coarse]
     ground = on_ground[:, coarse]
     light = scene.shapes[scene.shape_index("light")]
