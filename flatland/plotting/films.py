@@ -103,6 +103,23 @@ def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, co
     draw_estimate(ax, x, array, halfwidth=halfwidth, level=TWO_SIGMA, label=label, color=color, lw=1.2)
 
 
+def _strip_over_curve(
+    fig: Figure, sketch: Sketch | None, values: np.ndarray, stderr: np.ndarray | None, cmap: str,
+    norm: Normalize, title: str, ylabel: str,
+) -> tuple[Any, Any, Any]:  # fmt: skip
+    """A 1D film's two panels: its strip over its curve (± 2 standard errors, legend naming the band), on
+    one pixel axis; returns the strip's and the curve's axes and the strip's image."""
+    top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
+    strip = _film(top, values, cmap, norm, title)
+    top.set_xlabel("")
+    _curve(bottom, values, stderr, ylabel, color="k")
+    bottom.legend(fontsize=8, loc="upper right")  # names the band and its coverage
+    bottom.set_xlabel("pixel")
+    bottom.set_ylabel(ylabel)
+    bottom.set_xlim(0, values.size)
+    return top, bottom, strip
+
+
 def image_figure(
     value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
     sketch: Sketch | None = None,
@@ -113,14 +130,7 @@ def image_figure(
     norm = radiance_norm(value)
     if value.ndim == 1:
         fig = Figure(figsize=(7, 3.2))
-        top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
-        _film(top, value, PRIMAL, norm, title)
-        top.set_xlabel("")
-        _curve(bottom, value, stderr, "radiance", color="k")
-        bottom.legend(fontsize=8, loc="upper right")  # names the band and its coverage
-        bottom.set_xlabel("pixel")
-        bottom.set_ylabel("radiance")
-        bottom.set_xlim(0, value.size)
+        _strip_over_curve(fig, sketch, value, stderr, PRIMAL, norm, title, "radiance")
     else:
         fig = Figure(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4))
         ax = grid_beside(fig, sketch, 1, 1).subplots()
@@ -139,17 +149,11 @@ def gradient_figure(
     norm = symmetric_norm(limit)
     if derivative.ndim == 1:
         fig = Figure(figsize=(7, 3.2))
-        top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
-        fig.colorbar(
-            _film(top, derivative, DIVERGING, norm, title), ax=[top, bottom], shrink=0.6, label="dI/dθ"
+        top, bottom, strip = _strip_over_curve(
+            fig, sketch, derivative, stderr, DIVERGING, norm, title, "dI/dθ"
         )
-        top.set_xlabel("")
-        _curve(bottom, derivative, stderr, "dI/dθ", color="k")
-        bottom.legend(fontsize=8, loc="upper right")  # names the band and its coverage
+        fig.colorbar(strip, ax=[top, bottom], shrink=0.6, label="dI/dθ")
         bottom.axhline(0.0, color="0.5", lw=0.6)
-        bottom.set_xlabel("pixel")
-        bottom.set_ylabel("dI/dθ")
-        bottom.set_xlim(0, derivative.size)
     else:
         fig = Figure(figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4))
         ax = grid_beside(fig, sketch, 1, 1).subplots()
