@@ -152,16 +152,17 @@ class ReparamTransforms(Identity):
             return hits.prim, hits.coord
 
         probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
-        choice = self._choose(ctx, x0, direction(center), probes, trace)
+        dirs0 = direction(center)
+        choice = self._choose(ctx, x0, dirs0, probes, trace)
         # nothing chosen, but a primitive's whole image lies between two probes: probe it too, choose again
         gap = np.flatnonzero(~choice.ok)
         extra = angle_gap_probe(ctx.geom0, x0[gap], ignore[gap], probes[gap])
-        choice = self._again(ctx, choice, gap, extra, x0, direction(center), probes, trace)
+        choice = self._again(ctx, choice, gap, extra, x0, dirs0, probes, trace)
         offset = choice.point - x
         # a chosen point on the shading point itself (coincident geometry) defines no direction: the
         # derivative of atan2 there is 0/0, so that sample keeps the identity transform
         ok = choice.ok & (np.hypot(*detach(offset).T) > EPS_DIST)
-        angle = angle_of(np.where(ok[:, None], offset, direction(center)))
+        angle = angle_of(np.where(ok[:, None], offset, dirs0))
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (Sec. 4.1)
         points = mu + translation_offset(angle, ok)[:, None]
         c = np.cos(points - center[:, None])
