@@ -43,6 +43,7 @@ SCENE_SHARE, PART_SHARE = 0.12, 0.3
 """Default step dθ: no point moves by more than these shares of the scene's extent and of its own
 shape's size (a small step keeps the first-order copy of a rotated or scaled shape close to the true one)."""
 _TINY = 1e-12  # speeds below this (relative to the largest) count as "does not move"
+_MOVED = {"lw": 1.3, "ls": "--"}  # the scene at θ + dθ: its drawn outlines and their legend entry
 
 
 def scene_state(scene: Any, param: str | None = None, theta: float = 0.0) -> tuple[Any, Any]:
@@ -173,7 +174,7 @@ def _draw_part(ax: Axes, p: dict[str, Any], step: float, size: float) -> None:
         _outline(ax, p, f"moving:{name}", lw=9, alpha=0.35, zorder=2, **{line: green}, **halo)
     if p["moves"]:
         halo = {"fill": False} if solid else {}
-        _outline(ax, p, f"moved:{name}", step, lw=1.3, ls="--", zorder=4, **{line: green}, **halo)
+        _outline(ax, p, f"moved:{name}", step, zorder=4, **_MOVED, **{line: green}, **halo)
     if p["emitter"] and p["one_sided"] and "segments" in p:  # ticks on the emitting side: right of a -> b
         a, b = p["segments"]
         d = b - a
@@ -325,8 +326,7 @@ def draw_scene(
             Line2D(
                 *moved[[1, 0, 2]].T,
                 color=SKETCH_COLOURS["moving"],
-                lw=1.3,
-                ls="--",
+                **_MOVED,
                 gid="moved:camera",
                 zorder=4,
             )
@@ -363,8 +363,7 @@ def _legend(ax: Axes, parts: list[dict[str, Any]], cam: dict[str, Any], param: A
                 [],
                 [],
                 color=colours["moving"],
-                lw=1.3,
-                ls="--",
+                **_MOVED,
                 marker=">",
                 ms=5,
                 label=f"at θ + dθ, dθ = {step:.2g}",
