@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach
+from flatland.sampling import wrap_angle
 from flatland.state import SceneState
 from flatland.tracing import attached_points, zeros
 
@@ -307,8 +308,7 @@ def angle_gap_probe(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes:
     )
     a = np.concatenate([seg_a[None] - x[:, None], plus], axis=1)  # (n, J, 2)
     b = np.concatenate([seg_b[None] - x[:, None], minus], axis=1)
-    rel_a = np.angle(np.exp(1j * (np.arctan2(a[..., 1], a[..., 0]) - centre)))  # wrapped to (-π, π]
-    rel_b = np.angle(np.exp(1j * (np.arctan2(b[..., 1], b[..., 0]) - centre)))
+    rel_a, rel_b = (wrap_angle(np.arctan2(v[..., 1], v[..., 0]) - centre) for v in (a, b))  # [-π, π)
     ok = np.abs(rel_a - rel_b) < np.pi - 1e-9
     ok[:, geom.n_seg :] &= outside
     ok &= np.arange(ok.shape[1]) != ignore[:, None]
