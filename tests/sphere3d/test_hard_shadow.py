@@ -36,6 +36,7 @@ import pytest
 from scipy import stats
 
 import sphere3d as s3
+from flatland.core.stats import sidak
 from sphere3d import shapes
 from sphere3d.sampling import FILTER_STD, GAUSSIAN_SIGMA
 from sphere3d.scene import load_scene
@@ -97,8 +98,7 @@ def test01_scenes_are_the_issue_specification():
 def sidak_quantile(n, dof, alpha=ALPHA):
     """Two-sided Student-t quantile that the largest |t| of n independent pixels exceeds with
     probability alpha (Šidák)."""
-    per_pixel = 1.0 - (1.0 - alpha) ** (1.0 / n)
-    return float(stats.t.ppf(1.0 - per_pixel / 2.0, dof))
+    return float(stats.t.ppf(1.0 - sidak(alpha, n) / 2.0, dof))
 
 
 @pytest.fixture(scope="module")
