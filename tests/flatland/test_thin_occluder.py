@@ -110,7 +110,8 @@ def test02_a_thin_sticks_edge_terms_are_kept():
 def test03_every_shading_kernel_whose_probes_span_a_thin_stick_follows_it():
     """A stick seen under 0.02 rad from a shading point, below the probes' spacing 2 / √κ = 0.063 rad:
     every direction sample whose probe span [ω - 3σ, ω + 3σ] (σ = 1 / √κ) overlaps the stick's image
-    is translated like the stick (a nonzero angle tangent, ``flatland.probes.angle_gap_probe``)."""
+    is translated like the stick (``flatland.probes.angle_gap_probe``): its angle tangent lies between the
+    rates -h / (x² + h²) of the stick's two ends."""
     x0, height, angle = 0.3, 1.0, 0.02
     w = angle * (1.0 + x0**2)  # the stick's length for that angle at x0 (dφ/dx = 1 / (1 + x²) at height 1)
     scene = {
@@ -143,4 +144,7 @@ def test03_every_shading_kernel_whose_probes_span_a_thin_stick_follows_it():
     ends = np.arctan2(height, np.array([x0 + w / 2, x0 - w / 2]))
     overlaps = (centre + 3.0 * sigma > ends[0]) & (centre - 3.0 * sigma < ends[1])
     assert overlaps.sum() > 1000
-    assert np.all(np.asarray(tangent(members.points))[overlaps, 0] != 0.0)
+    # the stick's angle φ = atan2(h, x) moves at dφ/dθ = -h / (x² + h²), between its ends' rates
+    rates = -height / (np.array([x0 - w / 2, x0 + w / 2]) ** 2 + height**2)
+    followed = np.asarray(tangent(members.points))[overlaps, 0]
+    assert np.all((followed >= rates.min() - 1e-12) & (followed <= rates.max() + 1e-12))

@@ -38,17 +38,18 @@ from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.sampling import filter_value
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
-from tests.sphere3d.test_closed_forms import (
+from tests.sphere3d.helpers import (
     ORIGIN,
     SKY,
     UP,
-    _light_exact,
-    _light_scene,
-    _triangle_exact,
-    _triangle_scene,
+    footprint_rays,
     lambert,
+    light_exact,
+    light_scene,
+    regions,
+    triangle_exact,
+    triangle_scene,
 )
-from tests.sphere3d.test_hard_shadow import footprint_rays, regions
 
 ALPHA = 1e-3
 SIZE = 16
@@ -195,23 +196,20 @@ def test03_black_triangle_pixels_match_the_closed_form(param):
 def test04_irradiance_under_a_black_triangle_matches_lambert(axis):
     """Secondary edges alone: E = L (π - Φ), Φ by Lambert's formula differentiated with Duals. naive
     gives exactly 0 here (test_closed_forms test03). Measured (2^17 samples): z 0.9, 1.6, 1.3."""
-    exact = float(tangent(_triangle_exact(axis)))
+    exact = float(tangent(triangle_exact(axis)))
     param = f"tri.translate.{'xyz'[axis]}"
-    e = s3.irradiance(_triangle_scene(), ORIGIN, UP, param, method="boundary", n=1 << 17, seed=3)
+    e = s3.irradiance(triangle_scene(), ORIGIN, UP, param, method="boundary", n=1 << 17, seed=3)
     assert abs(e.derivative - exact) <= _z(3) * e.derivative_stderr
     assert (
-        e.value
-        == s3.irradiance(_triangle_scene(), ORIGIN, UP, param, method="naive", n=1 << 17, seed=3).value
+        e.value == s3.irradiance(triangle_scene(), ORIGIN, UP, param, method="naive", n=1 << 17, seed=3).value
     )
 
 
 def test05_a_light_without_fade_moving_has_its_border_as_the_only_moving_edge():
     """The unfaded light of test_closed_forms test07 (reparam 73 % low, naive 0): its own boundary
     edges are silhouettes seen from the point, the jump is its radiance. Exact -0.3007."""
-    exact = float(tangent(_light_exact(0.0)))
-    e = s3.irradiance(
-        _light_scene(0.0), ORIGIN, UP, "light.translate.x", method="boundary", n=1 << 17, seed=6
-    )
+    exact = float(tangent(light_exact(0.0)))
+    e = s3.irradiance(light_scene(0.0), ORIGIN, UP, "light.translate.x", method="boundary", n=1 << 17, seed=6)
     assert abs(e.derivative - exact) <= _z(1) * e.derivative_stderr
     assert abs(detach(e.value)) > 0.0
 
@@ -279,7 +277,7 @@ def test07_triangles_through_the_pinhole_match_sphere3d_closed_form(size, kind, 
     both continuous filters. Measured max |z| 0.8-4.1 (limits about 4.6-5.2); pixels without
     variance are exact to 3e-11. (With the box filter a pixel clipping an edge by a sliver is a rare
     event at 64 spp, whose batch error can be 0: not tested per pixel.)"""
-    scene = closed_form.pinhole_triangle_scene(size, filter=kind)
+    scene = closed_form.pinholetriangle_scene(size, filter=kind)
     exact = closed_form.triangle_image(scene, param).derivative
     g = s3.render_gradient(scene, param, method="boundary", spp=64, seed=1, batches=32)
     live = g.derivative_stderr > 0.0
@@ -326,11 +324,11 @@ def test08_hard_shadow_smooth_creases_add_nothing_and_regions_match_the_referenc
 
 
 SHADE = np.array([[0.2, 0.05, 1.0], [0.6, -0.1, 1.0], [0.35, 0.3, 1.0]])
-"""A black triangle between the origin and the light of ``_light_scene(0.0)`` (x 0.2-0.8, y 0-0.4 at
+"""A black triangle between the origin and the light of ``light_scene(0.0)`` (x 0.2-0.8, y 0-0.4 at
 z = 1.5), covering part of it as seen from the origin."""
 
 
-def _shaded_light_exact(theta: float) -> float:
+def _shadedlight_exact(theta: float) -> float:
     """E at the origin: the light's projected solid angle minus that of its part behind the triangle
     moved by θ in x (Lambert's formula; the part by clipping the triangle's central projection on
     the light's plane z = 1.5 to the light's rectangle, Sutherland-Hodgman)."""
@@ -356,11 +354,11 @@ def test09_a_black_triangle_shading_a_light_under_a_black_sky_matches_lambert():
     (h = 1e-5) of the closed form above, whose truncation error (~1e-9) is far below the stderr.
     Measured (2^16 samples): z 1.55 here; the mean of 8 other seeds z 0.3, and with a 1e-9 sky
     (arcs not clipped) z 0.8 with 1.3 × the stderr. naive gives exactly 0 (the triangle is black)."""
-    scene = _light_scene(0.0)
+    scene = light_scene(0.0)
     scene["shapes"].append({"name": "tri", "type": "mesh", "vertices": SHADE.tolist(), "faces": [[0, 1, 2]]})
     scene["shapes"][-1]["albedo"] = 0.0
     h = 1e-5
-    exact = (_shaded_light_exact(h) - _shaded_light_exact(-h)) / (2.0 * h)
+    exact = (_shadedlight_exact(h) - _shadedlight_exact(-h)) / (2.0 * h)
     e = s3.irradiance(scene, ORIGIN, UP, "tri.translate.x", method="boundary", n=1 << 16, seed=4)
     print(f"{e.derivative:.4f} ± {e.derivative_stderr:.4f} vs {exact:.4f}")
     assert abs(e.derivative - exact) <= _z(1) * e.derivative_stderr
@@ -370,7 +368,7 @@ def test09_a_black_triangle_shading_a_light_under_a_black_sky_matches_lambert():
 
 
 def _crease_pixels(name: str) -> np.ndarray:
-    """Pixels whose filter footprint (the grid of tests/sphere3d/test_hard_shadow.py) meets faces with
+    """Pixels whose filter footprint (the grid of tests/sphere3d/helpers.py, footprint_rays) meets faces with
     different normals: on the cube, the images of its creases and of its silhouette."""
     scene = s3.load_scene(name)
     state = scene.state()

@@ -15,50 +15,27 @@ sign, and how the method's options change it (measured numbers in the docstrings
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pytest
 
 import sphere3d as s3
-from flatland.core.dual import detach, tangent, variable
+from flatland.core.dual import detach, tangent
 from flatland.core.stats import batch_interval, normal_quantile
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.tasks import PointTask
+from tests.sphere3d.helpers import (
+    CAMERA,
+    ORIGIN,
+    SKY,
+    UP,
+    light_exact,
+    light_scene,
+    triangle_exact,
+    triangle_scene,
+)
 
 LEVEL = 0.9999
 Z = normal_quantile(LEVEL)
-SKY = 1.5
-TRIANGLE = np.array([[0.0, -0.5, 1.0], [0.9, 0.0, 1.0], [0.0, 0.5, 1.0]])
-ORIGIN, UP = [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]
-CAMERA = {"position": [0, -3, 1], "look_at": [0, 0, 0], "fov": 0.8, "width": 8, "height": 8}
-
-
-def lambert(vertices, normal=(0.0, 0.0, 1.0)):
-    """Projected solid angle of a polygon seen from the origin: ½ |Σ γ_i n·u_i| (Dual-aware).
-
-    Written with numpy's own cross product and norm, not the renderer's vector helpers,
-    so the closed form shares no code with what it checks.
-    """
-    a = vertices / np.linalg.norm(vertices, axis=-1)[:, None]
-    normal = np.asarray(normal)
-    total = 0.0
-    for i in range(len(vertices)):  # edges of the polygon
-        c = np.cross(a[i], a[(i + 1) % len(vertices)])
-        gamma = np.arccos(np.sum(a[i] * a[(i + 1) % len(vertices)]))  # the edge's angle γ_i
-        total = total + gamma * np.sum(c * normal) / np.linalg.norm(c)
-    return np.abs(0.5 * total)
-
-
-def _triangle_scene():
-    shapes = [
-        {"name": "tri", "type": "mesh", "vertices": TRIANGLE.tolist(), "faces": [[0, 1, 2]], "albedo": 0.0}
-    ]
-    return {"name": "triangle", "camera": CAMERA, "sky": SKY, "shapes": shapes}
-
-
-def _triangle_exact(axis):
-    return SKY * (np.pi - lambert(TRIANGLE + np.eye(3)[axis] * variable(0.0)))
 
 
 def test01_open_sky_gives_pi_times_its_radiance_for_every_sample():
@@ -75,8 +52,8 @@ def test01_open_sky_gives_pi_times_its_radiance_for_every_sample():
 
 
 def test02_black_triangle_value_is_sky_times_pi_minus_lambert():
-    e = s3.irradiance(_triangle_scene(), ORIGIN, UP, n=1 << 18, seed=1)
-    exact = detach(_triangle_exact(0))
+    e = s3.irradiance(triangle_scene(), ORIGIN, UP, n=1 << 18, seed=1)
+    exact = detach(triangle_exact(0))
     assert abs(e.value - exact) <= Z * e.value_stderr
 
 
@@ -84,15 +61,15 @@ def test02_black_triangle_value_is_sky_times_pi_minus_lambert():
 def test03_black_triangle_naive_derivative_is_zero(axis):
     """The triangle moving up (z: it shrinks in view) or sideways (x): ``naive`` differentiates
     visibility as a step, so its derivative is exactly 0 while the exact one is not."""
-    assert abs(float(tangent(_triangle_exact(axis)))) > 0.1
+    assert abs(float(tangent(triangle_exact(axis)))) > 0.1
     param = f"tri.translate.{'xyz'[axis]}"
-    naive = s3.irradiance(_triangle_scene(), ORIGIN, UP, param, method="naive", n=1 << 16, seed=2)
+    naive = s3.irradiance(triangle_scene(), ORIGIN, UP, param, method="naive", n=1 << 16, seed=2)
     assert naive.derivative == 0.0
 
 
 def _reparam_batches(n, seed, **options):
     """Per-batch derivative estimates of ``reparam`` for the triangle moving up (16 batches)."""
-    scene = s3.load_scene(_triangle_scene())
+    scene = s3.load_scene(triangle_scene())
     task = PointTask(scene, "tri.translate.z", tuple(ORIGIN), tuple(UP), n, seed, 16)
     return GRADIENT_METHODS.run("reparam", task, **options).derivative
 
@@ -111,7 +88,7 @@ def test04_black_triangle_reparam_is_biased_low_less_with_more_probes_and_a_narr
     The three runs share their primary samples (same seed), so the differences are paired.
     Each claim is one Student-t interval over the 16 batches at LEVEL (99.99 %, two-sided).
     """
-    exact = float(tangent(_triangle_exact(2)))
+    exact = float(tangent(triangle_exact(2)))
     n, seed = 1 << 18, 3
     base = _reparam_batches(n, seed, kappa=100.0, probes=4)
     more_probes = _reparam_batches(n, seed, kappa=100.0, probes=8)
@@ -122,45 +99,12 @@ def test04_black_triangle_reparam_is_biased_low_less_with_more_probes_and_a_narr
     assert batch_interval(narrower - base, LEVEL).low > 0.0  # larger κ: less bias
 
 
-def _light_scene(fade):
-    light = {
-        "name": "light", "type": "rectangle", "size": [0.6, 0.4], "translate": [0.5, 0.2, 1.5],
-        "rotate": [np.pi, 0.0, 0.0], "emission": 5.0, "albedo": 0.0, "fade": fade,
-    }  # fmt: skip
-    return {"name": "lit", "camera": CAMERA, "sky": 0.0, "shapes": [light]}
-
-
-def _light_exact(fade, nodes=48):
-    """E for the rectangle light of :func:`_light_scene` moving by θ in x, as a Dual."""
-    theta = variable(0.0)
-    if fade == 0.0:
-        c = np.array([0.5, 0.2, 1.5]) + np.array([1.0, 0.0, 0.0]) * theta
-        half = np.array([[-0.3, -0.2, 0.0], [0.3, -0.2, 0.0], [0.3, 0.2, 0.0], [-0.3, 0.2, 0.0]])
-        corners = c + half
-        return 5.0 * lambert(corners)
-    # Gauss–Legendre on the pieces where the fade is smooth: E = ∫ L fade z² / d⁴ dA
-    g, w = np.polynomial.legendre.leggauss(nodes)
-    breaks = [-1.0, -1.0 + fade, 1.0 - fade, 1.0]
-    u = np.concatenate([0.5 * (a + b) + 0.5 * (b - a) * g for a, b in itertools.pairwise(breaks)])
-    wu = np.concatenate([0.5 * (b - a) * w for a, b in itertools.pairwise(breaks)])
-    uu, vv = np.meshgrid(u, u, indexing="ij")
-
-    def smooth(t):
-        t = np.clip(t, 0.0, 1.0)
-        return t * t * (3 - 2 * t)
-
-    weight = smooth((1 - np.abs(uu)) / fade) * smooth((1 - np.abs(vv)) / fade)
-    px, py, pz = 0.5 + theta + 0.3 * uu, 0.2 + 0.2 * vv, 1.5
-    d2 = px * px + py * py + pz * pz
-    return np.sum(5.0 * weight * pz * pz / (d2 * d2) * np.outer(wu, wu)) * 0.3 * 0.2
-
-
 def test05_rectangle_light_value_is_radiance_times_lambert():
     # emitter and cosine sampling combined by MIS: unbiased for the value
-    e = s3.irradiance(_light_scene(0.0), ORIGIN, UP, n=1 << 18, seed=4)
-    assert abs(e.value - detach(_light_exact(0.0))) <= Z * e.value_stderr
-    faded = s3.irradiance(_light_scene(0.25), ORIGIN, UP, n=1 << 18, seed=4)
-    assert abs(faded.value - detach(_light_exact(0.25))) <= Z * faded.value_stderr
+    e = s3.irradiance(light_scene(0.0), ORIGIN, UP, n=1 << 18, seed=4)
+    assert abs(e.value - detach(light_exact(0.0))) <= Z * e.value_stderr
+    faded = s3.irradiance(light_scene(0.25), ORIGIN, UP, n=1 << 18, seed=4)
+    assert abs(faded.value - detach(light_exact(0.25))) <= Z * faded.value_stderr
 
 
 def test06_faded_light_moving_derivative_matches_quadrature():
@@ -168,10 +112,10 @@ def test06_faded_light_moving_derivative_matches_quadrature():
     agree with the quadrature. Measured (2^20 samples): exact -0.23497; naive -0.2326 ± 0.0025;
     reparam -0.2343 ± 0.0008 (following the light's mean probe point keeps its samples on the light,
     a third of naive's standard error)."""
-    exact = float(tangent(_light_exact(0.25)))
+    exact = float(tangent(light_exact(0.25)))
     for method in ("naive", "reparam"):
         e = s3.irradiance(
-            _light_scene(0.25), ORIGIN, UP, "light.translate.x", method=method, n=1 << 19, seed=5
+            light_scene(0.25), ORIGIN, UP, "light.translate.x", method=method, n=1 << 19, seed=5
         )
         assert abs(e.derivative - exact) <= Z * e.derivative_stderr, method
 
@@ -183,15 +127,15 @@ def test07_unfaded_light_moving_keeps_its_edge_term():
     holds the border fixed instead: measured (2^18 samples) reparam -0.3003 ± 0.0019 against the
     exact -0.3007; without the term -0.0822 ± 0.0020 (73 % low); naive misses every edge and
     gives 0. The test asserts the term's effect and the bias without it."""
-    exact = float(tangent(_light_exact(0.0)))
+    exact = float(tangent(light_exact(0.0)))
     naive = s3.irradiance(
-        _light_scene(0.0), ORIGIN, UP, "light.translate.x", method="naive", n=1 << 16, seed=6
+        light_scene(0.0), ORIGIN, UP, "light.translate.x", method="naive", n=1 << 16, seed=6
     )
     assert abs(naive.derivative) < 1e-12
-    e = s3.irradiance(_light_scene(0.0), ORIGIN, UP, "light.translate.x", method="reparam", n=1 << 18, seed=6)
+    e = s3.irradiance(light_scene(0.0), ORIGIN, UP, "light.translate.x", method="reparam", n=1 << 18, seed=6)
     assert abs(e.derivative - exact) <= Z * e.derivative_stderr
     dragged = s3.irradiance(
-        _light_scene(0.0),
+        light_scene(0.0),
         ORIGIN,
         UP,
         "light.translate.x",

@@ -36,21 +36,18 @@ import pytest
 from scipy import stats
 
 import sphere3d as s3
+from flatland.core.stats import sidak
 from sphere3d import shapes
-from sphere3d.sampling import FILTER_STD, GAUSSIAN_RADIUS, GAUSSIAN_SIGMA
+from sphere3d.sampling import FILTER_STD, GAUSSIAN_SIGMA
 from sphere3d.scene import load_scene
-from sphere3d.state import euler_matrix
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
+from tests.sphere3d.helpers import REGIONS, regions
 
 REFERENCE = Path(__file__).resolve().parents[2] / "benchmarks" / "reference"
 SCENES = ("hard_shadow", "hard_shadow_cube")
 PARAM = "occluder.translate.x"
 ALPHA = 1e-3
-REGIONS = ("silhouette", "occluder", "penumbra", "umbra", "lit")
-MARGIN = 0.5
-"""Pixels of margin around the filter footprint: the grid's spacing (0.25 px) and the
-reference's steps (the edges move up to 0.3 px at θ = ±0.01) must not hide an edge."""
 
 
 def _reference(name):
@@ -96,79 +93,12 @@ def test01_scenes_are_the_issue_specification():
 
 
 # ------------------------------------------------------------------------------------ regions
-def _blocked(scene, x, y, grow):
-    """True where the segment x -> y meets the occluder grown by ``grow`` (closed forms)."""
-    s = scene.shapes[scene.shape_index("occluder")]
-    c = np.array(s.translate)
-    d = y - x
-    if s.type == "icosphere":
-        # distance from the centre to the segment: clamp the projection parameter to [0, 1]
-        t = np.clip(np.einsum("...i,...i", c - x, d) / np.einsum("...i,...i", d, d), 0.0, 1.0)
-        return np.linalg.norm(x + t[..., None] * d - c, axis=-1) < dict(s.geometry)["radius"] + grow
-    rotation = euler_matrix(np.array(s.rotate))
-    half = np.array(dict(s.geometry)["size"]) / 2.0 + grow
-    o, dl = (x - c) @ rotation, d @ rotation  # the box's frame: R^T (x - c)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1, t2 = (-half - o) / dl, (half - o) / dl
-    # slabs: the segment meets the box iff the intervals of the three axes overlap within [0, 1]
-    near = np.nanmax(np.minimum(t1, t2), axis=-1)
-    far = np.nanmin(np.maximum(t1, t2), axis=-1)
-    return (near <= far) & (far >= 0.0) & (near <= 1.0)
-
-
-def footprint_rays(state):
-    """A 0.25 px grid over every pixel's filter footprint widened by MARGIN: the grid's offsets
-    (ox, oy) from the pixel centre, and the camera directions (pixels, points, 3) through them."""
-    cam = state.camera
-    reach = GAUSSIAN_RADIUS + MARGIN
-    g = np.arange(-reach, reach + 1e-9, 0.25)
-    gx, gy = np.meshgrid(g, g)
-    inside = gx**2 + gy**2 <= reach**2 + 1e-12
-    rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
-    d = cam.directions(cols[:, None] + 0.5 + gx[inside], rows[:, None] + 0.5 + gy[inside])
-    return gx[inside], gy[inside], d
-
-
-def regions(name):
-    """Boolean masks (height, width) of the regions of the module docstring."""
-    scene = load_scene(name)
-    state = scene.state()
-    cam = state.camera
-    ox, oy, d = footprint_rays(state)
-    origin = np.array(scene.camera.position)
-    hit = state.tracer.intersect(origin, d).shape
-    on_occ, on_ground = hit == scene.shape_index("occluder"), hit == scene.shape_index("ground")
-    # shadows on the ground: every other footprint point (a 0.5 px grid), on the plane z = 0
-    coarse = (np.abs(ox * 4) % 2 == 0) & (np.abs(oy * 4) % 2 == 0)
-    x = origin + (-origin[2] / d[:, coarse, 2])[..., None] * d[:, coarse]
-    ground = on_ground[:, coarse]
-    light = scene.shapes[scene.shape_index("light")]
-    u = np.linspace(-0.5, 0.5, 6)
-    grid = np.array(light.translate) + np.stack([*np.meshgrid(u, u), np.zeros((6, 6))], -1).reshape(-1, 3)
-    corners = np.array(light.translate) + np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]) / 2
-    occ = scene.shapes[scene.shape_index("occluder")]
-    # margins: the icosphere's faces lie up to 0.0054 inside its sphere; the reference moves it by 0.01
-    facets = 0.006 if occ.type == "icosphere" else 0.0
-    near = ground.any(1)  # pixels that see some ground: the only ones tested against the light
-    hidden = np.zeros(ground.shape, dtype=bool)
-    visible = np.ones(ground.shape, dtype=bool)
-    hidden[near] = np.all([_blocked(scene, x[near], y, -facets - 0.011) for y in corners], axis=0)
-    visible[near] = ~np.any([_blocked(scene, x[near], y, 0.011) for y in grid], axis=0)
-    out = {
-        "silhouette": on_occ.any(1) & ~on_occ.all(1),
-        "occluder": on_occ.all(1),
-        "umbra": on_ground.all(1) & hidden.all(1),
-        "lit": ~on_occ.any(1) & np.where(ground, visible, True).all(1),
-    }
-    out["penumbra"] = ~(out["silhouette"] | out["occluder"] | out["umbra"] | out["lit"])
-    return {k: out[k].reshape(cam.height, cam.width) for k in REGIONS}
 
 
 def sidak_quantile(n, dof, alpha=ALPHA):
     """Two-sided Student-t quantile that the largest |t| of n independent pixels exceeds with
     probability alpha (Šidák)."""
-    per_pixel = 1.0 - (1.0 - alpha) ** (1.0 / n)
-    return float(stats.t.ppf(1.0 - per_pixel / 2.0, dof))
+    return float(stats.t.ppf(1.0 - sidak(alpha, n) / 2.0, dof))
 
 
 @pytest.fixture(scope="module")

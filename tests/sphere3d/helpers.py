@@ -1,0 +1,156 @@
+"""Closed forms and region masks shared by the sphere3d test modules.
+
+From ``test_closed_forms``: the scenes of a black triangle under a sky and of a rectangular
+light above the origin, with their irradiance by Lambert's polygon formula (a faded light by
+quadrature). From ``test_hard_shadow``: the regions of the ``hard_shadow`` images
+(silhouette, occluder, penumbra, umbra, lit; see that module's docstring), decided by closed
+forms and a grid of camera rays over every pixel's filter footprint.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from flatland.core.dual import variable
+from sphere3d.sampling import GAUSSIAN_RADIUS
+from sphere3d.scene import load_scene
+from sphere3d.state import euler_matrix
+
+SKY = 1.5
+TRIANGLE = np.array([[0.0, -0.5, 1.0], [0.9, 0.0, 1.0], [0.0, 0.5, 1.0]])
+ORIGIN, UP = [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]
+CAMERA = {"position": [0, -3, 1], "look_at": [0, 0, 0], "fov": 0.8, "width": 8, "height": 8}
+REGIONS = ("silhouette", "occluder", "penumbra", "umbra", "lit")
+MARGIN = 0.5
+"""Pixels of margin around the filter footprint: the grid's spacing (0.25 px) and the
+reference's steps (the edges move up to 0.3 px at θ = ±0.01) must not hide an edge."""
+
+
+def lambert(vertices, normal=(0.0, 0.0, 1.0)):
+    """Projected solid angle of a polygon seen from the origin: ½ |Σ γ_i n·u_i| (Dual-aware).
+
+    Written with numpy's own cross product and norm, not the renderer's vector helpers,
+    so the closed form shares no code with what it checks.
+    """
+    a = vertices / np.linalg.norm(vertices, axis=-1)[:, None]
+    normal = np.asarray(normal)
+    total = 0.0
+    for i in range(len(vertices)):  # edges of the polygon
+        c = np.cross(a[i], a[(i + 1) % len(vertices)])
+        gamma = np.arccos(np.sum(a[i] * a[(i + 1) % len(vertices)]))  # the edge's angle γ_i
+        total = total + gamma * np.sum(c * normal) / np.linalg.norm(c)
+    return np.abs(0.5 * total)
+
+
+def triangle_scene():
+    shapes = [
+        {"name": "tri", "type": "mesh", "vertices": TRIANGLE.tolist(), "faces": [[0, 1, 2]], "albedo": 0.0}
+    ]
+    return {"name": "triangle", "camera": CAMERA, "sky": SKY, "shapes": shapes}
+
+
+def triangle_exact(axis):
+    return SKY * (np.pi - lambert(TRIANGLE + np.eye(3)[axis] * variable(0.0)))
+
+
+def light_scene(fade):
+    light = {
+        "name": "light", "type": "rectangle", "size": [0.6, 0.4], "translate": [0.5, 0.2, 1.5],
+        "rotate": [np.pi, 0.0, 0.0], "emission": 5.0, "albedo": 0.0, "fade": fade,
+    }  # fmt: skip
+    return {"name": "lit", "camera": CAMERA, "sky": 0.0, "shapes": [light]}
+
+
+def light_exact(fade, nodes=48):
+    """E for the rectangle light of :func:`light_scene` moving by θ in x, as a Dual."""
+    theta = variable(0.0)
+    if fade == 0.0:
+        c = np.array([0.5, 0.2, 1.5]) + np.array([1.0, 0.0, 0.0]) * theta
+        half = np.array([[-0.3, -0.2, 0.0], [0.3, -0.2, 0.0], [0.3, 0.2, 0.0], [-0.3, 0.2, 0.0]])
+        corners = c + half
+        return 5.0 * lambert(corners)
+    # Gauss–Legendre on the pieces where the fade is smooth: E = ∫ L fade z² / d⁴ dA
+    g, w = np.polynomial.legendre.leggauss(nodes)
+    breaks = [-1.0, -1.0 + fade, 1.0 - fade, 1.0]
+    u = np.concatenate([0.5 * (a + b) + 0.5 * (b - a) * g for a, b in itertools.pairwise(breaks)])
+    wu = np.concatenate([0.5 * (b - a) * w for a, b in itertools.pairwise(breaks)])
+    uu, vv = np.meshgrid(u, u, indexing="ij")
+
+    def smooth(t):
+        t = np.clip(t, 0.0, 1.0)
+        return t * t * (3 - 2 * t)
+
+    weight = smooth((1 - np.abs(uu)) / fade) * smooth((1 - np.abs(vv)) / fade)
+    px, py, pz = 0.5 + theta + 0.3 * uu, 0.2 + 0.2 * vv, 1.5
+    d2 = px * px + py * py + pz * pz
+    return np.sum(5.0 * weight * pz * pz / (d2 * d2) * np.outer(wu, wu)) * 0.3 * 0.2
+
+
+def blocked(scene, x, y, grow):
+    """True where the segment x -> y meets the occluder grown by ``grow`` (closed forms)."""
+    s = scene.shapes[scene.shape_index("occluder")]
+    c = np.array(s.translate)
+    d = y - x
+    if s.type == "icosphere":
+        # distance from the centre to the segment: clamp the projection parameter to [0, 1]
+        t = np.clip(np.einsum("...i,...i", c - x, d) / np.einsum("...i,...i", d, d), 0.0, 1.0)
+        return np.linalg.norm(x + t[..., None] * d - c, axis=-1) < dict(s.geometry)["radius"] + grow
+    rotation = euler_matrix(np.array(s.rotate))
+    half = np.array(dict(s.geometry)["size"]) / 2.0 + grow
+    o, dl = (x - c) @ rotation, d @ rotation  # the box's frame: R^T (x - c)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (-half - o) / dl, (half - o) / dl
+    # slabs: the segment meets the box iff the intervals of the three axes overlap within [0, 1]
+    near = np.nanmax(np.minimum(t1, t2), axis=-1)
+    far = np.nanmin(np.maximum(t1, t2), axis=-1)
+    return (near <= far) & (far >= 0.0) & (near <= 1.0)
+
+
+def footprint_rays(state):
+    """A 0.25 px grid over every pixel's filter footprint widened by MARGIN: the grid's offsets
+    (ox, oy) from the pixel centre, and the camera directions (pixels, points, 3) through them."""
+    cam = state.camera
+    reach = GAUSSIAN_RADIUS + MARGIN
+    g = np.arange(-reach, reach + 1e-9, 0.25)
+    gx, gy = np.meshgrid(g, g)
+    inside = gx**2 + gy**2 <= reach**2 + 1e-12
+    rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
+    d = cam.directions(cols[:, None] + 0.5 + gx[inside], rows[:, None] + 0.5 + gy[inside])
+    return gx[inside], gy[inside], d
+
+
+def regions(name):
+    """Boolean masks (height, width) of the regions of ``test_hard_shadow``'s module docstring."""
+    scene = load_scene(name)
+    state = scene.state()
+    cam = state.camera
+    ox, oy, d = footprint_rays(state)
+    origin = np.array(scene.camera.position)
+    hit = state.tracer.intersect(origin, d).shape
+    on_occ, on_ground = hit == scene.shape_index("occluder"), hit == scene.shape_index("ground")
+    # shadows on the ground: every other footprint point (a 0.5 px grid), on the plane z = 0
+    coarse = (np.abs(ox * 4) % 2 == 0) & (np.abs(oy * 4) % 2 == 0)
+    x = origin + (-origin[2] / d[:, coarse, 2])[..., None] * d[:, coarse]
+    ground = on_ground[:, coarse]
+    light = scene.shapes[scene.shape_index("light")]
+    u = np.linspace(-0.5, 0.5, 6)
+    grid = np.array(light.translate) + np.stack([*np.meshgrid(u, u), np.zeros((6, 6))], -1).reshape(-1, 3)
+    corners = np.array(light.translate) + np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]) / 2
+    occ = scene.shapes[scene.shape_index("occluder")]
+    # margins: the icosphere's faces lie up to 0.0054 inside its sphere; the reference moves it by 0.01
+    facets = 0.006 if occ.type == "icosphere" else 0.0
+    near = ground.any(1)  # pixels that see some ground: the only ones tested against the light
+    hidden = np.zeros(ground.shape, dtype=bool)
+    visible = np.ones(ground.shape, dtype=bool)
+    hidden[near] = np.all([blocked(scene, x[near], y, -facets - 0.011) for y in corners], axis=0)
+    visible[near] = ~np.any([blocked(scene, x[near], y, 0.011) for y in grid], axis=0)
+    out = {
+        "silhouette": on_occ.any(1) & ~on_occ.all(1),
+        "occluder": on_occ.all(1),
+        "umbra": on_ground.all(1) & hidden.all(1),
+        "lit": ~on_occ.any(1) & np.where(ground, visible, True).all(1),
+    }
+    out["penumbra"] = ~(out["silhouette"] | out["occluder"] | out["umbra"] | out["lit"])
+    return {k: out[k].reshape(cam.height, cam.width) for k in REGIONS}
