@@ -171,15 +171,15 @@ def film_transform(
     centre = np.concatenate([s + z, s - z])  # rows: the n first members, then the n second
     phase = draws.uniforms("probes.film", 2).T.ravel()
     rotation = Rotation.identity((2 * n,))
+    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)
-    rows = _reaching_motion(state, centre, spread * sigma)
+    rows = _reaching_motion(state, moving, centre, spread * sigma)
     if rows.size:
         ring = centre[rows, None] + ring_offsets(spread * sigma, film_probes(probes), phase[rows])
         d = cam.directions(ring[..., 0], ring[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
         if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
-            moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
             seen = np.any(moving[np.maximum(hits.triangle, 0)] & (hits.triangle >= 0), axis=1)
             rows, d, hits = rows[seen], d[seen], hits.take(seen)
         # a corner up to twice the ring's radius away: its second edge still enters the ring if it
@@ -193,15 +193,15 @@ def film_transform(
     return FilmTransform((rotation.take(first), rotation.take(second)), (centre[:n], centre[n:]), kappa_film)
 
 
-def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.ndarray:
+def _reaching_motion(state: SceneState, moving: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
     """Rows whose probes (within ``reach`` px of ``centre``) may see a moving triangle, or all rows
-    when the camera moves or a moving triangle reaches behind the camera plane.
+    when the camera moves or a moving triangle (``moving``: one flag per triangle) reaches behind
+    the camera plane.
 
     Conservative: the film box of the moving triangles' vertices (in front of the camera)
     holds every film point whose ray can meet one of them.
     """
     cam = state.camera
-    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
     if np.any(tangent(cam.origin) != 0.0):
         return np.arange(len(centre))
     if not moving.any():

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from flatland.core.dual import detach
-from sphere3d.vector import cross, dot, norm
+from sphere3d.tracing import face_normals
+from sphere3d.vector import dot
 
 __all__ = ["COPLANAR_TOL", "Edges", "mesh_edges"]
 
@@ -125,8 +126,7 @@ def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
     two = count == 2
     other = np.where(two, face[h2], -1)
     face1 = face[h1]
-    normals = cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals = normals / norm(normals)[:, None]
+    normals = face_normals(tri)
     n1 = normals[face1]
     n2 = np.where(two[:, None], normals[np.maximum(other, 0)], n1)
     between_shapes = two & (shape_of[face1] != shape_of[np.maximum(other, 0)])

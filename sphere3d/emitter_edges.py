@@ -47,7 +47,7 @@ from flatland.core.dual import Dual, detach, tangent
 from sphere3d.edges import mesh_edges
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
-from sphere3d.tracing import face_normals, intersect_triangles
+from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import cross, dot, norm
 
 __all__ = ["POINTS", "EmitterEdgeSamples", "add_tangent", "sample_emitter_edges"]
@@ -147,7 +147,7 @@ class EmitterEdgeSamples:
                 t0[:, 2] - t0[:, 0]
             )
             speed = dot(v, self.table.outward[self.edge[s], j])
-            cos_y = -dot(face_normals(t0), self.w[s])
+            cos_y = -dot(self.table.normals[self.edge[s], j], self.w[s])  # the face's unit normal, tabled
             d = self.dist[s]
             p_light = d * d / (area * cos_y)  # solid-angle density of the emitter strategy
             p_cos = self.cos_x[s] * INV_PI

@@ -152,7 +152,8 @@ def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     $\cos φ\, w_a + \sin φ\, w_⊥$."""
     wa = qa / norm(qa)[:, None]
     perp = qb - wa * dot(qb, wa)[:, None]
-    return wa, perp / np.where(norm(perp) > 0.0, norm(perp), 1.0)[:, None]
+    length = norm(perp)
+    return wa, perp / np.where(length > 0.0, length, 1.0)[:, None]
 
 
 def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np.ndarray]:
@@ -170,7 +171,7 @@ def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np
     """
     wa, perp = _arc_frame(qa, qb)
     q = triangles[None] - o[:, None, None, :]  # (points, T, 3 vertices, 3)
-    sides = np.cross(q[:, :, [1, 2, 0]], q)  # c_i = q_{i+1} × q_i
+    sides = cross(q[:, :, [1, 2, 0]], q)  # c_i = q_{i+1} × q_i
     front = np.einsum("ptk,ptk->pt", q[:, :, 0], sides[:, :, 1]) > 0.0  # q₀·(q₂ × q₁) = -det
     lo = np.zeros((rows.size, len(triangles)))
     hi = np.repeat(gamma[:, None], len(triangles), axis=1)
