@@ -17,14 +17,16 @@ never to be ranked above an unbiased one by its RMSE alone):
 - **RMSE** at 16, 64 and 256 spp: sqrt of the mean over seeds and pixels of (g - ref)²
   (4 seeds at 16 and 64 spp, 2 at 256: the mean over 4096 pixels is already stable; it
   includes the reference's own noise r², listed in the reference row);
-- **seconds per 64 spp** image (best of the seeds' runs, all cores the renderer uses).
+- **seconds per 64 spp** image: wall clock (best of the seeds' runs, all cores the renderer
+  uses), meaningful on an idle machine only.
 
 Next to them the numbers issue 11 quotes for Mitsuba 3.4.1 ``direct_reparam`` on the
 same scene (RMSE 16/64/256 and bias), the target the project's ``reparam`` aims below.
 
 ``boundary`` (edge sampling, unbiased), measured with its defaults (rate 2, 4 edge samples per
-shading point), CPU time of both threads (time.process_time, a loaded machine: wall-clock
-seconds there say nothing), 832 spp per scene in all:
+shading point) by a separate run on a loaded machine, where wall-clock seconds say nothing: its
+last column is CPU time of both threads (time.process_time), not this benchmark's wall clock;
+832 spp per scene in all:
 
 ============================  ===========  ===========  ==========  ===========  =============
 scene                         RMSE 16 spp  RMSE 64 spp  RMSE 256    bias floor   CPU s / 64 spp
@@ -78,9 +80,9 @@ def rmse(images: np.ndarray, reference: np.ndarray) -> float:
     return float(np.sqrt(np.mean((images - reference) ** 2)))
 
 
-def measure(scene: str, method: str) -> dict:
-    """Derivative images for every seed and spp, their RMSE, the bias floor and the time per 64 spp."""
-    ref = load_reference(scene)
+def measure(scene: str, method: str, ref: dict) -> dict:
+    """Derivative images for every seed and spp, their RMSE against the reference ``ref``, the bias
+    floor and the wall-clock time per 64 spp."""
     images, seconds = {}, []
     for spp in SPPS:
         runs = []
@@ -117,7 +119,7 @@ def run() -> list[Row]:
         )
         target = MITSUBA[scene]
         for method in METHODS:
-            result = measure(scene, method)
+            result = measure(scene, method, ref)
             case = f"{scene} {method}"
             rows.append(
                 Row("hard_shadow", f"{case}: bias floor", result["bias"], "rms", f"Mitsuba {target['bias']}")

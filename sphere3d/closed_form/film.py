@@ -231,15 +231,9 @@ def project(camera: Camera, points: Any) -> tuple[Any, Any]:
     """
     f = np.subtract(camera.look_at, camera.position)
     f = f / math.sqrt(float(f @ f))
-    r = np.array(  # f × up, written out component by component
-        [
-            f[1] * camera.up[2] - f[2] * camera.up[1],
-            f[2] * camera.up[0] - f[0] * camera.up[2],
-            f[0] * camera.up[1] - f[1] * camera.up[0],
-        ]
-    )
+    r = np.cross(f, camera.up)  # numpy's cross product, not the renderer's frame code
     r = r / math.sqrt(float(r @ r))
-    u = np.array([r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]])
+    u = np.cross(r, f)
     q = points - np.asarray(camera.position)
     depth = q @ f
     if not np.all(np.asarray(detach(depth)) > 0.0):
