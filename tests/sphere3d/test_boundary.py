@@ -277,7 +277,7 @@ def test07_triangles_through_the_pinhole_match_sphere3d_closed_form(size, kind, 
     both continuous filters. Measured max |z| 0.8-4.1 (limits about 4.6-5.2); pixels without
     variance are exact to 3e-11. (With the box filter a pixel clipping an edge by a sliver is a rare
     event at 64 spp, whose batch error can be 0: not tested per pixel.)"""
-    scene = closed_form.pinholetriangle_scene(size, filter=kind)
+    scene = closed_form.pinhole_triangle_scene(size, filter=kind)
     exact = closed_form.triangle_image(scene, param).derivative
     g = s3.render_gradient(scene, param, method="boundary", spp=64, seed=1, batches=32)
     live = g.derivative_stderr > 0.0
@@ -328,7 +328,7 @@ SHADE = np.array([[0.2, 0.05, 1.0], [0.6, -0.1, 1.0], [0.35, 0.3, 1.0]])
 z = 1.5), covering part of it as seen from the origin."""
 
 
-def _shadedlight_exact(theta: float) -> float:
+def _shaded_light_exact(theta: float) -> float:
     """E at the origin: the light's projected solid angle minus that of its part behind the triangle
     moved by θ in x (Lambert's formula; the part by clipping the triangle's central projection on
     the light's plane z = 1.5 to the light's rectangle, Sutherland-Hodgman)."""
@@ -358,7 +358,7 @@ def test09_a_black_triangle_shading_a_light_under_a_black_sky_matches_lambert():
     scene["shapes"].append({"name": "tri", "type": "mesh", "vertices": SHADE.tolist(), "faces": [[0, 1, 2]]})
     scene["shapes"][-1]["albedo"] = 0.0
     h = 1e-5
-    exact = (_shadedlight_exact(h) - _shadedlight_exact(-h)) / (2.0 * h)
+    exact = (_shaded_light_exact(h) - _shaded_light_exact(-h)) / (2.0 * h)
     e = s3.irradiance(scene, ORIGIN, UP, "tri.translate.x", method="boundary", n=1 << 16, seed=4)
     print(f"{e.derivative:.4f} ± {e.derivative_stderr:.4f} vs {exact:.4f}")
     assert abs(e.derivative - exact) <= _z(1) * e.derivative_stderr
