@@ -63,7 +63,7 @@ from flatland.core.dual import detach, tangent, variable
 from flatland.core.rng import Draws
 from flatland.core.translation import check_continuous_filter, paired_combine, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
-from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_transform
+from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_probes, film_transform
 from sphere3d.integrator import FilmTransform, Shading
 from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.probes import (
@@ -81,6 +81,7 @@ from sphere3d.sampling import (
     triangle_barycentrics,
     vmf_hemisphere_fraction,
 )
+from sphere3d.snaps import angle_snap
 from sphere3d.state import SceneState
 from sphere3d.tasks import ImageTask, PointTask, Tally
 from sphere3d.tracing import attached_points
@@ -181,19 +182,25 @@ class ReparamTransforms:
 
         Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
+        snap = None
         if self.kappa is None:
             d = sample_cosine_hemisphere(
                 shading.draws.uniforms("probes.bsdf", self.probes, 2), detach(shading.n)[:, None]
             )
         else:
             phase = shading.draws.uniforms("probes.bsdf.ring")
-            d = ring_directions(centre, vmf_spread_angle(self.kappa, self.spread), self.probes, phase)
+            ring = vmf_spread_angle(self.kappa, self.spread)
+            # the centre and a ring of 2 probes - 2, as on the film: edges within cos(π/6) of the ring
+            d = ring_directions(centre, ring, film_probes(self.probes), phase)
+            # onto the edge, or its corner up to twice the ring's radius away (as on the film)
+            snap = angle_snap(shading.state, centre, 2.0 * ring)
         hits = shading.state.tracer.intersect(shading.origin[:, None], d)
         # a probe below the horizon sees only the surface it leaves, where the integrand is 0
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
         normal = detach(shading.n)
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
-        return follow_probes(shading.state, shading.x, shading.origin, d, hits, normal, self.refine)
+        state = shading.state
+        return follow_probes(state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin=True)
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
         r"""$w = k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$ in log space: value exactly 1
