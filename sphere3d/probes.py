@@ -309,17 +309,18 @@ def follow_probes(
     normal: np.ndarray | None = None,
     refine: int = REFINE,
     snap: Snap | None = None,
-    spin: bool = False,
+    spin: tuple[np.ndarray, float] | None = None,
 ) -> Rotation:
     """The rotation following the point chosen by :func:`select_points` (identity where none).
 
-    With ``spin`` (and a ``snap``), where the point was snapped onto an edge the rotation also
-    turns about it so that the edge's great circle follows its own (:func:`line_spin`); at a
-    corner, by the mean of its two edges' rates.
+    With ``spin`` = (kernel centres (m, 3), kernel σ in radians) and a ``snap``, where the point
+    was snapped onto an edge the rotation also turns about it so that the edge's great circle
+    follows its own (:func:`~sphere3d.snaps.line_spin`); at a corner, by its two edges' rates
+    weighted by the kernel.
     """
     point, found, snapped = _choose(state, origin, trace_origin, directions, hits, normal, refine, snap)
     to, found = _towards(point, origin, found)
-    if not (spin and snapped is not None):
+    if spin is None or snapped is None:
         return Rotation.following(to, found)
     rows, triangle, lines = snapped
     turn = np.zeros(len(found))
@@ -327,7 +328,7 @@ def follow_probes(
     if ok.any():
         r = rows[ok]
         o = origin if np.ndim(detach(origin)) == 1 else origin[r]
-        turn[r] = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok])
+        turn[r] = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], spin[1])
     return Rotation.following(to, found, Dual(np.zeros(len(found)), turn))
 
 

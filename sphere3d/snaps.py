@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from scipy import special
 
 from flatland.core.dual import detach, tangent
 from sphere3d.state import SceneState
@@ -106,7 +107,14 @@ def angle_snap(state: SceneState, centre: np.ndarray, radius: float) -> Snap:
     return edge_snap(state, gap, radius)
 
 
-def line_spin(triangles: Any, origin: Any, point: Any, lines: np.ndarray) -> np.ndarray:
+def line_spin(
+    triangles: Any,
+    origin: Any,
+    point: Any,
+    lines: np.ndarray,
+    centre: np.ndarray | None = None,
+    sigma: float = 1.0,
+) -> np.ndarray:
     r"""Rate of turn about the direction of ``point`` that keeps the great circles of ``lines`` on theirs.
 
     A rotation with angular velocity $Ω = a × \dot a + λ a$ follows the direction a of a point of
@@ -126,7 +134,11 @@ def line_spin(triangles: Any, origin: Any, point: Any, lines: np.ndarray) -> np.
         The moving ray origin and the followed point on the edges.
     lines : ndarray of int, shape (k, 2, 2)
         Two edges per row as pairs of vertex slots (the same edge twice for a point on one
-        edge); the rate is the mean of the two.
+        edge; at a corner the corner first): their rates' mean, or weighted by ``centre``.
+    centre : ndarray, shape (k, 3), optional
+        Unit kernel centres: at a corner each edge's rate is weighted by its first moment
+        $M_i = ∫ s\, g\, ds$ from the corner under a Gaussian of ``sigma`` (radians) about the
+        centre, the λ that zeroes the first-order error $Σ_i (λ_i - λ) M_i$ (:func:`_moment`).
 
     Returns
     -------
@@ -136,11 +148,34 @@ def line_spin(triangles: Any, origin: Any, point: Any, lines: np.ndarray) -> np.
     k = np.arange(len(lines))
     a = detach(point - origin)
     a = a / norm(a)[:, None]
-    rate = np.zeros(len(lines))
+    rates, weights = [], []
     for side in range(2):  # the two edges (not a loop over samples)
-        m = cross(triangles[k, lines[:, side, 0]] - origin, triangles[k, lines[:, side, 1]] - origin)
+        p, q = triangles[k, lines[:, side, 0]] - origin, triangles[k, lines[:, side, 1]] - origin
+        m = cross(p, q)
         length = norm(detach(m))
         m = m / np.where(length > 0.0, length, 1.0)[:, None]
         e = cross(detach(m), a)
-        rate = rate - 0.5 * np.where(length > 0.0, tangent(dot(m, e)), 0.0)
-    return rate
+        rates.append(-np.where(length > 0.0, tangent(dot(m, e)), 0.0))
+        weights.append(np.ones(len(lines)) if centre is None else _moment(a, detach(q), centre, sigma))
+    total = weights[0] + weights[1]
+    w = np.where(total > 0.0, weights[0] / np.where(total > 0.0, total, 1.0), 0.5)
+    return w * rates[0] + (1.0 - w) * rates[1]
+
+
+def _moment(a: np.ndarray, q: np.ndarray, centre: np.ndarray, sigma: float) -> np.ndarray:
+    r"""$∫_0^∞ s\, g(s t - x) ds$ along the edge from the corner a towards q, g the Gaussian of ``sigma``
+    about the kernel ``centre`` (x: the centre's offset in a's tangent plane, small angles):
+    $e^{-b^2/2σ^2} (σ^2 e^{-α^2/2σ^2} + α σ \sqrt{2π}\, Φ(α/σ))$, α = x·t, $b^2 = |x|^2 - α^2$.
+
+    The weight of the edge in the first-order error $Σ_i (λ_i - λ) M_i$ of a turn λ at a corner."""
+    t = q - dot(q, a)[:, None] * a
+    t = t / np.maximum(norm(t), 1e-300)[:, None]
+    x = centre - dot(centre, a)[:, None] * a
+    along = dot(x, t)
+    b2 = np.maximum(dot(x, x) - along * along, 0.0)
+    z = along / sigma
+    return (
+        np.exp(-0.5 * b2 / sigma**2)
+        * sigma**2
+        * (np.exp(-0.5 * z * z) + z * np.sqrt(2.0 * np.pi) * special.ndtr(z))
+    )

@@ -199,8 +199,10 @@ class ReparamTransforms:
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
         normal = detach(shading.n)
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
-        state = shading.state
-        return follow_probes(state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin=True)
+        spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(self.kappa))
+        return follow_probes(
+            shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
+        )
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
         r"""$w = k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$ in log space: value exactly 1
