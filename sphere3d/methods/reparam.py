@@ -17,8 +17,8 @@ implementation (theory/kernels).
 Bias
 ----
 Measured against the closed forms of :mod:`sphere3d.closed_form` by
-``python -m benchmarks --only reparam_bias`` (defaults: κ = 1000, 4 probes, spread 3;
-seed 11, 16 batches; ± one standard error); tested as biases in
+``python -m benchmarks --only reparam_bias`` (defaults: κ = 1000, 4 probes (7 on the ring),
+spread 3; seed 11, 16 batches; ± one standard error); tested as biases in
 ``tests/sphere3d/test_triangle_closed_form.py``.
 
 **Camera**: the film kernel's loss of a small triangle's silhouette term, in
@@ -31,23 +31,34 @@ lost, $1 - d / g$. The triangle (-0.2, -0.5, 1), (0.9, 0.1, 1.1), (0.1, 0.6, 0.9
 its centroid; "near the horizon": a large triangle whose lower edge lies 20, 10 or 5 degrees
 above the horizon, its apex high (``horizon_triangle`` in the benchmark), moving sideways:
 
-=====================================  ==========  ==================
-case                                   samples     lost
-=====================================  ==========  ==================
-z-translation                          2^22        5.4 % ± 0.7 %
-x-translation                          2^24        4.8 % ± 1.3 %
-scale                                  2^22        5.1 % ± 0.6 %
-rotation about x                       2^24        11.4 % ± 1.5 %
-rotation about y                       2^24        4.6 % ± 1.3 %
-near the horizon: 20°, 10°, 5°         2^22        4.6, 3.1, 2.9 % (± 0.7, 0.5, 0.4 %)
-``kappa=None``: z-translation, scale   2^22        100.9 %, 99.5 % (± 0.1 %)
-=====================================  ==========  ==================
+=====================================  ==========  ==================  ==================
+case                                   samples     lost                before the snaps
+=====================================  ==========  ==================  ==================
+z-translation                          2^22        @Z                  5.4 % ± 0.7 %
+x-translation                          2^24        @X                  4.8 % ± 1.3 %
+scale                                  2^22        @S                  5.1 % ± 0.6 %
+rotation about x                       2^24        @RX                 11.4 % ± 1.5 %
+rotation about y                       2^24        @RY                 4.6 % ± 1.3 %
+near the horizon: 20°, 10°, 5°         2^22        @H                  4.6, 3.1, 2.9 %
+``kappa=None``: z-translation, scale   2^22        100.9 %, 99.5 %     (± 0.1 %)
+=====================================  ==========  ==================  ==================
 
-Always short, never long: a kernel that reaches an edge none of its probes detects (near
-the triangle's corners), or two edges one rotation cannot follow, drops its share of the
-boundary term. Without a kernel (``kappa=None``) one
-rotation from cosine-distributed probes serves the whole hemisphere and the derivative is
-lost entirely (the estimate is within 1 % of zero).
+Before, with a ring of 3 probes, no snap and no turn ("before the snaps"; seed 11 is a low
+draw: seeds 12-14 gave 2.1, 3.1, 1.3 ± 0.8 % for z-translation after), the loss per kernel,
+from the velocity of each kernel's rotation against the edges' own along the edges inside it
+(2^18 kernels, z-translation: 7.0 ± 0.1 % in all): 4.6 % in kernels none of whose probes hit
+the triangle, nearly all within 2σ of a corner and outside it (its wedge fell between the
+ring's probes); 1.2 % where one edge was followed at a point up to 1/8 of the probe gap
+inside the triangle, whose image scales; 1.2 % at corners, followed without their edges'
+turn (the rotation about x turns the triangle's image: 11 %). Now: a ring of 2 ``probes`` - 2
+as on the film (:func:`~sphere3d.camera_kernel.film_probes`), the bisected hit snapped onto
+its edge or onto the corner within twice the ring's radius (:func:`~sphere3d.snaps.angle_snap`),
+and the rotation turned about the followed direction so that the edge's great circle follows
+(:func:`~sphere3d.snaps.line_spin`; at a corner its two edges' rates weighted by the kernel).
+Left (same check, 2^18 kernels): @LEFT. Always short, never long: kernels whose probes all
+miss the triangle near a corner, and corners whose two edges turn at different rates.
+Without a kernel (``kappa=None``) one rotation from cosine-distributed probes serves the
+whole hemisphere and the derivative is lost entirely (the estimate is within 1 % of zero).
 """
 
 from __future__ import annotations
@@ -105,9 +116,10 @@ class ReparamTransforms:
         1 / variance of the Gaussian film kernel of the pixel integral, $\mathrm{pixels}^{-2}$
         (:mod:`sphere3d.camera_kernel`).
     probes : int
-        Probe rays per transform, >= 1. With one probe (the kernel's centre, the pixel
-        centre) there is no pair: its attached hit is followed, the identity where it
-        misses (:mod:`sphere3d.probes`).
+        Probe rays per transform, >= 1; on the film and around the cosine strategy's kernel
+        centres the centre and a ring of 2 ``probes`` - 2 (:func:`~sphere3d.camera_kernel.film_probes`).
+        With one probe (the kernel's centre, the pixel centre) there is no pair: its
+        attached hit is followed, the identity where it misses (:mod:`sphere3d.probes`).
     spread : float
         Radius of the ring of probes around a kernel's centre, in kernel standard
         deviations (:mod:`sphere3d.probes`), >= 0: any value has a ring, whose angle
@@ -314,13 +326,14 @@ def reparam(
       rotation does not hold an occluder's shadow edge still (occluders moving
       differently, or one whose outline lies at several depths).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
-      with concentration ``kappa``: a kernel centre $ω \sim \mathrm{vMF}(μ, κ)$ per sample, probes
-      on a ring of ``spread`` kernel widths around it, weight
-      $k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$. Biased where a kernel reaches a discontinuity
-      that no probe detects (near corners) or that the rotation does not follow
-      (several in one kernel): a black triangle rising above a point, -7.6 % with 4
-      probes, -2.9 % with 8; the bias falls as κ grows, the variance of a sample near
-      an edge grows like $\sqrt{κ}$. ``kappa=None``: no kernel, probes from the cosine
+      with concentration ``kappa``: a kernel centre $ω \sim \mathrm{vMF}(μ, κ)$ per sample, the
+      centre and a ring of 2 ``probes`` - 2 probes ``spread`` kernel widths around it, the
+      bisected hit snapped onto its edge or corner and the rotation turned so that the edge
+      follows (:mod:`sphere3d.snaps`), weight $k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$. Biased
+      where a kernel reaches a discontinuity that no probe detects (near corners) or that
+      the rotation does not follow (a corner's two edges turning differently): a black
+      triangle above a point loses about 1-2 % (module docstring, Bias); the bias falls as
+      κ grows, the variance of a sample near an edge grows like $\sqrt{κ}$. ``kappa=None``: no kernel, probes from the cosine
       density (one rotation for the whole hemisphere: strongly biased, for study).
 
     ``refine`` (an integer >= 0, default :data:`~sphere3d.probes.REFINE` = 3): where the
