@@ -107,10 +107,11 @@ not from $\dot w$ times a noisy radiance. On the cube (``make bench`` seeds) RMS
 filter weight's variance fell from 0.91 to 0.20 (all terms: 0.96 to 0.30), at 3 % more CPU
 time (1.82 to 1.88 s per 64 spp, process time, measured in the same minutes). The drop in
 squared error at 256 spp (0.053) is the drop in variance (0.055), the bias changes within
-its noise (the silhouette keeps 99.3 ± 1.0 % instead of 96.1 ± 1.1 %). Smooth shapes are
-left out: on the icosphere the same rule raised the RMSE at 16 spp from 0.96 to 1.04 (the
-emitter edge term at shading points sliding over the sphere: variance 0.37 on the
-occluder) for 13 % more CPU time.
+its noise (the silhouette keeps 99.3 ± 1.0 % instead of 96.1 ± 1.1 %). Not applied while
+the camera moves (every surface then moves in the image; not measured there). Smooth
+shapes are left out: on the icosphere the same rule raised the RMSE at 16 spp from 0.96
+to 1.04 (the emitter edge term at shading points sliding over the sphere: variance 0.37
+on the occluder) for 13 % more CPU time.
 """
 
 from __future__ import annotations
@@ -202,7 +203,8 @@ def film_transform(
         ``spread`` kernel standard deviations; bisection rays toward the silhouette.
     plane : bool, optional
         The identity where every probe of a kernel hits one plane of a flat-shaded shape
-        (:func:`one_plane`; the ``reparam`` option ``film_one_plane``, module docstring, Noise).
+        (:func:`one_plane`; the ``reparam`` option ``film_one_plane``, module docstring, Noise),
+        while the camera stands still.
 
     Returns
     -------
@@ -228,9 +230,9 @@ def film_transform(
         if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
             seen = np.any(moving[np.maximum(hits.triangle, 0)] & (hits.triangle >= 0), axis=1)
             rows, d, hits = rows[seen], d[seen], hits.take(seen)
-        if plane:  # one plane in sight, nothing to follow: the identity (module docstring, Noise)
-            keep = ~one_plane(state, hits)
-            rows, d, hits = rows[keep], d[keep], hits.take(keep)
+            if plane:  # one plane in sight, nothing to follow: the identity (module docstring, Noise)
+                keep = ~one_plane(state, hits)
+                rows, d, hits = rows[keep], d[keep], hits.take(keep)
         # a corner up to twice the ring's radius away: its second edge still enters the ring if it
         # makes more than 30 degrees with the line to the centre (sin 30° = 1/2)
         snap = silhouette_snap(state, centre[rows], 2.0 * spread * sigma)
