@@ -40,6 +40,7 @@ def test01_api_exports_and_methods():
         "refine": 3,
         "paired": False,
         "emitter_edges": True,
+        "film_one_plane": True,
     }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
