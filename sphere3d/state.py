@@ -11,7 +11,7 @@ the detached triangles: rays are traced at θ0 and re-attached to these Duals.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -141,6 +141,12 @@ class SceneState:
     def dual(self) -> bool:
         """True if the state carries θ-tangents."""
         return isinstance(self.triangles, Dual)
+
+    def detached(self) -> SceneState:
+        """The same state without tangents (values unchanged), for rows whose tangents are known to be 0."""
+        plain = {f: detach(getattr(self, f)) for f in ("triangles", "normals", "albedo", "emission", "sky")}
+        camera = replace(self.camera, origin=detach(self.camera.origin))
+        return replace(self, **plain, emitter_area=detach(self.emitter_area), camera=camera)
 
     def emitted(self, triangle: np.ndarray, b1: Any, b2: Any) -> Any:
         """Front-side radiance at barycentrics (b1, b2) of ``triangle``: emission × border fade."""
