@@ -263,7 +263,7 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     need = np.zeros(m, dtype=bool)  # one rotation per point, for both terms
     need[vis if edge is None else np.concatenate([vis, edge.index])] = True
     place = np.cumsum(need) - 1  # row of each needed point in the rotation
-    rotation = transforms.emitter(shading.take(np.flatnonzero(need)))
+    rotation = transforms.emitter(shading if need.all() else shading.take(np.flatnonzero(need)))
     # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
     live = rotation.active[place[vis]] | moving_rows(vis, shading.x, shading.n) | emitters_change(state)
     plain, inv_area = state.detached(), 1.0 / float(detach(state.emitter_area))
@@ -392,6 +392,7 @@ def camera_radiance(
         diffuse = (detach(albedo) > 0.0) | (state.param is not None and state.param.endswith(".albedo"))
         s = np.flatnonzero(diffuse)
         if s.size:
+            s = slice(None) if s.size == hit.size else s  # all diffuse: views, not copies
             shading = Shading.at(state, point[s], shade_n[s], draws.take(hit[s]), geometric[s])
             e = irradiance_samples(shading, u[hit[s]], transforms)
             value = value + scatter(hit.size, s, albedo[s] * INV_PI * e, state.dual)

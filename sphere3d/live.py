@@ -28,7 +28,7 @@ def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
     for s in sources:
         if isinstance(s, Dual):
             t = s.tangent[rows]
-            out |= np.any(t.reshape(len(rows), -1) != 0.0, axis=1)
+            out |= np.any(t != 0.0, axis=tuple(range(1, t.ndim)))
     return out
 
 
@@ -55,7 +55,7 @@ def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sourc
         ``func``'s outputs for all ``rows``: tangents +0 where not ``live``.
     """
     li, di = rows[live], rows[~live]
-    plain = func(False, *(detach(s)[di] for s in sources)) if di.size else None
+    plain = func(False, *(detach(s)[di] for s in sources)) if di.size or not li.size else None
     dual = func(True, *(s[li] for s in sources)) if li.size else None
     outputs = []
     for j in range(len(plain if plain is not None else dual)):
