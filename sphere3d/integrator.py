@@ -44,7 +44,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
-from sphere3d.emitter_edges import add_tangent, sample_emitter_edges
+from sphere3d.emitter_edges import add_tangent, emitter_edge_term
 from sphere3d.live import emitters_change, moving_rows, on_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
@@ -246,22 +246,18 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     to = y - detach(shading.x)
     dist = norm(to)
     w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
-    cos_y = -dot(face_normals(emitters[k]), w)
+    cos_y = -dot(face_normals(emitters)[k], w)
     cos_x = dot(detach(shading.n), w)
     valid = (cos_y > 1e-9) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
     blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
     # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
-    edge = (
-        sample_emitter_edges(state, shading)
-        if state.dual and getattr(transforms, "emitter_edges", False)
-        else None
-    )
-    if vis.size == 0 and edge is None:
+    edges = state.dual and getattr(transforms, "emitter_edges", False)
+    if vis.size == 0 and not edges:
         return scatter(m, vis, 0.0, state.dual)
-    need = np.zeros(m, dtype=bool)  # one rotation per point, for both terms
-    need[vis if edge is None else np.concatenate([vis, edge.index])] = True
+    need = np.full(m, edges)  # one rotation per point, for both terms (any point may have edge samples)
+    need[vis] = True
     place = np.cumsum(need) - 1  # row of each needed point in the rotation
     rotation = transforms.emitter(shading if need.all() else shading.take(np.flatnonzero(need)))
     # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
@@ -282,9 +278,7 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
 
     (f,) = on_rows(estimate, vis, live, shading.x, shading.n, w, place, tri, dist, cos_y)
     out = scatter(m, vis, f, state.dual)
-    if edge is None:
-        return out
-    return add_tangent(out, *edge.term(state, shading, rotation.take(place[edge.index])))
+    return add_tangent(out, *emitter_edge_term(state, shading, rotation)) if edges else out
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:

@@ -150,11 +150,16 @@ class SceneState:
 
     def emitted(self, triangle: np.ndarray, b1: Any, b2: Any) -> Any:
         """Front-side radiance at barycentrics (b1, b2) of ``triangle``: emission × border fade."""
+        emission = self.emission[self.shape_of[triangle]]
+        if np.shape(b1) == np.shape(triangle) and not np.any(
+            (self.fade[triangle] > 0.0) & (self.fade_kind[triangle] != shp.FADE_NONE)
+        ):
+            return emission  # no border fade on these triangles: the factor is exactly 1
         uv = self.uv[triangle]
         b1, b2 = b1[..., None], b2[..., None]
         point_uv = (1.0 - b1 - b2) * uv[..., 0, :] + b1 * uv[..., 1, :] + b2 * uv[..., 2, :]
         fade = shp.fade_weight(point_uv, self.fade_kind[triangle], self.fade[triangle])
-        return self.emission[self.shape_of[triangle]] * fade
+        return emission * fade
 
     def shading_normals(self, triangle: np.ndarray, b1: Any, b2: Any, geometric: Any) -> Any:
         """Unit shading normals at barycentrics (b1, b2) of ``triangle``; Dual-aware.
