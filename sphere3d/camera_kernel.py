@@ -240,7 +240,7 @@ def film_transform(
         sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap)
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
-    first, second = np.arange(n), np.arange(n, 2 * n)
+    first, second = slice(0, n), slice(n, 2 * n)  # views, not copies
     return FilmTransform((rotation.take(first), rotation.take(second)), (centre[:n], centre[n:]), kappa_film)
 
 

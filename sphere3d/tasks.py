@@ -15,6 +15,8 @@ index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -57,12 +59,43 @@ class Tally:
     derivative: np.ndarray
 
 
+@functools.cache
+def _heap_for_temporaries() -> bool:
+    """Let glibc's malloc serve a chunk's temporaries (up to 32 MiB each) from its heap and keep them.
+
+    By default glibc maps large arrays with ``mmap`` and unmaps them when freed (and trims
+    the heap's free top), so the temporaries of every chunk (hundreds of arrays of 0.1 to
+    10 MB) are page-faulted in again: on ``hard_shadow`` (reparam, 64 spp, one thread)
+    75 000 page faults and 0.18 s of system time per image, against 16 000 and 0.05 s
+    with this (the trim after each task included).
+    Raising the mmap and trim thresholds (``mallopt``) reuses the freed memory instead;
+    :func:`_map` hands it back with ``malloc_trim`` after each task. Process-wide, set
+    once, on glibc only (elsewhere a no-op); the arithmetic, hence every result, is unchanged.
+    """
+    try:
+        libc = ctypes.CDLL(None)
+        mallopt, _ = libc.mallopt, libc.malloc_trim  # both must exist (glibc)
+    except (OSError, AttributeError, TypeError):  # no C library by that name, or not glibc
+        return False
+    m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
+    return bool(mallopt(m_mmap_threshold, 32 << 20)) and bool(mallopt(m_trim_threshold, 512 << 20))
+
+
 def _map(func: Callable[[int], Any], items: range) -> list[Any]:
     """``[func(i) for i in items]``, on up to :data:`WORKERS` threads (numpy and Embree release the GIL).
 
     Each chunk draws from its own named streams, so the result does not depend on
     the number of threads or the order they finish in.
     """
+    if _heap_for_temporaries():
+        try:
+            return _map_threads(func, items)
+        finally:
+            ctypes.CDLL(None).malloc_trim(0)  # give the chunks' memory back
+    return _map_threads(func, items)
+
+
+def _map_threads(func: Callable[[int], Any], items: range) -> list[Any]:
     if WORKERS <= 1 or len(items) <= 1:
         return [func(i) for i in items]
     with ThreadPoolExecutor(max_workers=WORKERS) as pool:
