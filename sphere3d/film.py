@@ -121,20 +121,20 @@ def stencil(values: np.ndarray, pixel: np.ndarray, source: np.ndarray, width: in
     samples, m).
 
     ``pixel`` (same shape): target flat index (-1: none); ``source`` (pixels,): the source pixels'
-    flat indices. Returns (groups, pixels, (2h + 1)²); every sum runs over one source pixel's
-    samples in their order, whatever the chunk.
+    flat indices. Returns (groups, pixels, (2h + 1)²). ``np.bincount`` adds each bin's entries
+    one by one in their order, a source pixel's samples in sample order, so every sum is the
+    same whatever chunk holds the pixel.
     """
     side = 2 * h + 1
+    g, p, _, _ = values.shape
     src = source[None, :, None, None]
     drow = np.floor_divide(pixel, width) - src // width
     dcol = np.mod(pixel, width) - src % width
     ok = (pixel >= 0) & (np.abs(drow) <= h) & (np.abs(dcol) <= h)
-    slot = np.where(ok, (drow + h) * side + dcol + h, 0)
-    g, p, s, _ = values.shape
-    dense = np.zeros((g, p, side * side, s))
-    gi, pi, si, mi = np.nonzero(ok)
-    dense[gi, pi, slot[gi, pi, si, mi], si] = values[gi, pi, si, mi]  # a sample's targets are distinct
-    return np.sum(dense, axis=-1)
+    group = np.arange(g * p).reshape(g, p, 1, 1)
+    key = (group * side + drow + h) * side + dcol + h
+    sums = np.bincount(key[ok], weights=values[ok], minlength=g * p * side * side)
+    return sums.reshape(g, p, side * side)
 
 
 def gather(parts: np.ndarray, height: int, width: int, h: int) -> np.ndarray:

@@ -208,7 +208,7 @@ class ImageTask:
         ev, et = (np.asarray(f(e), dtype=np.float64).reshape(shape) for f in (detach, tangent))
         n = batches * per_batch if self.cv_scope == "pixel" else per_batch
         if self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box":
-            return stencil(ev, target, pix, width, h), stencil(et, target, pix, width, h), None, None, None
+            return stencil(np.concatenate([ev, et]), np.tile(target, (2, 1, 1, 1)), pix, width, h), None
         radiance = np.asarray(detach(samples.radiance), dtype=np.float64).reshape(batches, -1, per_batch)
         rows = radiance.transpose(1, 0, 2).reshape(pix.size, -1) if self.cv_scope == "pixel" else radiance
         total = np.sum(np.ascontiguousarray(rows), axis=-1)  # per pixel (and batch), as _control_variate
@@ -218,22 +218,22 @@ class ImageTask:
         wv, wt = (np.asarray(f(samples.weight), dtype=np.float64).reshape(shape) for f in (detach, tangent))
         ev = ev - np.where(own, scale * (wv - 1.0), 0.0)
         et = et - np.where(own, scale * wt, 0.0)
-        ov, ot = (stencil(np.where(own, 0.0, w), target, pix, width, h) for w in (wv, wt))
-        total = total.reshape(-1 if self.cv_scope == "pixel" else batches, pix.size)
-        return stencil(ev, target, pix, width, h), stencil(et, target, pix, width, h), ov, ot, total
+        ov, ot = np.where(own, 0.0, wv), np.where(own, 0.0, wt)
+        parts = stencil(np.concatenate([ev, et, ov, ot]), np.tile(target, (4, 1, 1, 1)), pix, width, h)
+        return parts, total.reshape(-1 if self.cv_scope == "pixel" else batches, pix.size)
 
     def _splat_image(self, parts: list[tuple], batches: int, per_batch: int) -> Tally:
-        """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`)."""
+        """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`):
+        value and tangent, minus the other pixels' samples' weights times their target's mean radiance."""
         height, width = self.shape
         _, h = reach(self.scene.camera.filter)
-        ev, et, ov, ot, total = (
-            None if part[0] is None else np.concatenate(part, axis=1) for part in zip(*parts, strict=True)
-        )
-        value, deriv = (gather(x, height, width, h) / per_batch for x in (ev, et))
-        if ov is not None:  # the other pixels' samples, scaled by their target's mean radiance
+        sums = gather(np.concatenate([part[0] for part in parts], axis=1), height, width, h) / per_batch
+        value, deriv = sums[:batches], sums[batches : 2 * batches]
+        if parts[0][1] is not None:
+            total = np.concatenate([part[1] for part in parts], axis=1)
             mean = total / (batches * per_batch if self.cv_scope == "pixel" else per_batch)
-            value = value - mean * (gather(ov, height, width, h) / per_batch)
-            deriv = deriv - mean * (gather(ot, height, width, h) / per_batch)
+            value = value - mean * sums[2 * batches : 3 * batches]
+            deriv = deriv - mean * sums[3 * batches :]
         shape = (batches, height, width)
         return Tally(value=value.reshape(shape), derivative=deriv.reshape(shape))
 
