@@ -22,9 +22,9 @@ weight is $k(\mathrm{film}(Rω) - p) J(Rω) g(\mathrm{film}(Rω) - c) / \mathrm{
 value $k(s - p) / q(s)$: the per-pixel weight with the pixel centre replaced by p and the
 density p by q. The reverse-order argument of :mod:`sphere3d.camera_kernel` holds with q in
 place of p: the pair (s, c) has the θ-free joint density $q(s) g(c - s)$ pooled over the
-samplers, and for a fixed c, $T_c$ the film map of $R_c$,
-$Σ_{p'} ∫∫ p(s - p') g(c - s) \frac{|T_c'| g(T_c s - c) k(T_c s - p) L(T_c s)}{q(s) g(c - s)} ds\, dc
-= ∫ dc ∫ g(u - c) k(u - p) L(u) du = ∫ k(u - p) L(u) du$ for every θ.
+samplers, and for a fixed c, $T_c$ the film map of $R_c$, the expectation of the estimate
+$|T_c'| g(T_c s - c) k(T_c s - p) L(T_c s) / (q(s) g(c - s))$ summed over the samplers is
+$∫ dc ∫ g(u - c) k(u - p) L(u) du = ∫ k(u - p) L(u) du$ for every θ ($u = T_c s$).
 
 Control variate: with L = 1 the same sum is 1 for every θ, so the weights' tangents
 $\dot w_{i,p}$ summed over *all* the samplers' samples (any set holding equally many samples
