@@ -32,8 +32,12 @@ of every pixel, e.g. one batch) have zero mean for each pixel p; one sample's al
 (the ratio $p(s - p') / q(s)$ is not carried by the rotation). A scale $c_{p,-i}$ independent
 of sample i with the same expectation for every i keeps $E[Σ_i c_{p,-i} \dot w_{i,p}] = 0$:
 the mean radiance of pixel p's own samples, leaving sample i out when it is one of them
-(any subset of pixel p's i.i.d. samples has the same mean). See
-:meth:`~sphere3d.tasks.ImageTask._control_variate`.
+(any subset of pixel p's i.i.d. samples has the same mean). The value gets the same
+control variate, $c_{p,-i} (w_{i,p} - [i ∈ p])$: $E Σ_i w_{i,p} = N$, so a constant radiance
+is estimated exactly, where the raw splat's value is noisier than one pixel's own samples
+(the number of neighbours' samples landing near p varies; closed-form triangle, 256 spp:
+value RMSE 0.023 raw, 0.0039 controlled, 0.0089 unsplatted). See
+:meth:`~sphere3d.tasks.ImageTask._splat_chunk`.
 
 Independence of chunks and threads: each chunk holds whole pixels and sums, per source
 pixel p', batch and target offset p - p', over the source's own samples (:func:`stencil`);

@@ -79,7 +79,11 @@ def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
 
 @dataclass(frozen=True)
 class ImageTask:
-    """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``."""
+    """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``.
+
+    ``cv_scope``: :meth:`_control_variate`; ``film``: ``"pixel"`` (default) or ``"splat"``
+    (:mod:`sphere3d.film`, :meth:`_splat_chunk`), for every method alike.
+    """
 
     scene: Scene
     param: str | None
