@@ -20,6 +20,9 @@ never to be ranked above an unbiased one by its RMSE alone):
 - **seconds per 64 spp** image: wall clock (best of the seeds' runs, all cores the renderer
   uses), meaningful on an idle machine only.
 
+``reparam (splat)`` is ``reparam`` with ``film="splat"`` (:mod:`sphere3d.film`: every sample in
+every pixel its filter covers, as Mitsuba's film); its numbers are in that module's docstring.
+
 Next to them the numbers issue 11 quotes for Mitsuba 3.4.1 ``direct_reparam`` on the
 same scene (RMSE 16/64/256 and bias), the target the project's ``reparam`` aims below.
 
