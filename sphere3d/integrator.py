@@ -167,6 +167,7 @@ class PixelSamples:
 
     radiance: Any
     weight: Any
+    pixel: Any = None  # film splatting: (n, m) flat indices of the pixels each weight is for (-1: none)
 
     @property
     def estimate(self) -> Any:
@@ -301,12 +302,15 @@ def pixel_samples(
     cols: np.ndarray,
     u: np.ndarray,
     draws: Draws,
+    splat: Any = None,
 ) -> Any:
     """One estimate of the pixel integral per sample (pixel ``rows``, ``cols``; uniforms ``u``).
 
     With tangents, ``transforms.camera`` gives each sample its rotations and film kernels.
     The estimate is ``radiance * weight`` (:class:`PixelSamples`); both are Duals when the
     state carries tangents. ``draws`` keys the samples' further random numbers on their indices.
+    ``splat(x, y)``: a :class:`~sphere3d.film.Splat` of the film points (x, y), whose weights
+    (n, m), one per reached pixel, replace k / p (film splatting, :mod:`sphere3d.film`).
     """
     cam = state.camera
     offsets = sample_filter(u[:, 0:2], cam.filter)
@@ -314,28 +318,36 @@ def pixel_samples(
     cx, cy = cols + 0.5, rows + 0.5
     x, y = cx + offsets[:, 0], cy + offsets[:, 1]
     d = cam.directions(x, y)
+    if splat is not None:
+        splat = splat(x, y)
+        weight = splat.weight  # k(s - p) / q(s) per reached pixel p, θ-free
     if state.dual:
         film = transforms.camera(state, x, y, draws)
         # only rows where a rotation moves: elsewhere every tangent below is exactly 0
         live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
-        r_dot, w_dot = np.zeros(d.shape), np.zeros(len(d))
+        r_dot, w_dot = np.zeros(d.shape), np.zeros(np.shape(weight))
         for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
             r = rotation.take(live).apply(d[live])
             fx, fy = cam.film(r)
             # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
             # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)
-            log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
-            w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+            if splat is None:
+                log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
+                w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+            else:  # the same with each reached pixel's centre (sphere3d.film)
+                rest = cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live)
+                w = splat.unit_weights(fx, fy, rest, live, cam.filter)
             r_dot[live] += tangent(r)
             w_dot[live] += tangent(w)
         # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is
         # linear in the direction's, so one evaluation along the mean tangent gives the mean of
         # the tangents; values exactly ω and 1 (the primal stays the naive one)
         m = len(film.rotations)
-        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(len(d)), w_dot / m)
+        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
     else:
         rotated = d
-    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight)
+    pixel = None if splat is None else splat.pixel
+    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight, pixel)
 
 
 def camera_radiance(

@@ -29,6 +29,7 @@ from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import control_variate
 from flatland.core.validate import check_choice
+from sphere3d.film import FILMS, gather, reach, splat_weights, stencil
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
     Identity,
@@ -111,7 +112,11 @@ def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
 
 @dataclass(frozen=True)
 class ImageTask:
-    """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``."""
+    """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``.
+
+    ``cv_scope``: :meth:`_control_variate`; ``film``: ``"pixel"`` (default) or ``"splat"``
+    (:mod:`sphere3d.film`, :meth:`_splat_chunk`), for every method alike.
+    """
 
     scene: Scene
     param: str | None
@@ -120,6 +125,9 @@ class ImageTask:
     batches: int
     tracer: str = "embree"
     cv_scope: str = "pixel"
+    film: str = "pixel"
+    """``"pixel"``: each sample in the pixel that drew it; ``"splat"``: in every pixel its filter
+    covers, weighted by $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`; not the default)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -127,6 +135,7 @@ class ImageTask:
 
     def __post_init__(self) -> None:
         check_choice("cv_scope", self.cv_scope, CV_SCOPES)
+        check_choice("film", self.film, FILMS)
 
     def _control_variate(self, samples: PixelSamples, batches: int, per_batch: int) -> Any:
         r"""Per-sample estimates (batches × pixels × samples) with the filter-weight control variate.
@@ -198,11 +207,72 @@ class ImageTask:
             draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
             u = draws.uniforms("samples", PRIMARY_UNIFORMS)
             sample_pix = p_idx.ravel()
+            if self.film == "splat":
+                kind = self.scene.camera.filter
+                splat = lambda x, y: splat_weights(x, y, width, height, kind)  # noqa: E731
+                est = pixel_samples(
+                    state, transforms, rows_all[sample_pix], cols_all[sample_pix], u, draws, splat
+                )
+                return self._splat_chunk(est, pix, batches, per_batch)
             est = pixel_samples(state, transforms, rows_all[sample_pix], cols_all[sample_pix], u, draws)
             return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
         parts = _map(chunk, range(-(-pixels.size // chunk_pixels)))
+        if self.film == "splat":
+            return self._splat_image(parts, batches, per_batch)
         return _tally(list(np.concatenate(parts, axis=1)), self.shape)
+
+    def _splat_chunk(self, samples: PixelSamples, pix: np.ndarray, batches: int, per_batch: int) -> tuple:
+        r"""One chunk's splatted estimates as stencils (:func:`~sphere3d.film.stencil`): value and
+        tangent, then those of the weights $w_{i,p}$ of samples i in pixels p other than their own
+        (or None), and the radiance totals of the chunk's pixels.
+
+        Control variate (:mod:`sphere3d.film`), value and tangent: $Σ_i e_{i,p}$ minus
+        $Σ_i c_{p,-i} (w_{i,p} - [i ∈ p])$, $c_{p,-i}$ the mean radiance of pixel p's samples
+        without i (all of them when i is another pixel's; same expectation for every i,
+        independent of i). Unbiased: a batch holds equally many samples of every pixel, so
+        $E Σ_i w_{i,p} = n$ and $E Σ_i \dot w_{i,p} = 0$ for every θ (pooled over the samplers,
+        :mod:`sphere3d.film`); the $[i ∈ p]$ count n. It removes the noise of the weights'
+        sum (a constant radiance gives its value exactly) and the filter derivative's $L \dot w$
+        (:meth:`_control_variate`). The other pixels' part is applied in :meth:`_splat_image`.
+        Off where :meth:`_control_variate` is (``cv_scope="off"``, one sample per scope, box).
+        """
+        _, h = reach(self.scene.camera.filter)
+        width = self.scene.camera.width
+        shape = (batches, pix.size, per_batch, samples.weight.shape[-1])
+        target = samples.pixel.reshape(shape)
+        e = samples.radiance[:, None] * samples.weight
+        ev, et = (np.asarray(f(e), dtype=np.float64).reshape(shape) for f in (detach, tangent))
+        n = batches * per_batch if self.cv_scope == "pixel" else per_batch
+        if self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box":
+            return stencil(np.concatenate([ev, et]), np.tile(target, (2, 1, 1, 1)), pix, width, h), None
+        radiance = np.asarray(detach(samples.radiance), dtype=np.float64).reshape(batches, -1, per_batch)
+        rows = radiance.transpose(1, 0, 2).reshape(pix.size, -1) if self.cv_scope == "pixel" else radiance
+        total = np.sum(np.ascontiguousarray(rows), axis=-1)  # per pixel (and batch), as _control_variate
+        total = total[None, :, None] if self.cv_scope == "pixel" else total[..., None]
+        own = target == pix[None, :, None, None]
+        scale = ((total - radiance) / (n - 1))[..., None]  # leave sample i out of its own pixel
+        wv, wt = (np.asarray(f(samples.weight), dtype=np.float64).reshape(shape) for f in (detach, tangent))
+        ev = ev - np.where(own, scale * (wv - 1.0), 0.0)
+        et = et - np.where(own, scale * wt, 0.0)
+        ov, ot = np.where(own, 0.0, wv), np.where(own, 0.0, wt)
+        parts = stencil(np.concatenate([ev, et, ov, ot]), np.tile(target, (4, 1, 1, 1)), pix, width, h)
+        return parts, total.reshape(-1 if self.cv_scope == "pixel" else batches, pix.size)
+
+    def _splat_image(self, parts: list[tuple], batches: int, per_batch: int) -> Tally:
+        """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`):
+        value and tangent, minus the other pixels' samples' weights times their target's mean radiance."""
+        height, width = self.shape
+        _, h = reach(self.scene.camera.filter)
+        sums = gather(np.concatenate([part[0] for part in parts], axis=1), height, width, h) / per_batch
+        value, deriv = sums[:batches], sums[batches : 2 * batches]
+        if parts[0][1] is not None:
+            total = np.concatenate([part[1] for part in parts], axis=1)
+            mean = total / (batches * per_batch if self.cv_scope == "pixel" else per_batch)
+            value = value - mean * sums[2 * batches : 3 * batches]
+            deriv = deriv - mean * sums[3 * batches :]
+        shape = (batches, height, width)
+        return Tally(value=value.reshape(shape), derivative=deriv.reshape(shape))
 
 
 @dataclass(frozen=True)
