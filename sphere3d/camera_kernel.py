@@ -124,7 +124,7 @@ import numpy as np
 from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
-from sphere3d.integrator import FilmTransform
+from sphere3d.film import FilmTransform
 from sphere3d.probes import Snap, follow_probes, ring_offsets
 from sphere3d.rotation import Rotation
 from sphere3d.state import SceneState

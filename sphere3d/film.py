@@ -2,6 +2,8 @@ r"""Film splatting: every camera sample contributes to every pixel whose filter 
 
 Opt-in (``ImageTask(film="splat")``, ``render(..., film="splat")``); the default ``"pixel"``
 keeps each sample in the pixel that drew it.
+The film transform of a camera sample (:class:`FilmTransform`: its rotations and film kernels,
+what a method's ``camera`` returns) is defined here too.
 
 Pixel p' draws its samples s from its own filter sampler, density $p(s - p')$
 (:func:`~sphere3d.sampling.pdf_filter`; the gaussian filter's is the truncated normal, not
@@ -80,12 +82,42 @@ import numpy as np
 
 from flatland.core.dual import Dual
 from flatland.core.translation import unit_weight
+from sphere3d.rotation import Rotation
 from sphere3d.sampling import filter_radius, filter_value, log_filter_value, pdf_filter
 
-__all__ = ["FILMS", "Splat", "gather", "reach", "splat_weights", "stencil"]
+__all__ = ["FILMS", "FilmTransform", "Splat", "gather", "reach", "splat_weights", "stencil"]
 
 FILMS = ("pixel", "splat")
 """Image options: each sample in its own pixel, or splatted into every pixel its filter covers."""
+
+
+@dataclass(frozen=True)
+class FilmTransform:
+    """Per camera sample: one or two rotations of its direction, each optionally with a film kernel.
+
+    The sample's estimate is the mean of its estimates under the ``rotations`` (one, or
+    two: an antithetic pair); ``centres`` (one (n, 2) array per rotation, pixels) are the
+    centres c of Gaussian film kernels of concentration ``kappa`` (1 / variance, pixels⁻²),
+    none for no kernel (log weight 0).
+    """
+
+    rotations: tuple[Rotation, ...]
+    centres: tuple[np.ndarray, ...] = ()
+    kappa: float = 0.0
+
+    @staticmethod
+    def identity(shape: tuple[int, ...]) -> FilmTransform:
+        """No change of variables."""
+        return FilmTransform((Rotation.identity(shape),))
+
+    def log_kernel(self, member: int, fx: Any, fy: Any, rows: Any = slice(None)) -> Any:
+        """log g(f - c) + const at the rotated film points f = (fx, fy) of samples ``rows``
+        (Loubet et al. 2019, Sec. 4.2)."""
+        if not self.centres:
+            return 0.0
+        c = self.centres[member][rows]
+        dx, dy = fx - c[:, 0], fy - c[:, 1]
+        return -0.5 * self.kappa * (dx * dx + dy * dy)  # log of exp(-κ |f - c|² / 2)
 
 
 def reach(kind: str) -> tuple[int, int]:

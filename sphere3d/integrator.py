@@ -45,6 +45,7 @@ from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
 from sphere3d.emitter_edges import add_tangent, emitter_edge_term
+from sphere3d.film import FilmTransform
 from sphere3d.live import emitters_change, moving_rows, on_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
@@ -63,7 +64,6 @@ from sphere3d.vector import dot, norm, scatter
 
 __all__ = [
     "PRIMARY_UNIFORMS",
-    "FilmTransform",
     "Identity",
     "PixelSamples",
     "Shading",
@@ -172,35 +172,6 @@ class PixelSamples:
     @property
     def estimate(self) -> Any:
         return self.radiance * self.weight
-
-
-@dataclass(frozen=True)
-class FilmTransform:
-    """Per camera sample: one or two rotations of its direction, each optionally with a film kernel.
-
-    The sample's estimate is the mean of its estimates under the ``rotations`` (one, or
-    two: an antithetic pair); ``centres`` (one (n, 2) array per rotation, pixels) are the
-    centres c of Gaussian film kernels of concentration ``kappa`` (1 / variance, pixels⁻²),
-    none for no kernel (log weight 0).
-    """
-
-    rotations: tuple[Rotation, ...]
-    centres: tuple[np.ndarray, ...] = ()
-    kappa: float = 0.0
-
-    @staticmethod
-    def identity(shape: tuple[int, ...]) -> FilmTransform:
-        """No change of variables."""
-        return FilmTransform((Rotation.identity(shape),))
-
-    def log_kernel(self, member: int, fx: Any, fy: Any, rows: Any = slice(None)) -> Any:
-        """log g(f - c) + const at the rotated film points f = (fx, fy) of samples ``rows``
-        (Loubet et al. 2019, Sec. 4.2)."""
-        if not self.centres:
-            return 0.0
-        c = self.centres[member][rows]
-        dx, dy = fx - c[:, 0], fy - c[:, 1]
-        return -0.5 * self.kappa * (dx * dx + dy * dy)  # log of exp(-κ |f - c|² / 2)
 
 
 class Transforms(Protocol):

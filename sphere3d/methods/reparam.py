@@ -64,7 +64,8 @@ from flatland.core.rng import Draws
 from flatland.core.translation import check_continuous_filter, paired_combine, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_transform
-from sphere3d.integrator import FilmTransform, Shading
+from sphere3d.film import FilmTransform
+from sphere3d.integrator import Shading
 from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.probes import (
     REFINE,
