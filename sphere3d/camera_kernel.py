@@ -124,7 +124,7 @@ import numpy as np
 from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
-from sphere3d.integrator import FilmTransform
+from sphere3d.film import FilmTransform
 from sphere3d.probes import follow_probes, ring_offsets
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
@@ -240,7 +240,7 @@ def film_transform(
         sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap)
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
-    first, second = np.arange(n), np.arange(n, 2 * n)
+    first, second = slice(0, n), slice(n, 2 * n)  # views, not copies
     return FilmTransform((rotation.take(first), rotation.take(second)), (centre[:n], centre[n:]), kappa_film)
 
 

@@ -50,7 +50,7 @@ from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
 from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["POINTS", "EmitterEdgeSamples", "add_tangent", "sample_emitter_edges"]
+__all__ = ["POINTS", "EmitterEdgeSamples", "add_tangent", "emitter_edge_term", "sample_emitter_edges"]
 
 INV_PI = 1.0 / np.pi
 POINTS = 2
@@ -250,6 +250,26 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     return EmitterEdgeSamples(
         point[idx], w[idx], e[idx], front[idx], dist[idx], cos_x[idx], table, perimeter / POINTS
     )
+
+
+def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary term's shading points and tangents, given one emitter rotation per shading point.
+
+    V_T is exactly 0 where the rotation is the identity (no point followed) and neither
+    the shading point nor an emitter moves (on ``hard_shadow`` the lit ground): those
+    points get no edge samples. The others' are drawn by :func:`sample_emitter_edges` (the
+    numbers they would get among all points: draws are keyed on the samples) and traced
+    by :meth:`EmitterEdgeSamples.term`.
+    """
+    x_moves = np.any(tangent(shading.x) != 0.0, axis=1)
+    emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
+    rows = np.flatnonzero(rotation.active | x_moves | emitters_move)
+    sub = shading if rows.size == len(shading) else shading.take(rows)
+    edge = sample_emitter_edges(state, sub) if rows.size else None
+    if edge is None:
+        return rows[:0], np.zeros(0)
+    index, term = edge.term(state, sub, rotation.take(rows[edge.index]))
+    return rows[index], term
 
 
 def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:

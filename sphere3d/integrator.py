@@ -44,7 +44,9 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
-from sphere3d.emitter_edges import add_tangent, sample_emitter_edges
+from sphere3d.emitter_edges import add_tangent, emitter_edge_term
+from sphere3d.film import FilmTransform
+from sphere3d.live import emitters_change, moving_rows, on_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -62,7 +64,6 @@ from sphere3d.vector import dot, norm, scatter
 
 __all__ = [
     "PRIMARY_UNIFORMS",
-    "FilmTransform",
     "Identity",
     "PixelSamples",
     "Shading",
@@ -166,39 +167,11 @@ class PixelSamples:
 
     radiance: Any
     weight: Any
+    pixel: Any = None  # film splatting: (n, m) flat indices of the pixels each weight is for (-1: none)
 
     @property
     def estimate(self) -> Any:
         return self.radiance * self.weight
-
-
-@dataclass(frozen=True)
-class FilmTransform:
-    """Per camera sample: one or two rotations of its direction, each optionally with a film kernel.
-
-    The sample's estimate is the mean of its estimates under the ``rotations`` (one, or
-    two: an antithetic pair); ``centres`` (one (n, 2) array per rotation, pixels) are the
-    centres c of Gaussian film kernels of concentration ``kappa`` (1 / variance, pixels⁻²),
-    none for no kernel (log weight 0).
-    """
-
-    rotations: tuple[Rotation, ...]
-    centres: tuple[np.ndarray, ...] = ()
-    kappa: float = 0.0
-
-    @staticmethod
-    def identity(shape: tuple[int, ...]) -> FilmTransform:
-        """No change of variables."""
-        return FilmTransform((Rotation.identity(shape),))
-
-    def log_kernel(self, member: int, fx: Any, fy: Any, rows: Any = slice(None)) -> Any:
-        """log g(f - c) + const at the rotated film points f = (fx, fy) of samples ``rows``
-        (Loubet et al. 2019, Sec. 4.2)."""
-        if not self.centres:
-            return 0.0
-        c = self.centres[member][rows]
-        dx, dy = fx - c[:, 0], fy - c[:, 1]
-        return -0.5 * self.kappa * (dx * dx + dy * dy)  # log of exp(-κ |f - c|² / 2)
 
 
 class Transforms(Protocol):
@@ -242,42 +215,42 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     emitters = np.asarray(detach(state.triangles))[state.emitters]
     y, k = sample_mesh(u, emitters)
     tri = state.emitters[k]
-    xv = detach(shading.x)
-    to = y - xv
+    to = y - detach(shading.x)
     dist = norm(to)
-    safe = np.where(dist > 0.0, dist, 1.0)
-    w = to / safe[:, None]
-    cos_y = -dot(face_normals(emitters[k]), w)
+    w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
+    cos_y = -dot(face_normals(emitters)[k], w)
     cos_x = dot(detach(shading.n), w)
     valid = (cos_y > 1e-9) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
     blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
     # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
-    edge = (
-        sample_emitter_edges(state, shading)
-        if state.dual and getattr(transforms, "emitter_edges", False)
-        else None
-    )
-    if vis.size == 0 and edge is None:
+    edges = state.dual and getattr(transforms, "emitter_edges", False)
+    if vis.size == 0 and not edges:
         return scatter(m, vis, 0.0, state.dual)
-    # θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
-    pdf = solid_angle_pdf(1.0 / float(detach(state.emitter_area)), dist[vis], cos_y[vis])
-    sub = shading.take(vis)
-    need = vis if edge is None else np.union1d(vis, edge.index)  # one rotation per point, for both terms
-    rotation = transforms.emitter(shading.take(need))
-    rotated = rotation.take(np.searchsorted(need, vis)).apply(w[vis])
-    # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
-    it = intersect_triangles(sub.x, rotated, state.triangles[tri[vis]])
-    cos_x_d = np.maximum(dot(sub.n, rotated), 0.0)
-    cos_y_d = -dot(it.normal, rotated)
-    p_light = solid_angle_pdf(1.0 / state.emitter_area, it.t, cos_y_d)
-    p_cos = cos_x_d * INV_PI
-    f = state.emitted(tri[vis], it.b1, it.b2) * cos_x_d
-    out = scatter(m, vis, f * (p_light / (p_light + p_cos)) / pdf, state.dual)
-    if edge is None:
-        return out
-    return add_tangent(out, *edge.term(state, shading, rotation.take(np.searchsorted(need, edge.index))))
+    need = np.full(m, edges)  # one rotation per point, for both terms (any point may have edge samples)
+    need[vis] = True
+    place = np.cumsum(need) - 1  # row of each needed point in the rotation
+    rotation = transforms.emitter(shading if need.all() else shading.take(np.flatnonzero(need)))
+    # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
+    live = rotation.active[place[vis]] | moving_rows(vis, shading.x, shading.n) | emitters_change(state)
+    plain, inv_area = state.detached(), 1.0 / float(detach(state.emitter_area))
+
+    def estimate(dual: bool, x: Any, n: Any, omega: np.ndarray, row: Any, t: Any, d: Any, c: Any) -> tuple:
+        st, rotated = (state, rotation.take(row).apply(omega)) if dual else (plain, omega)
+        # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
+        it = intersect_triangles(x, rotated, st.triangles[t])
+        cos_x_d = np.maximum(dot(n, rotated), 0.0)
+        cos_y_d = -dot(it.normal, rotated)
+        p_light = solid_angle_pdf(1.0 / st.emitter_area, it.t, cos_y_d)
+        p_cos = cos_x_d * INV_PI
+        f = st.emitted(t, it.b1, it.b2) * cos_x_d
+        # divided by the θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
+        return (f * (p_light / (p_light + p_cos)) / solid_angle_pdf(inv_area, d, c),)
+
+    (f,) = on_rows(estimate, vis, live, shading.x, shading.n, w, place, tri, dist, cos_y)
+    out = scatter(m, vis, f, state.dual)
+    return add_tangent(out, *emitter_edge_term(state, shading, rotation)) if edges else out
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
@@ -300,12 +273,15 @@ def pixel_samples(
     cols: np.ndarray,
     u: np.ndarray,
     draws: Draws,
+    splat: Any = None,
 ) -> Any:
     """One estimate of the pixel integral per sample (pixel ``rows``, ``cols``; uniforms ``u``).
 
     With tangents, ``transforms.camera`` gives each sample its rotations and film kernels.
     The estimate is ``radiance * weight`` (:class:`PixelSamples`); both are Duals when the
     state carries tangents. ``draws`` keys the samples' further random numbers on their indices.
+    ``splat(x, y)``: a :class:`~sphere3d.film.Splat` of the film points (x, y), whose weights
+    (n, m), one per reached pixel, replace k / p (film splatting, :mod:`sphere3d.film`).
     """
     cam = state.camera
     offsets = sample_filter(u[:, 0:2], cam.filter)
@@ -313,28 +289,36 @@ def pixel_samples(
     cx, cy = cols + 0.5, rows + 0.5
     x, y = cx + offsets[:, 0], cy + offsets[:, 1]
     d = cam.directions(x, y)
+    if splat is not None:
+        splat = splat(x, y)
+        weight = splat.weight  # k(s - p) / q(s) per reached pixel p, θ-free
     if state.dual:
         film = transforms.camera(state, x, y, draws)
         # only rows where a rotation moves: elsewhere every tangent below is exactly 0
         live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
-        r_dot, w_dot = np.zeros(d.shape), np.zeros(len(d))
+        r_dot, w_dot = np.zeros(d.shape), np.zeros(np.shape(weight))
         for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
             r = rotation.take(live).apply(d[live])
             fx, fy = cam.film(r)
             # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
             # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)
-            log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
-            w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+            if splat is None:
+                log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
+                w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+            else:  # the same with each reached pixel's centre (sphere3d.film)
+                rest = cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live)
+                w = splat.unit_weights(fx, fy, rest, live, cam.filter)
             r_dot[live] += tangent(r)
             w_dot[live] += tangent(w)
         # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is
         # linear in the direction's, so one evaluation along the mean tangent gives the mean of
         # the tangents; values exactly ω and 1 (the primal stays the naive one)
         m = len(film.rotations)
-        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(len(d)), w_dot / m)
+        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
     else:
         rotated = d
-    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight)
+    pixel = None if splat is None else splat.pixel
+    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight, pixel)
 
 
 def camera_radiance(
@@ -361,22 +345,32 @@ def camera_radiance(
     miss = np.flatnonzero(~hits.hit)
     radiance = scatter(n, miss, state.sky, state.dual)
     if hit.size:
-        tri = hits.triangle[hit]
-        it = intersect_triangles(cam.origin, rotated[hit], state.triangles[tri])
-        facing = dot(detach(it.normal), detach(rotated)[hit])  # only its value is used
-        front = facing < 0.0  # the ray arrives on the side the normal faces
-        side = np.where(front[:, None], 1.0, -1.0)
-        geometric = it.normal * side
-        # smooth shapes shade with interpolated vertex normals; face normals otherwise (the same object)
-        normal = state.shading_normals(tri, it.b1, it.b2, it.normal)
-        shade_n = geometric if normal is it.normal else normal * side
+        tri, plain = hits.triangle[hit], state.detached()
+
+        def attach(dual: bool, direction: Any, t: np.ndarray) -> tuple[Any, ...]:
+            st = state if dual else plain
+            it = intersect_triangles(st.camera.origin, direction, st.triangles[t])
+            front = dot(detach(it.normal), detach(direction)) < 0.0  # arriving on the side the normal faces
+            side = np.where(front[:, None], 1.0, -1.0)
+            # smooth shapes shade with interpolated vertex normals; face normals otherwise (the same object)
+            normal = st.shading_normals(t, it.b1, it.b2, it.normal)
+            geometric = it.normal * side
+            shade_n = geometric if normal is it.normal else normal * side
+            return it.point, geometric, shade_n, st.emitted(t, it.b1, it.b2) * front
+
+        # tangents only where the direction turns, the camera or the hit triangle moves (sphere3d.live)
+        live = moving_rows(hit, rotated) | triangles_change(state)[tri] | np.any(tangent(cam.origin) != 0.0)
+        if state.dual:
+            point, geometric, shade_n, value = on_rows(attach, hit, live, rotated, hits.triangle)
+        else:
+            point, geometric, shade_n, value = attach(False, rotated[hit], tri)
         shape = state.shape_of[tri]
-        value = state.emitted(tri, it.b1, it.b2) * front
         albedo = state.albedo[shape]
         diffuse = (detach(albedo) > 0.0) | (state.param is not None and state.param.endswith(".albedo"))
         s = np.flatnonzero(diffuse)
         if s.size:
-            shading = Shading.at(state, it.point[s], shade_n[s], draws.take(hit[s]), geometric[s])
+            s = slice(None) if s.size == hit.size else s  # all diffuse: views, not copies
+            shading = Shading.at(state, point[s], shade_n[s], draws.take(hit[s]), geometric[s])
             e = irradiance_samples(shading, u[hit[s]], transforms)
             value = value + scatter(hit.size, s, albedo[s] * INV_PI * e, state.dual)
         radiance[hit] = value

@@ -25,7 +25,9 @@ from sphere3d.tasks import ImageTask, PointTask, Tally
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
 
-def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None) -> Image:
+def render(
+    scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None, film: str = "pixel"
+) -> Image:
     """Render ``scene`` (a built-in name, a .json path, a dict or a Scene).
 
     Parameters
@@ -37,6 +39,10 @@ def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None)
     batches : int, optional
         Independent batches behind the standard errors (must divide ``spp``);
         default: the largest divisor of ``spp`` up to 16 (:func:`~flatland.core.image.resolve_batches`).
+    film : {"pixel", "splat"}
+        ``"pixel"`` (default): each sample counts in the pixel that drew it; ``"splat"``: in every
+        pixel its filter covers, with multi-sample MIS weights over the pixels' samplers
+        (:mod:`sphere3d.film`).
 
     Returns
     -------
@@ -47,7 +53,7 @@ def render(scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    task = ImageTask(scene, None, spp, seed, batches)
+    task = ImageTask(scene, None, spp, seed, batches, film=film)
     _check_budget(task, {})
     tally = task.evaluate(0.0)
     return Image.from_batches(tally.value, spp=spp, seed=seed, scene=scene.name)
@@ -78,6 +84,7 @@ def render_gradient(
     spp: int = 64,
     seed: int = 0,
     batches: int | None = None,
+    film: str = "pixel",
     **options: Any,
 ) -> GradientImage:
     """Render ``scene`` and its derivative with respect to ``param`` by ``method``.
@@ -87,8 +94,8 @@ def render_gradient(
     param : str
         A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
     method : {"naive", "finite_difference", "reparam", "boundary"}
-    spp, seed, batches
-        As in :func:`render`.
+    spp, seed, batches, film
+        As in :func:`render`; ``film="splat"`` applies to every method alike (their values stay equal).
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
@@ -105,7 +112,8 @@ def render_gradient(
     ------
     ValidationError
         One error naming the field and value: unknown scene field, method, option or
-        parameter, spp < 1, κ outside (0, 1e15], h <= 0 (or h >= 1 on a scale), batches not dividing spp.
+        parameter, spp < 1, κ outside (0, 1e15], h <= 0 (or h >= 1 on a scale), batches not dividing spp,
+        film not one of "pixel", "splat".
     """
     scene = load_scene(scene)
     param = scene.check_param(param)
@@ -113,7 +121,7 @@ def render_gradient(
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    tally, resolved = _run(method, ImageTask(scene, param, spp, seed, batches), options)
+    tally, resolved = _run(method, ImageTask(scene, param, spp, seed, batches, film=film), options)
     return GradientImage.from_batches(
         tally.value,
         tally.derivative,

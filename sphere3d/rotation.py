@@ -120,18 +120,19 @@ class Rotation:
         omega_p = omega_p if isinstance(omega_p, Dual) else Dual(omega_p)
         if active is None:
             active = np.ones(omega_p.shape[:-1], dtype=bool)
-        length = norm(omega_p)
-        active = np.asarray(active, dtype=bool) & (length.value > 0.0) & np.isfinite(length.value)
+        length = np.sqrt(dot(omega_p.value, omega_p.value))  # the value of norm(omega_p)
+        active = np.asarray(active, dtype=bool) & (length > 0.0) & np.isfinite(length)
         active = active & np.all(np.isfinite(omega_p.tangent), axis=-1)
-        ez = np.zeros(omega_p.shape)
-        ez[..., 2] = 1.0
-        # normalized with its tangent (a unit Dual: b·ḃ = 0, which Ṙ a = ḃ relies on)
-        unit = omega_p / np.where(active, length, 1.0)[..., None]
         if spin is not None:
             spin = spin if isinstance(spin, Dual) else Dual(spin)
             active = active & np.isfinite(spin.tangent)
             spin = Dual(np.zeros(active.shape), np.where(active, spin.tangent, 0.0))
-        return Rotation(np.where(active[..., None], unit, ez), active, spin)
+        target = Dual(np.zeros(omega_p.shape))
+        target.value[..., 2] = 1.0
+        # normalized with its tangent (a unit Dual: b·ḃ = 0, which Ṙ a = ḃ relies on), where active
+        found = omega_p[active]
+        target[active] = found / norm(found)[..., None]
+        return Rotation(target, active, spin)
 
     @property
     def shape(self) -> tuple[int, ...]:

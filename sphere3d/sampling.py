@@ -205,8 +205,8 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
     areas = triangle_area(triangles[:, 0], triangles[:, 1], triangles[:, 2])
     cdf = np.cumsum(areas)
     index = np.minimum(np.searchsorted(cdf, u[..., 0] * cdf[-1], side="right"), len(areas) - 1)
-    tri = triangles[index]
-    return sample_triangle(u[..., 1:3], tri[..., 0, :], tri[..., 1, :], tri[..., 2, :]), index
+    v0, v1, v2 = (np.take(triangles[:, j], index, axis=0) for j in range(3))  # contiguous rows
+    return sample_triangle(u[..., 1:3], v0, v1, v2), index
 
 
 def pdf_mesh(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:

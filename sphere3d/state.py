@@ -11,7 +11,7 @@ the detached triangles: rays are traced at θ0 and re-attached to these Duals.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -142,13 +142,24 @@ class SceneState:
         """True if the state carries θ-tangents."""
         return isinstance(self.triangles, Dual)
 
+    def detached(self) -> SceneState:
+        """The same state without tangents (values unchanged), for rows whose tangents are known to be 0."""
+        plain = {f: detach(getattr(self, f)) for f in ("triangles", "normals", "albedo", "emission", "sky")}
+        camera = replace(self.camera, origin=detach(self.camera.origin))
+        return replace(self, **plain, emitter_area=detach(self.emitter_area), camera=camera)
+
     def emitted(self, triangle: np.ndarray, b1: Any, b2: Any) -> Any:
         """Front-side radiance at barycentrics (b1, b2) of ``triangle``: emission × border fade."""
+        emission = self.emission[self.shape_of[triangle]]
+        if np.shape(b1) == np.shape(triangle) and not np.any(
+            (self.fade[triangle] > 0.0) & (self.fade_kind[triangle] != shp.FADE_NONE)
+        ):
+            return emission  # no border fade on these triangles: the factor is exactly 1
         uv = self.uv[triangle]
         b1, b2 = b1[..., None], b2[..., None]
         point_uv = (1.0 - b1 - b2) * uv[..., 0, :] + b1 * uv[..., 1, :] + b2 * uv[..., 2, :]
         fade = shp.fade_weight(point_uv, self.fade_kind[triangle], self.fade[triangle])
-        return self.emission[self.shape_of[triangle]] * fade
+        return emission * fade
 
     def shading_normals(self, triangle: np.ndarray, b1: Any, b2: Any, geometric: Any) -> Any:
         """Unit shading normals at barycentrics (b1, b2) of ``triangle``; Dual-aware.

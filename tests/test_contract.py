@@ -382,7 +382,8 @@ def _naive_scaled(package):
 
         return naive_scaled
 
-    from sphere3d.integrator import FilmTransform, Identity
+    from sphere3d.film import FilmTransform
+    from sphere3d.integrator import Identity
     from sphere3d.rotation import Rotation
     from sphere3d.tasks import Tally
 

@@ -43,12 +43,10 @@ near the horizon: 20°, 10°, 5°         2^22        1.4, 0.4, 0.0 %     4.6, 3
 ``kappa=None``: z-translation, scale   2^22        100.9 %, 99.5 %     (± 0.1 %)
 =====================================  ==========  ==================  ==================
 
-Near the horizon ± 0.8, 0.6, 0.4 % (before ± 0.7, 0.5, 0.4 %). "Before": a ring of 3 probes,
-no snap, no turn. Seed 11 is a low draw (z-translation, seeds 12-14: 0.7, 1.7, -0.2 ± 0.8 %);
-without the samples' noise the loss is 0.5-2.5 %, short in every case (:mod:`sphere3d.snaps`,
-Bias: where it came from, what removed it): kernels whose probes all miss the triangle near a
-corner, and corners whose edges turn differently. Without a kernel (``kappa=None``) one rotation
-from cosine-distributed probes serves the hemisphere: the estimate is within 1 % of zero.
+Near the horizon ± 0.8, 0.6, 0.4 % (before ± 0.7, 0.5, 0.4 %). "Before": a ring of 3 probes, no
+snap, no turn. Seed 11 is a low draw (z-translation, seeds 12-14: 0.7, 1.7, -0.2 ± 0.8 %); without
+the samples' noise 0.5-2.5 % is lost, always short (:mod:`sphere3d.snaps`, Bias: its causes), and
+``kappa=None`` (one rotation from cosine-distributed probes) is within 1 % of zero.
 """
 
 from __future__ import annotations
@@ -65,7 +63,8 @@ from flatland.core.rng import Draws
 from flatland.core.translation import check_continuous_filter, paired_combine, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_probes, film_transform
-from sphere3d.integrator import FilmTransform, Shading
+from sphere3d.film import FilmTransform
+from sphere3d.integrator import Shading
 from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.probes import (
     REFINE,
@@ -325,15 +324,13 @@ def reparam(
       differently, or one whose outline lies at several depths).
     - **cosine sampling** (support: the hemisphere): the vMF convolution of Sec. 4.2
       with concentration ``kappa``: a kernel centre $ω \sim \mathrm{vMF}(μ, κ)$ per sample, the
-      centre and a ring of 2 ``probes`` - 2 probes ``spread`` kernel widths around it, the
-      bisected hit snapped onto its edge or corner and the rotation turned so that the edge
-      follows (:mod:`sphere3d.snaps`), weight $k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$. Biased
-      where a kernel reaches a discontinuity that no probe detects (near corners) or that
-      the rotation does not follow (a corner's two edges turning differently): a black
-      triangle above a point loses about 1-2 % (module docstring, Bias); the bias falls as
-      κ grows, the variance of a sample near an edge grows like $\sqrt{κ}$. ``kappa=None``: no
-      kernel, probes from the cosine density (one rotation for the whole hemisphere: strongly
-      biased, for study).
+      centre and a ring of 2 ``probes`` - 2 probes ``spread`` kernel widths around it, the hit
+      snapped onto its edge or corner and the rotation turned with that edge
+      (:mod:`sphere3d.snaps`), weight $k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$. Biased where a
+      kernel's probes all miss a discontinuity (near corners) or its rotation does not follow it
+      (a corner's edges turning differently): 1-2 % lost under a black triangle (Bias); the bias
+      falls as κ grows, the variance near an edge grows like $\sqrt{κ}$. ``kappa=None``: no
+      kernel, cosine-distributed probes, one rotation for the hemisphere (all but lost, for study).
 
     ``refine`` (an integer >= 0, default :data:`~sphere3d.probes.REFINE` = 3): where the
     followed point is one probe's hit and its partner sees something else (camera and
@@ -361,10 +358,13 @@ def reparam(
     and the pooled pixel control variate (:class:`~sphere3d.tasks.ImageTask`). With all of
     them (``make bench``, table ``hard_shadow``, 2 seeds at 256 spp, one idle 2-core
     machine) the bias floor is 0.088 (sphere) and 0.155 (cube) rms per pixel, the RMSE at
-    16 / 64 / 256 spp 0.96 / 0.50 / 0.29 and 1.54 / 0.76 / 0.40, and a 64 spp image takes
-    0.72 s / 0.67 s. With ``film_one_plane`` (the identity on the film where a kernel sees one
-    face of the cube; :mod:`sphere3d.camera_kernel`, Noise) the cube's RMSE is 1.22 / 0.61 /
-    0.33 and its bias floor 0.11, the sphere's image unchanged; the cube's silhouette keeps
+    16 / 64 / 256 spp 0.96 / 0.50 / 0.29 and 1.54 / 0.76 / 0.40, and a 64 spp image took
+    0.72 s / 0.67 s. Dual arithmetic only on the rows that carry a tangent (:mod:`sphere3d.live`)
+    and chunks that reuse their memory (:mod:`sphere3d.tasks`) then cut one thread's CPU time per
+    64 spp image by 30 %, 1.32 → 0.93 s and 1.43 → 1.00 s (best of 3, same-minute comparison on a
+    loaded machine; bit-identical images). With ``film_one_plane`` (the identity on the film where a
+    kernel sees one face of the cube; :mod:`sphere3d.camera_kernel`, Noise) the cube's RMSE is 1.22 /
+    0.61 / 0.33 and its bias floor 0.11, the sphere's image unchanged; the cube's silhouette keeps
     99.3 ± 1.0 % (8 seeds × 128 spp; 96.1 ± 1.1 % without). Bias floors from 2 seeds are
     noisy: by region, the sphere's 0.088 is the penumbra's part alone (0.087), the
     silhouette's and the occluder's parts being below their noise.

@@ -33,7 +33,8 @@ from flatland.core.dual import Dual, detach
 from flatland.core.stats import sidak
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form as cf
-from sphere3d.integrator import FilmTransform, Identity
+from sphere3d.film import FilmTransform
+from sphere3d.integrator import Identity
 from sphere3d.rotation import Rotation
 from sphere3d.tasks import ImageTask
 from sphere3d.vector import norm

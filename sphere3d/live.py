@@ -1,0 +1,88 @@
+"""Dual arithmetic on the rows that carry a tangent, plain numpy on the others.
+
+With θ a Dual every scene quantity is one (:func:`~sphere3d.state.build_state`), but
+most rows of a batch have zero tangents: a shading point on a static surface, seen
+along an unrotated direction, lit by a static emitter. Their derivative is exactly 0
+(up to the sign of zero) whatever the estimator computes, so :func:`on_rows` evaluates
+such rows with plain arrays and keeps the :class:`~flatland.core.dual.Dual` arithmetic
+for the others. Values are those of a whole-array Dual evaluation, row for row (the
+Dual rules compute values with the same numpy operations); tangents are +0 on the
+plain rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach, tangent
+
+__all__ = ["emitters_change", "moving_rows", "on_rows", "triangles_change"]
+
+
+def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
+    """Where any of ``sources`` (Duals or plain arrays, one row per item) has a tangent at ``rows``."""
+    out = np.zeros(len(rows), dtype=bool)
+    for s in sources:
+        if isinstance(s, Dual):
+            t = s.tangent[rows]
+            out |= np.any(t != 0.0, axis=tuple(range(1, t.ndim)))
+    return out
+
+
+def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sources: Any) -> tuple[Dual, ...]:
+    """``func(dual, *(s[rows] for s in sources))``, as Duals on the ``live`` rows and plain elsewhere.
+
+    Parameters
+    ----------
+    func : callable
+        ``func(dual, *args)`` returns a tuple of arrays with one row per row of its
+        arguments, row by row independent of the others. ``dual`` says whether the
+        arguments are Duals; any other θ-dependent quantity ``func`` reads must have a
+        zero tangent on the rows that are not ``live`` (the caller's guarantee).
+    rows : ndarray of int, shape (k,)
+        Rows of ``sources`` to evaluate.
+    live : ndarray of bool, shape (k,)
+        Which of them are evaluated with tangents.
+    sources : Dual or ndarray
+        Arrays indexed by ``rows`` (Duals are detached on the plain rows).
+
+    Returns
+    -------
+    tuple of Dual
+        ``func``'s outputs for all ``rows``: tangents +0 where not ``live``.
+    """
+    li, di = rows[live], rows[~live]
+    plain = func(False, *(detach(s)[di] for s in sources)) if di.size or not li.size else None
+    dual = func(True, *(s[li] for s in sources)) if li.size else None
+    outputs = []
+    for j in range(len(plain if plain is not None else dual)):
+        first = detach(plain[j] if plain is not None else dual[j])
+        value = np.empty((len(rows), *np.shape(first)[1:]))
+        grad = np.zeros(value.shape)
+        if plain is not None:
+            value[~live] = detach(plain[j])
+        if dual is not None:
+            value[live] = detach(dual[j])
+            grad[live] = tangent(dual[j])
+        outputs.append(Dual(value, grad))
+    return tuple(outputs)
+
+
+def triangles_change(state: Any) -> np.ndarray:
+    """Per triangle: True if its vertices, vertex normals or its shape's emission carry a tangent."""
+    moves = np.any(tangent(state.triangles) != 0.0, axis=(1, 2)) | np.any(
+        tangent(state.normals) != 0.0, axis=(1, 2)
+    )
+    return moves | (tangent(state.emission) != 0.0)[state.shape_of]
+
+
+def emitters_change(state: Any) -> bool:
+    """True if an emitter's triangles, emission or total area carry a tangent."""
+    return bool(
+        np.any(tangent(state.triangles)[state.emitters] != 0.0)
+        or np.any(tangent(state.emission) != 0.0)
+        or np.any(tangent(state.emitter_area) != 0.0)
+    )
