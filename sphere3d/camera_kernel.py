@@ -125,11 +125,11 @@ from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import FilmTransform
-from sphere3d.probes import Snap, follow_probes, ring_offsets
+from sphere3d.probes import follow_probes, ring_offsets
 from sphere3d.rotation import Rotation
+from sphere3d.snaps import Snap, edge_snap
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits, face_normals
-from sphere3d.vector import cross
 
 __all__ = [
     "KAPPA_FILM",
@@ -298,53 +298,18 @@ def _reaching_motion(state: SceneState, moving: np.ndarray, centre: np.ndarray, 
 def silhouette_snap(state: SceneState, centre: np.ndarray, radius: float) -> Snap:
     r"""Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
 
-    The hook ``snap`` of :func:`~sphere3d.probes.select_points`. After bisection the hit
-    lies up to $1/2^\mathrm{refine}$ of the probe gap inside its triangle T; the point followed is
-    instead where the segment of directions from ``inside`` (hits T) to ``outside`` (misses
-    the shape) leaves T. With $e_k(d) = ((V_{k+1} - o) × (V_{k+2} - o)) · d$, linear in d and
-    proportional to the barycentric weight of $V_k$ of the hit along d, that exit is the
-    smallest λ in (0, 1] with $e_k((1 - λ) a + λ b) = 0$. A film rotation (locally a
-    translation of the film) that follows a point on a straight edge's line follows the
-    whole edge under translation and motion in depth (the edge's normal velocity is
-    affine in the point and constant along the line), while one following a point inside
-    T drifts by its distance from the edge times the image's rate of scaling. Where an end
-    of that edge projects within ``radius`` (the probe ring) of the kernel centre, the
-    corner is followed instead: it lies on both edges that meet there, so one rotation
-    follows the two (Loubet et al. 2019, Sec. 4.3: a refinement of the heuristic).
+    :func:`~sphere3d.snaps.edge_snap` on the film: a corner whose image lies within ``radius``
+    pixels of the kernel ``centre`` (m, 2) is followed. A film rotation (locally a translation
+    of the film) that follows a point on a straight edge's line follows the whole edge under
+    translation and motion in depth (the edge's normal velocity is affine in the point and
+    constant along the line), while one following a point inside T drifts by its distance from
+    the edge times the image's rate of scaling (Loubet et al. 2019, Sec. 4.3: a refinement of
+    the heuristic).
     """
     cam = state.camera
-    triangles = np.asarray(detach(state.triangles))
 
-    def snap(
-        rows: np.ndarray, origin: np.ndarray, inside: np.ndarray, outside: np.ndarray, hits: Hits
-    ) -> tuple[np.ndarray, np.ndarray]:
-        m = np.arange(rows.size)
-        vert = triangles[hits.triangle] - origin[:, None]  # (k, 3, 3): V_j - o
-        # row j of c: (V_{j+1} - o) × (V_{j+2} - o), so e_j(d) = c_j · d
-        c = cross(np.roll(vert, -1, axis=1), np.roll(vert, -2, axis=1))
-        ea, eb = np.einsum("kjx,kx->kj", c, inside), np.einsum("kjx,kx->kj", c, outside)
-        sign = np.where(ea.sum(axis=1) < 0.0, -1.0, 1.0)[:, None]  # orient: e_j(inside) >= 0
-        ea, eb = ea * sign, eb * sign
-        leaving = (eb < 0.0) & (ea >= 0.0)
-        lam = np.where(leaving, ea / np.where(leaving, ea - eb, 1.0), np.inf)
-        j = np.argmin(lam, axis=1)  # V_j's weight reaches 0 first: the exit edge is V_{j+1} V_{j+2}
-        exits = np.isfinite(lam[m, j])
-        d = inside + np.where(exits, lam[m, j], 0.0)[:, None] * (outside - inside)
-        w = np.maximum(np.einsum("kjx,kx->kj", c, d) * sign, 0.0)
-        w[m, j] = 0.0
-        total = w.sum(axis=1)
-        exits &= total > 0.0
-        w = w / np.where(total > 0.0, total, 1.0)[:, None]
-        # the exit edge's ends on the film, the nearer one to the kernel centre if the ring reaches it
-        ends = np.stack([(j + 1) % 3, (j + 2) % 3], axis=1)
-        fx, fy = cam.film(vert[m[:, None], ends])
-        gap = np.hypot(fx - centre[rows, None, 0], fy - centre[rows, None, 1])
-        near = np.argmin(gap, axis=1)
-        corner = exits & (gap[m, near] <= radius)
-        w[corner] = 0.0
-        w[m[corner], ends[m, near][corner]] = 1.0
-        u = np.where(exits, w[:, 1], hits.u)
-        v = np.where(exits, w[:, 2], hits.v)
-        return u, v
+    def gap(rows: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        fx, fy = cam.film(ends)
+        return np.hypot(fx - centre[rows, None, 0], fy - centre[rows, None, 1])
 
-    return snap
+    return edge_snap(state, gap, radius)

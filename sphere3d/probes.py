@@ -41,13 +41,13 @@ is instead the mean of the attached hits of the occluded shadow probes
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import detach
+from flatland.core.dual import Dual, detach
 from sphere3d.rotation import Rotation
+from sphere3d.snaps import Snap, line_spin
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits, attached_points, face_normals
 from sphere3d.vector import cross, dot, frame, norm
@@ -67,9 +67,6 @@ PARALLEL = 0.99
 """|n0·n1| above which the two tangent planes count as parallel (Loubet et al. 2019, Sec. 4.3)."""
 DEGENERATE = 1e-6
 """|det| of the plane system below which the intersection is ill-conditioned."""
-Snap = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Hits], tuple[np.ndarray, np.ndarray]]
-"""``snap(rows, origin, inside, outside, hits) -> (u, v)``: where on a bisected hit's triangle to follow
-(:func:`select_points`)."""
 REFINE = 3
 """Default bisection rays that move a single probe's hit towards the silhouette next to it (3: to
 1/8 of the gap); the default of the ``reparam`` option ``refine``."""
@@ -194,10 +191,10 @@ def select_points(
         Bisection rays toward the silhouette per single-probe point (default
         :data:`REFINE`; 0: the probe's own hit).
     snap : callable, optional
-        ``snap(rows, origin, inside, outside, hits) -> (u, v)``: the barycentrics to follow on
-        the bisected hits' triangles instead of the hits' own (rows: the rows of the
-        single-probe points; the final bisection directions); used on the film by
-        :mod:`sphere3d.camera_kernel`.
+        ``snap(rows, origin, inside, outside, hits) -> (u, v, lines)``: the barycentrics to follow
+        on the bisected hits' triangles instead of the hits' own (rows: the rows of the
+        single-probe points; the final bisection directions), and the edges through that
+        point (:data:`Snap`, :func:`edge_snap`).
 
     Returns
     -------
@@ -221,6 +218,22 @@ def select_points(
       about the silhouette between the two probes, and its direction would be
       reversed.
     """
+    point, found, _ = _choose(state, origin, trace_origin, directions, hits, normal, refine, snap)
+    return point, found
+
+
+def _choose(
+    state: SceneState,
+    origin: Any,
+    trace_origin: np.ndarray,
+    directions: np.ndarray,
+    hits: Hits,
+    normal: np.ndarray | None,
+    refine: int,
+    snap: Snap | None,
+) -> tuple[Any, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+    """:func:`select_points`, and for the snapped rows (rows, their triangles, the edges through their
+    points: :data:`Snap`), None without a snap."""
     m = directions.shape[0]
     rows = np.arange(m)
     j = pair_index(hits.shape)
@@ -263,6 +276,7 @@ def select_points(
     use_p0 = hit0 & ~use_p1 & ~use_cross
     # a single probe's point with a partner that sees something else: move it to the silhouette
     single = np.flatnonzero((use_p0 | use_p1) & (j != 0))
+    snapped = None
     if single.size and refine:
         first = use_p0[single]
         inside = np.where(first[:, None], d0[single], d1[single])
@@ -271,7 +285,11 @@ def select_points(
         tro = np.broadcast_to(trace_origin, (m, 3))[single]
         nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
         edge, inside, outside = _bisect(state, tro, inside, outside, start, nrm, refine)
-        u, v = (edge.u, edge.v) if snap is None else snap(single, tro, inside, outside, edge)
+        if snap is None:
+            u, v = edge.u, edge.v
+        else:
+            u, v, lines = snap(single, tro, inside, outside, edge)
+            snapped = (single, edge.triangle, lines)
         moved = attached_points(state.triangles[edge.triangle], u, v)
         p0[single] = np.where(first[:, None], moved, p0[single])
         p1[single] = np.where(first[:, None], p1[single], moved)
@@ -279,7 +297,7 @@ def select_points(
     c = np.flatnonzero(use_cross)
     if c.size:  # with tangents only where the crossing is used (row by row the same numbers)
         point[c] = crossing_of(face_normals(t0[c]), face_normals(t1[c]), p0[c], p1[c], o[c], mv[c])[0]
-    return point, hit0 | hit1
+    return point, hit0 | hit1, snapped
 
 
 def follow_probes(
@@ -291,11 +309,27 @@ def follow_probes(
     normal: np.ndarray | None = None,
     refine: int = REFINE,
     snap: Snap | None = None,
+    spin: tuple[np.ndarray, float] | None = None,
 ) -> Rotation:
-    """The rotation following the point chosen by :func:`select_points` (identity where none)."""
-    point, found = select_points(state, origin, trace_origin, directions, hits, normal, refine, snap)
+    """The rotation following the point chosen by :func:`select_points` (identity where none).
+
+    With ``spin`` = (kernel centres (m, 3), kernel σ in radians) and a ``snap``, where the point
+    was snapped onto an edge the rotation also turns about it so that the edge's great circle
+    follows its own (:func:`~sphere3d.snaps.line_spin`); at a corner, by its two edges' rates
+    weighted by the kernel.
+    """
+    point, found, snapped = _choose(state, origin, trace_origin, directions, hits, normal, refine, snap)
     to, found = _towards(point, origin, found)
-    return Rotation.following(to, found)
+    if spin is None or snapped is None:
+        return Rotation.following(to, found)
+    rows, triangle, lines = snapped
+    turn = np.zeros(len(found))
+    ok = lines[:, 0, 0] >= 0
+    if ok.any():
+        r = rows[ok]
+        o = origin if np.ndim(detach(origin)) == 1 else origin[r]
+        turn[r] = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], spin[1])
+    return Rotation.following(to, found, Dual(np.zeros(len(found)), turn))
 
 
 def mean_point_direction(origin: Any, points: Any, mask: np.ndarray) -> tuple[Any, np.ndarray]:

@@ -17,6 +17,11 @@ quadratic term has a double zero), and $\dot R a = \dot c a + \dot b (a·a) - a 
 $a·\dot b = \dot c = 0$ for a unit vector. Samples are rotated as $R · \mathrm{detach}(ω)$: they are
 drawn θ-independently, and only the rotation carries the tangent.
 
+A rotation has one more degree of freedom than the point it follows: a turn about $ω_p$
+itself. :meth:`Rotation.following` takes its rate as ``spin`` (an angle of value 0, a Dual);
+$\dot R ω$ gains $\dot ψ\, (a × ω)$, the angular velocity being $Ω = a × \dot b + \dot ψ a$.
+:mod:`sphere3d.probes` sets it so that the great circle of a followed edge turns with it.
+
 Floating point: $a × a$ is exactly 0 but $a · a$ is 1 only to rounding, so
 :meth:`Rotation.apply` returns $ω + (Rω - \mathrm{detach}(Rω))$: value exactly ω (the
 primal stays bit-identical to the naive estimator), tangent exactly that of Rω.
@@ -78,7 +83,7 @@ def rotate(a: Any, b: Any, omega: Any) -> Any:
 
 @dataclass(frozen=True)
 class Rotation:
-    """A rotation R(θ) that is the identity at θ0 and follows one direction $ω_p(θ)$ exactly.
+    r"""A rotation R(θ) that is the identity at θ0 and follows one direction $ω_p(θ)$ exactly.
 
     Attributes
     ----------
@@ -86,10 +91,14 @@ class Rotation:
         $ω_p(θ)$, unit directions; R takes ``detach(target)`` to ``target``.
     active : ndarray of bool, shape (...)
         Where a point was found; elsewhere R is the identity (zero derivative).
+    spin : Dual or None, shape (...)
+        Angle ψ of a turn about ``target`` (value 0; None: no turn): R is the turn by ψ
+        after $R(a → b)$, whose derivative adds $\dot ψ\, (a × ω)$ to $\dot R ω$.
     """
 
     target: Dual
     active: np.ndarray
+    spin: Dual | None = None
 
     @staticmethod
     def identity(shape: tuple[int, ...]) -> Rotation:
@@ -99,14 +108,14 @@ class Rotation:
         return Rotation(Dual(z), np.zeros(shape, dtype=bool))
 
     @staticmethod
-    def following(omega_p: Any, active: np.ndarray | None = None) -> Rotation:
+    def following(omega_p: Any, active: np.ndarray | None = None, spin: Any = None) -> Rotation:
         r"""The rotation whose derivative moves $\mathrm{detach}(ω_p)$ like $ω_p$ (Loubet et al. 2019,
-        Sec. 4.1).
+        Sec. 4.1), turning about it by the angle ``spin`` (value 0; None: no turn).
 
         ``omega_p`` need not be unit: it is normalized here, tangent included.
         Where ``active`` is False the direction is replaced by a constant, so the
         rotation there is the identity, also in derivative (and NaNs from an
-        undefined $ω_p$ cannot leak).
+        undefined $ω_p$ or ``spin`` cannot leak).
         """
         omega_p = omega_p if isinstance(omega_p, Dual) else Dual(omega_p)
         if active is None:
@@ -114,12 +123,16 @@ class Rotation:
         length = np.sqrt(dot(omega_p.value, omega_p.value))  # the value of norm(omega_p)
         active = np.asarray(active, dtype=bool) & (length > 0.0) & np.isfinite(length)
         active = active & np.all(np.isfinite(omega_p.tangent), axis=-1)
+        if spin is not None:
+            spin = spin if isinstance(spin, Dual) else Dual(spin)
+            active = active & np.isfinite(spin.tangent)
+            spin = Dual(np.zeros(active.shape), np.where(active, spin.tangent, 0.0))
         target = Dual(np.zeros(omega_p.shape))
         target.value[..., 2] = 1.0
         # normalized with its tangent (a unit Dual: b·ḃ = 0, which Ṙ a = ḃ relies on), where active
         found = omega_p[active]
         target[active] = found / norm(found)[..., None]
-        return Rotation(target, active)
+        return Rotation(target, active, spin)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -128,7 +141,9 @@ class Rotation:
 
     def take(self, index: Any) -> Rotation:
         """The rotations at ``index`` (e.g. one per sample from one per pixel)."""
-        return Rotation(self.target[index], self.active[index])
+        return Rotation(
+            self.target[index], self.active[index], None if self.spin is None else self.spin[index]
+        )
 
     def apply(self, omega: np.ndarray) -> Dual:
         r"""$R(θ) · \mathrm{detach}(ω)$: value exactly $\mathrm{detach}(ω)$, tangent $\dot R ω$
@@ -150,7 +165,12 @@ class Rotation:
             if rows.size:
                 active = b.reshape(-1, 3)[rows]
                 t[rows] = tangent(rotate(detach(active), active, flat[rows]))
+                if self.spin is not None:  # the turn about a: ψ' (a × ω)
+                    t[rows] += tangent(self.spin).ravel()[rows, None] * cross(detach(active), flat[rows])
             return Dual(omega.copy(), t.reshape(omega.shape))
         r = rotate(detach(b), b, omega)
+        t = tangent(r)
+        if self.spin is not None:  # the turn about a: ψ' (a × ω)   (zero on the identity rows)
+            t = t + tangent(self.spin)[..., None] * cross(detach(b), omega)
         # value exactly ω (R is the identity at θ0 up to rounding in a·a); tangent dR/dθ ω
-        return Dual(np.broadcast_to(omega, np.shape(r.value)).copy(), tangent(r))
+        return Dual(np.broadcast_to(omega, np.shape(r.value)).copy(), t)

@@ -24,7 +24,7 @@ def _state(param="tri.translate.x"):
     return load_scene(cf.pinhole_triangle_scene(4, 8)).state(param, variable(0.0))
 
 
-def test01_the_snap_moves_a_bisected_hit_onto_the_edge_or_its_corner():
+def test01_the_snap_moves_a_bisected_hit_onto_the_edge_or_its_corner_and_names_their_lines():
     state = _state()
     o = np.asarray(detach(state.camera.origin))
     tri = np.asarray(detach(state.triangles))[0]
@@ -36,11 +36,15 @@ def test01_the_snap_moves_a_bisected_hit_onto_the_edge_or_its_corner():
     hits = state.tracer.intersect(o, inside)
     assert hits.triangle.tolist() == [0]
     far = np.array([[1e6, 1e6]])  # no corner within reach: the exit point on the edge
-    u, v = silhouette_snap(state, far, 1.0)(np.array([0]), o[None], inside, outside, hits)
+    u, v, lines = silhouette_snap(state, far, 1.0)(np.array([0]), o[None], inside, outside, hits)
     np.testing.assert_allclose(attached_points(tri, u, v)[0], mid, atol=1e-12)
+    assert lines.tolist() == [[[0, 1], [0, 1]]]  # on the edge V0 V1 (twice: one line)
     fx, fy = state.camera.film(tri[0] - o)  # a kernel centred on V0's image: the corner V0
-    u, v = silhouette_snap(state, np.array([[fx, fy]]), 1.0)(np.array([0]), o[None], inside, outside, hits)
+    u, v, corner = silhouette_snap(state, np.array([[fx, fy]]), 1.0)(
+        np.array([0]), o[None], inside, outside, hits
+    )
     assert (u.tolist(), v.tolist()) == ([0.0], [0.0])
+    assert corner.tolist() == [[[0, 1], [0, 2]]]  # the corner V0 lies on its two edges
 
 
 def test02_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_triangle():

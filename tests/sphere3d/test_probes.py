@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from flatland.core.dual import Dual, detach, tangent, variable
+from sphere3d import closed_form as cf
 from sphere3d.probes import (
     mean_point_direction,
     pair_index,
@@ -22,8 +23,11 @@ from sphere3d.probes import (
     select_points,
     vmf_spread_angle,
 )
+from sphere3d.rotation import Rotation
 from sphere3d.scene import load_scene
-from sphere3d.vector import normalize
+from sphere3d.snaps import line_spin
+from sphere3d.tracing import attached_points
+from sphere3d.vector import cross, normalize
 
 CAMERA = {"position": [0, 0, 5], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov": 0.8, "width": 4, "height": 4}
 SCENE = {
@@ -182,3 +186,32 @@ def test10_the_ring_angle_is_defined_for_every_spread(kappa):
     assert (
         vmf_spread_angle(1000.0, 1e3) == math.pi
     )  # the mass beyond 1000 σ is below e^{-2κ}: the whole sphere
+
+
+@pytest.mark.parametrize("param", ["tri.rotate.z", "tri.rotate.x", "tri.translate.z"])
+def test11_the_spin_makes_the_rotation_follow_the_edges_great_circle(param):
+    """A rotation following a point of an edge, with the turn of :func:`~sphere3d.snaps.line_spin`, moves
+    the edge's great circle (unit normal m̂ ∝ V0 × V1 seen from the origin) exactly as the edge moves it:
+    Ω × m̂ = dm̂/dθ; without the turn it does not (the image turns: rotations, and perspective under
+    z-translation); at a corner the turn is the mean of its two edges' rates."""
+    scene = load_scene(cf.sky_triangle_scene([[-0.2, -0.5, 1.0], [0.9, 0.1, 1.1], [0.1, 0.6, 0.9]]))
+    state = scene.state(param, variable(0.0))
+    tri = state.triangles[[0]]
+    origin = Dual(np.zeros((1, 3)))
+    point = attached_points(tri, np.array([0.3]), np.array([0.0]))  # on the edge V0 V1 (v = 0)
+    one = np.array([[[0, 1], [0, 1]]])
+    rate = line_spin(tri, origin, point, one)
+    m = normalize(cross(tri[:, 0], tri[:, 1]))
+    a = normalize(detach(point))
+    for spin in (rate, None):
+        turn = None if spin is None else Dual(np.zeros(1), spin)
+        rotation = Rotation.following(point, spin=turn)
+        # the followed direction itself moves exactly, with or without the turn
+        np.testing.assert_allclose(tangent(rotation.apply(a)), tangent(normalize(point)), atol=1e-12)
+        big_omega = np.cross(a, tangent(normalize(point))) + (0.0 if spin is None else spin[:, None] * a)
+        gap = np.abs(np.cross(big_omega, detach(m)) - tangent(m)).max()
+        assert gap < 1e-12 if spin is not None else gap > 1e-3, gap
+    corner = attached_points(tri, np.array([0.0]), np.array([0.0]))  # V0: on V0 V1 and V0 V2
+    both = line_spin(tri, origin, corner, np.array([[[0, 1], [0, 2]]]))
+    each = [line_spin(tri, origin, corner, np.array([[e, e]])) for e in ([0, 1], [0, 2])]
+    np.testing.assert_allclose(both, 0.5 * (each[0] + each[1]), atol=1e-15)

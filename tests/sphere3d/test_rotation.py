@@ -82,3 +82,26 @@ def test06_inactive_rotations_are_the_identity_also_in_derivative():
     out = rotation.apply(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]))
     assert np.array_equal(tangent(out), np.zeros((2, 3)))
     assert np.array_equal(tangent(Rotation.identity((3,)).apply(np.eye(3))), np.zeros((3, 3)))
+
+
+@given(vectors, vectors, vectors, finite)
+def test07_a_spin_turns_about_the_followed_direction_and_keeps_the_value(p, p_dot, w, rate):
+    """Ṙω = (a × ȧ) × ω + ψ̇ (a × ω): the followed direction still moves exactly like ω_p (a × a = 0),
+    the value is still ω bit for bit, and Ṙ stays skew (ω · Ṙω = 0)."""
+    omega_p = normalize(Dual(_unit(p), p_dot))
+    a, omega = detach(omega_p), _unit(w)
+    spin = Dual(np.zeros(1), np.array([rate]))
+    turning = Rotation.following(omega_p[None], spin=spin)
+    plain = Rotation.following(omega_p[None]).apply(omega[None])
+    out = turning.apply(omega[None])
+    assert np.array_equal(detach(out)[0], omega)
+    np.testing.assert_allclose(tangent(out)[0], tangent(plain)[0] + rate * np.cross(a, omega), atol=1e-12)
+    np.testing.assert_allclose(tangent(turning.apply(a[None]))[0], tangent(omega_p), atol=1e-12)
+    assert abs(omega @ tangent(out)[0]) < 1e-12
+    # the row-by-row path (some rows inactive) gives the same numbers as the whole-array one
+    both = Rotation.following(
+        np.concatenate([omega_p[None], omega_p[None]]), np.array([True, False]), spin[[0, 0]]
+    )
+    rows = both.apply(np.stack([omega, omega]))
+    np.testing.assert_allclose(tangent(rows)[0], tangent(out)[0], atol=1e-15)
+    assert np.array_equal(tangent(rows)[1], np.zeros(3)) and both.take([0]).spin.shape == (1,)

@@ -17,10 +17,10 @@ in an average over the image:
 - ``reparam``: its measured loss of the silhouette term for small triangles, tested as a bias
   against the numbers documented in :mod:`sphere3d.camera_kernel` (``Bias``).
 
-Tests 11–14 do the same for the shading integral: the irradiance at a point under the sky with
+Tests 11–15 do the same for the shading integral: the irradiance at a point under the sky with
 a black triangle above it, ``E = L (π - Φ)``, Φ by Lambert's formula (against an area quadrature;
 its Dual derivative against differences), then ``naive`` and ``finite_difference`` against it and
-``reparam``'s documented loss as a bias.
+``reparam``'s documented loss as a bias (test15: the loss of its rotations given each kernel).
 
 Per-pixel tests: |estimate - exact| <= q · stderr for every pixel, q the two-sided Student-t
 quantile (batches - 1 degrees of freedom) at the Šidák-corrected level 1 - (1 - α)^(1/m) over
@@ -45,6 +45,7 @@ from sphere3d import closed_form as cf
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.sampling import filter_value, pdf_filter
 from sphere3d.tasks import ImageTask, PointTask
+from tests.sphere3d.helpers import rotation_loss
 
 ALPHA = 1e-3
 BATCHES = 16
@@ -454,7 +455,7 @@ def test13_irradiance_value_naive_and_finite_difference_against_lambert():
 # reparam's share of dE/dθ lost at the origin under SKY_TRIANGLE, as documented in
 # sphere3d.methods.reparam (Bias): (parameter, options) -> (mean, stderr) in %, at n = 2^22
 REPARAM_SHADING_LOSS = {
-    ("tri.translate.z", None): (5.4, 0.7),
+    ("tri.translate.z", None): (-1.0, 0.9),
     ("tri.translate.z", "kappa=None"): (100.9, 0.1),
     ("tri.scale", "kappa=None"): (99.5, 0.1),
 }
@@ -465,11 +466,12 @@ REPARAM_SHADING_N = {"tri.translate.z": 1 << 21}  # the default rows; kappa=None
 def test14_reparam_loses_a_documented_share_of_the_shading_derivative(param, options):
     """The convolution's bias (Sec. 4.2, 4.3) on a black triangle under the sky, tested as a bias.
 
-    At the defaults (κ = 1000, 4 probes) a kernel straddling an edge whose probes all miss the
-    triangle follows nothing (near its corners): a few % lost, which takes ~2^21 samples to
-    resolve. With ``kappa=None`` one rotation from cosine-distributed probes serves the whole
-    hemisphere: the derivative is all but lost. Asserted as in test10: z > 4 and consistent
-    with the documented number (Šidák over the 3 rows).
+    At the defaults (κ = 1000, 4 probes: a ring of 6) about 1 % is lost, below what 2^21 samples
+    resolve (± 1 %): that row is held to its documented number only (a loss back at the 5.4 %
+    measured before the snaps of :mod:`sphere3d.snaps` shows there; test15 resolves the 1 %).
+    With ``kappa=None`` one rotation from cosine-distributed probes serves the whole hemisphere:
+    the derivative is all but lost, z > 4. Consistent with the documented number as in test10
+    (Šidák over the 3 rows).
     """
     kappa_none = options == "kappa=None"
     n = (1 << 16) if kappa_none else REPARAM_SHADING_N[param]
@@ -479,6 +481,27 @@ def test14_reparam_loses_a_documented_share_of_the_shading_derivative(param, opt
     lost = cf.share_lost(tally.derivative, np.float64(exact))
     documented, documented_se = (x / 100.0 for x in REPARAM_SHADING_LOSS[param, options])
     print(f"{param} {options}: {100 * lost.mean:.1f} % +- {100 * lost.stderr:.1f} %")
-    assert lost.mean / lost.stderr > 4.0
+    assert not kappa_none or lost.mean / lost.stderr > 4.0
     q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, len(REPARAM_SHADING_LOSS)), BATCHES - 1)
     assert abs(lost.mean - documented) <= q * math.hypot(lost.stderr, documented_se)
+
+
+# the share the cosine strategy's rotations lose given each kernel, as documented in sphere3d.snaps
+# (Bias, 2^18 kernels, seed 11): parameter -> (mean, stderr) in %
+ROTATION_LOSS = {"tri.translate.z": (1.01, 0.03), "tri.rotate.x": (2.49, 0.23)}
+
+
+@pytest.mark.parametrize("param", list(ROTATION_LOSS))
+def test15_the_cosine_strategys_rotations_lose_a_documented_share(param):
+    """The same bias without the noise of the samples μ (:func:`helpers.rotation_loss`): per kernel,
+    the derivative its rotation gives in expectation (the edge integral of the rotation's velocity)
+    against the exact one (the edges' own). 2^16 kernels (seed 12): z > 4, and consistent with the
+    documented number, q the normal quantile at the Šidák level over the 2 rows (2^16 kernels: the
+    mean is normal). The loss before the snaps (7.0 % and 10.9 %) fails here.
+    """
+    mean, stderr = rotation_loss(SKY_TRIANGLE, param, 1 << 16, 12)
+    documented, documented_se = (x / 100.0 for x in ROTATION_LOSS[param])
+    print(f"{param}: {100 * mean:.2f} % +- {100 * stderr:.2f} %")
+    assert mean / stderr > 4.0
+    q = stats.norm.ppf(1.0 - 0.5 * sidak(ALPHA, len(ROTATION_LOSS)))
+    assert abs(mean - documented) <= q * math.hypot(stderr, documented_se)
