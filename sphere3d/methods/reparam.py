@@ -340,8 +340,9 @@ def reparam(
     penumbra; following the silhouette between a shadowed and a lit probe, with probes along the
     light's edges (:mod:`sphere3d.emitter_probes`, Bias: the breakdown by strategy) it keeps
     99.0 ± 0.3 / 99.8 ± 0.3 %, and the bias floor (``make bench``, 2 seeds) fell from 0.088 / 0.109
-    to 0.035 / 0.018 (``film="splat"``: 0.103 / 0.128 to 0.055 / 0.068), for 70-80 % more CPU time
-    per image (two threads' CPU, 64 spp, same-minute comparison: 0.95-1.25 → 1.69-1.96 s). What
+    to 0.035 / 0.018 (``film="splat"``: 0.103 / 0.128 to 0.055 / 0.068), for 60-80 % more CPU time
+    per 64 spp image (process time, old and new rule alternating in one run: 0.95-1.25 → 1.69-1.96 s;
+    splat 1.6-2.0 → 2.3-2.6 s) and 1.5 % more variance (standard errors 0.7-0.9 % larger). What
     remains is the cosine strategy's loss near the light's edge (its rotation follows the
     occluder and drags that edge: -1 to -3.5 % of the derivative at penumbra points) and, on the
     cube, two shadow edges at different depths that one rotation cannot both follow (+7 % at one point).
