@@ -1,0 +1,61 @@
+"""reparam's emitter rotation (:mod:`sphere3d.emitter_probes`) at single ground points of the penumbra.
+
+At a fixed point and normal of the ``hard_shadow`` scenes (d/d ``occluder.translate.x``,
+:func:`sphere3d.irradiance`) the ``boundary`` method is unbiased and, with the same seed,
+nearly noise-free (standard error < 0.1 % here): the reference. The points lie across the
+penumbra along y = -0.1 (x = -0.3: the lit side, where a few % of the light is hidden;
+x = 0.1: the umbra's side, a few % visible). Before the silhouette rule the emitter
+strategy followed the mean occluded hit of 4 area probes, and its derivative was off by
+-45 % (sphere, x = -0.3: no probe saw the occluder, the identity dragged its shadow
+edge) to +57 % (cube, x = -0.05: the mean hit nearer the point than the silhouette).
+
+Statistics: z = (reparam - boundary) / sqrt(se_r² + se_b²), Šidák over the file's points at
+family-wise level 1e-3 (normal quantile: 16 batches of 1024 samples, the stderr's own noise
+is covered by the documented bounds' margin); fixed seeds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sphere3d as s3
+from flatland.core.stats import normal_quantile, sidak
+
+PARAM = "occluder.translate.x"
+N = 16384
+BOUND = 0.05
+"""Documented |reparam / boundary - 1| at these points (measured -3.6 % to +0.9 %, seeds 11-12):
+the cosine strategy's loss near the light's edge (its rotation follows the occluder and drags
+the light's edge; up to 3.5 % at x = 0.1) and the silhouette's motion away from the followed
+point (:mod:`sphere3d.emitter_probes`, Bias)."""
+POINTS = [
+    ("hard_shadow", -0.3),
+    ("hard_shadow", 0.0),
+    ("hard_shadow", 0.1),
+    ("hard_shadow_cube", -0.2),
+    ("hard_shadow_cube", 0.65),
+    ("hard_shadow_cube", 0.1),
+]
+CUBE_CORNER = ("hard_shadow_cube", -0.05)
+"""Where the cube's shadow edge is two edges at different depths: +6.2 % / +7.2 % (seeds 12 / 11),
+one rotation follows one of them; tested as a significant bias below 20 %."""
+Q = normal_quantile(1.0 - sidak(1e-3, len(POINTS) + 1))
+
+
+def _pair(scene, x, seed=11):
+    point = (x, -0.1, 0.0)
+    r = s3.irradiance(scene, point, (0, 0, 1), PARAM, method="reparam", n=N, seed=seed)
+    b = s3.irradiance(scene, point, (0, 0, 1), PARAM, method="boundary", n=N, seed=seed)
+    return r.derivative, b.derivative, float(np.hypot(r.derivative_stderr, b.derivative_stderr))
+
+
+@pytest.mark.parametrize(("scene", "x"), POINTS)
+def test01_the_emitter_rotation_follows_the_shadow_edge_across_the_penumbra(scene, x):
+    r, b, se = _pair(scene, x)
+    assert abs(r - b) < BOUND * abs(b) + Q * se, (r, b, se)
+
+
+def test02_the_cube_corner_keeps_a_documented_bias():
+    r, b, se = _pair(*CUBE_CORNER)
+    assert Q * se < r - b < 0.2 * abs(b) + Q * se, (r, b, se)
