@@ -260,15 +260,16 @@ def one_plane(state: SceneState, hits: Hits) -> np.ndarray:
     """
     tri = np.maximum(hits.triangle, 0)
     same = np.all(hits.hit, axis=1) & np.all(hits.shape == hits.shape[:, :1], axis=1)
-    flat = ~np.any(state.smooth[tri], axis=1)
-    v = np.asarray(detach(state.triangles))[tri]  # (m, P, 3, 3)
+    out = same & ~np.any(state.smooth[tri], axis=1)
+    rows = np.flatnonzero(out)  # the geometry below only where one flat shape is in sight
+    v = np.asarray(detach(state.triangles))[tri[rows]]  # (m, P, 3, 3)
     n = face_normals(v)
     n0 = n[:, :1]
-    extent = np.max(np.abs(v - v[:, :1, :1]), axis=(1, 2, 3))
+    extent = np.max(np.abs(v - v[:, :1, :1]), axis=(1, 2, 3), initial=0.0)
     parallel = np.all(np.sum(n * n0, axis=-1) > 1.0 - COPLANAR, axis=1)
     offset = np.abs(np.sum((v[:, :, 0] - v[:, :1, 0]) * n0, axis=-1))  # n0 · (V_k - V_0): 0 on one plane
-    on_plane = np.all(offset <= COPLANAR * (1.0 + extent)[:, None], axis=1)
-    return same & flat & parallel & on_plane
+    out[rows] = parallel & np.all(offset <= COPLANAR * (1.0 + extent)[:, None], axis=1)
+    return out
 
 
 def _reaching_motion(state: SceneState, moving: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
