@@ -70,6 +70,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from sphere3d.emitter_edges import _edge_table
+from sphere3d.live import emitters_change, triangles_change
 from sphere3d.probes import _bisect, _towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
@@ -100,14 +101,67 @@ def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     return table.a[e] + along[..., None] * (table.b[e] - table.a[e])
 
 
+def _bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and radius of a sphere holding every vertex (k, 3, 3): the box's centre, a safe radius."""
+    v = vertices.reshape(-1, 3)
+    centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    return centre, float(np.sqrt(np.max(np.sum((v - centre) ** 2, axis=1)))) * (1.0 + 1e-9)
+
+
+def _may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
+    r"""Rows of the points ``x`` (plain, (m, 3)) whose shadow rays to the emitters may meet a moving triangle.
+
+    Conservative, by bounding spheres: a ray from x to the emitters lies within the angle
+    $β_L = \arcsin(r_L / d_L)$ of the direction to their sphere's centre, one that meets the
+    moving triangles within $β_M$ of theirs, so the two cones must overlap, $α < β_L + β_M$,
+    and the moving sphere must begin before the emitters' sphere ends. A point inside either
+    sphere counts.
+    """
+    moving = triangles_change(state)
+    if not moving.any():
+        return np.zeros(len(x), dtype=bool)
+    triangles = np.asarray(detach(state.triangles))
+    (c_m, r_m), (c_l, r_l) = _bounding_sphere(triangles[moving]), _bounding_sphere(triangles[state.emitters])
+    to_m, to_l = c_m - x, c_l - x
+    d_m, d_l = np.sqrt(np.sum(to_m**2, axis=1)), np.sqrt(np.sum(to_l**2, axis=1))
+    inside = (d_m <= r_m) | (d_l <= r_l)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_a = np.clip(np.sum(to_m * to_l, axis=1) / (d_m * d_l), -1.0, 1.0)
+        reach = np.arcsin(np.minimum(1.0, r_l / d_l)) + np.arcsin(np.minimum(1.0, r_m / d_m))
+    overlap = np.arccos(cos_a) < reach * (1.0 + 1e-9) + 1e-9
+    return inside | (overlap & (d_m - r_m < d_l + r_l))
+
+
 def emitter_rotation(
     shading: Any, probes: int = PROBES, boundary: int = BOUNDARY, refine: int = REFINE
 ) -> Rotation:
     """One rotation per shading point for the emitter strategy (module docstring).
 
     ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
-    (stream ``"probes.emitter"``), so the primary samples are untouched.
+    (stream ``"probes.emitter"``, keyed on each point's sample), so the primary samples are
+    untouched. Points that are static, under static emitters, and whose shadow rays cannot
+    meet a moving triangle (:func:`_may_see_motion`) get the identity without probes: any
+    rotation the probes chose there would follow a static point, with a zero derivative.
     """
+    state = shading.state
+    m = len(shading)
+    if not state.dual:
+        return Rotation.identity((m,))
+    x0 = detach(shading.x)
+    need = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_change(state) | _may_see_motion(state, x0)
+    if need.all():
+        return _probe_rotation(shading, probes, boundary, refine)
+    rows = np.flatnonzero(need)
+    target, found = zeros((m, 3), True), np.zeros(m, dtype=bool)
+    if rows.size:
+        sub = _probe_rotation(shading.take(rows), probes, boundary, refine, targets=True)
+        target[rows], found[rows] = sub
+    return Rotation.following(target, found)
+
+
+def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targets: bool = False) -> Any:
+    """The probes' rotation for every point of ``shading`` (its attached target and where it was
+    found, if ``targets``)."""
     state = shading.state
     m = len(shading)
     u = shading.draws.uniforms("probes.emitter", probes, 3)
@@ -152,4 +206,4 @@ def emitter_rotation(
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])
         points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)
         target[f], found[f] = mean_point_direction(shading.x[f], points, usable[f, :inner])
-    return Rotation.following(target, found)
+    return (target, found) if targets else Rotation.following(target, found)

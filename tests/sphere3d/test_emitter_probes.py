@@ -59,3 +59,31 @@ def test01_the_emitter_rotation_follows_the_shadow_edge_across_the_penumbra(scen
 def test02_the_cube_corner_keeps_a_documented_bias():
     r, b, se = _pair(*CUBE_CORNER)
     assert Q * se < r - b < 0.2 * abs(b) + Q * se, (r, b, se)
+
+
+@pytest.mark.parametrize("scene", ["hard_shadow", "hard_shadow_cube"])
+def test03_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the_light(scene):
+    """The cull of :func:`sphere3d.emitter_probes._may_see_motion` is conservative: every ground or
+    occluder point from which one of 64 rays to the light meets the moving occluder is kept,
+    and the cull skips a good share of the ground (else it would be pointless)."""
+    from flatland.core.dual import detach, variable
+    from sphere3d.emitter_probes import _may_see_motion
+    from sphere3d.sampling import sample_mesh
+
+    state = s3.load_scene(scene).state(PARAM, variable(0.0))
+    rng = np.random.default_rng(5)
+    x = np.column_stack([rng.uniform(-2.5, 2.5, 4000), rng.uniform(-2.5, 2.5, 4000), np.zeros(4000)])
+    occluder = np.asarray(detach(state.triangles))[
+        state.shape_of == s3.load_scene(scene).shape_index("occluder")
+    ]
+    on_occluder, _ = sample_mesh(rng.uniform(size=(1000, 1, 3)), occluder)
+    x = np.concatenate([x + np.array([0.0, 0.0, 1e-6]), on_occluder[:, 0]])
+    y, _ = sample_mesh(rng.uniform(size=(len(x), 64, 3)), np.asarray(detach(state.triangles))[state.emitters])
+    to = y - x[:, None]
+    dist = np.linalg.norm(to, axis=-1)
+    hits = state.tracer.intersect(np.broadcast_to(x[:, None], to.shape), to / dist[..., None])
+    moving = np.any(np.asarray(state.triangles.tangent) != 0.0, axis=(1, 2))
+    sees = np.any(hits.hit & moving[np.maximum(hits.triangle, 0)] & (hits.t < dist), axis=1)
+    kept = _may_see_motion(state, x)
+    assert sees.sum() > 100 and np.all(kept[sees])
+    assert 0.2 < np.mean(~kept[:4000]) < 1.0
