@@ -163,8 +163,9 @@ class Splat:
         axes = []
         for f, c, on in ((fx, self.cx, self.on_x), (fy, self.cy, self.on_y)):
             d = (f[:, None] - c[rows]) * on[rows].astype(np.float64)
-            zero = np.zeros(d.shape)
-            offsets = Dual(np.stack([d.value, zero], axis=-1), np.stack([d.tangent, zero], axis=-1))
+            value, slope = np.zeros((2, *d.shape)), np.zeros((2, *d.shape))
+            value[0], slope[0] = d.value, d.tangent  # (2, rows, k): each axis's offsets contiguous
+            offsets = Dual(np.moveaxis(value, 0, -1), np.moveaxis(slope, 0, -1))
             axes.append(tangent(log_filter_value(offsets, kind)))
         tx, ty = axes
         rest = tangent(log_rest)

@@ -314,7 +314,10 @@ def pixel_samples(
         # linear in the direction's, so one evaluation along the mean tangent gives the mean of
         # the tangents; values exactly ω and 1 (the primal stays the naive one)
         m = len(film.rotations)
-        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
+        if splat is None:
+            rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
+        else:  # the same product, written out: value weight, tangent weight · ẇ / m
+            rotated, weight = Dual(d, r_dot / m), Dual(weight, weight * (w_dot / m))
     else:
         rotated = d
     slot = None if splat is None else splat.slot
