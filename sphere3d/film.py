@@ -179,16 +179,15 @@ def splat_weights(
     r"""The pixels film points (x, y) of samples of pixels (``rows``, ``cols``) reach and the weights
     $k(s - p) / q(s)$, $q(s) = Σ_{p'} p(s - p')$ over the image's pixels (module docstring)."""
     j, h = reach(kind)
-    n, span = len(x), np.arange(-j, j + 1)
-    col = np.floor(x).astype(np.int64)[:, None] + span[None, :]  # (n, 2j + 1) each
-    row = np.floor(y).astype(np.int64)[:, None] + span[None, :]
-    inside = (((row >= 0) & (row < height))[:, :, None] & ((col >= 0) & (col < width))[:, None, :]).reshape(
-        n, -1
-    )
+    n, k, span = len(x), 2 * j + 1, np.arange(-j, j + 1)
+    ib, ia = np.tile(np.arange(k), k), np.repeat(np.arange(k), k)  # pixel (a, b): row a, column b
+    col = (np.floor(x).astype(np.int64)[None, :] + span[:, None]).T  # (n, k) each
+    row = (np.floor(y).astype(np.int64)[None, :] + span[:, None]).T
     cx, cy = col + 0.5, row + 0.5
-    offsets = np.empty((n, span.size, span.size, 2))  # pixel (a, b): row a, column b
-    offsets[..., 0], offsets[..., 1] = (x[:, None] - cx)[:, None, :], (y[:, None] - cy)[:, :, None]
-    offsets = offsets.reshape(n, -1, 2)
+    offsets = np.empty((2, n, k * k))  # each axis contiguous
+    offsets[0], offsets[1] = (x[:, None] - cx)[:, ib], (y[:, None] - cy)[:, ia]
+    offsets = np.moveaxis(offsets, 0, -1)
+    inside = ((col >= 0) & (col < width))[:, ib] & ((row >= 0) & (row < height))[:, ia]
     density = np.where(inside, pdf_filter(offsets, kind), 0.0)
     q = np.sum(density, axis=1)  # > 0: the sample's own pixel is among them, with p > 0 at s
     value = np.where(inside, filter_value(offsets, kind), 0.0)
@@ -198,11 +197,11 @@ def splat_weights(
     slot_row = np.where(np.abs(d_row) <= h, (d_row + h) * side, -side * side).astype(np.int16)
     slot_col = np.where(np.abs(d_col) <= h, d_col + h, -side * side).astype(np.int16)
     reached = weight > 0.0
-    slot = (slot_row[:, :, None] + slot_col[:, None, :]).reshape(n, -1)
+    slot = slot_row[:, ia] + slot_col[:, ib]
     slot = np.where(reached & (slot >= 0), slot, np.int16(-1))
-    grid = reached.reshape(n, span.size, span.size)
+    grid = reached.reshape(n, k, k)
     on_x, on_y = grid[:, 0, :].copy(), grid[:, :, 0].copy()
-    for a in range(1, span.size):  # 3 at most: a loop over offsets
+    for a in range(1, k):  # 3 at most: a loop over offsets
         on_x |= grid[:, a, :]
         on_y |= grid[:, :, a]
     return Splat(slot, weight, cx, cy, on_x, on_y)
