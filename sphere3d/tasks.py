@@ -269,10 +269,9 @@ class ImageTask:
         total = np.sum(np.ascontiguousarray(rows), axis=-1)  # per pixel (and batch), as _control_variate
         total = total[None, :, None] if self.cv_scope == "pixel" else total[..., None]
         centre = (2 * h + 1) * h + h  # the slot of the sample's own pixel
-        own = np.flatnonzero(slot == centre)
-        scale = ((total - radiance) / (n - 1)).ravel()[
-            own // shape[-1]
-        ]  # leave sample i out of its own pixel
+        own = np.flatnonzero(slot == centre)  # one entry per sample at most: only there is i ∈ p
+        scale = ((total - radiance) / (n - 1)).ravel()  # leave sample i out of its own pixel
+        scale = scale[own // shape[-1]]
         ev.ravel()[own] -= scale * (wv.ravel()[own] - 1.0)
         et.ravel()[own] -= scale * wt.ravel()[own]
         stencil((ev, et, wv, wt), slot, h, stencils)
