@@ -59,9 +59,13 @@ At 16 and 64 spp (mostly noise) the squared error is 4.6 to 5.8 times smaller; a
 predicted about 6 for the filter-weight term, 88-91 % of the unsplatted variance. Bias floor
 (256 spp, 6 seeds; 2 seeds as the benchmark: heavy-tailed without splatting): 0.104 (0.103)
 against 0.121 (0.088) on the sphere, 0.131 (0.128) against 0.142 (0.108) on the cube: no sign
-of added bias; at 256 spp it is now about half the squared error. CPU time per 256 spp image
-(process time, both threads, the two films alternating in one run) 5.9 → 7.2 s (sphere) and
-6.1 → 7.5 s (cube), +21-23 %; the value's standard error halves (0.0135 → 0.0075 at 64 spp).
+of added bias; at 256 spp it is now about half the squared error. The value's standard error
+halves (0.0135 → 0.0075 at 64 spp). Cost per 64 spp image, the two films alternating in one run
+(best of seeds 1-3, a loaded 2-core machine): one thread's CPU time (process time) 0.85 → 1.02 s
+(sphere) and 0.94 → 1.19 s (cube), +19 % and +26 %; wall clock on two threads 0.55 → 0.63 s
+(sphere, +16 %). Before the stencils' slots came from the film point's offset, with one bincount
+per quantity, and the gather ran on the threads: +48 % and +35 % CPU, +39 % wall (same images,
+bit for bit).
 The batches' standard errors understate the spread by a few percent: on the sphere at 16 spp
 the derivative's variance over 32 seeds is 1.03 times the mean squared standard error (16 other
 seeds: 1.08; without splatting 0.96), the pooled scale coupling the batches weakly
@@ -69,7 +73,8 @@ seeds: 1.08; without splatting 0.96), the pooled scale coupling the batches weak
 
 Independence of chunks and threads: each chunk holds whole pixels and sums, per source
 pixel p', batch and target offset p - p', over the source's own samples (:func:`stencil`);
-the image sums these stencils in a fixed order (:func:`gather`), whatever the chunking.
+the image sums these stencils in a fixed order (:func:`gather`, in bands of rows on the threads),
+whatever the chunking.
 """
 
 from __future__ import annotations
@@ -80,8 +85,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual
-from flatland.core.translation import unit_weight
+from flatland.core.dual import Dual, tangent
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import filter_radius, filter_value, log_filter_value, pdf_filter
 
@@ -135,77 +139,112 @@ def reach(kind: str) -> tuple[int, int]:
 
 @dataclass(frozen=True)
 class Splat:
-    """Per camera sample and reached pixel (n, m): flat pixel index (-1: none), centre, weight value."""
+    """Per camera sample (n) and reached pixel (m = (2j + 1)², row-major over the offsets of :func:`reach`).
 
-    pixel: np.ndarray
+    ``slot`` (n, m): the pixel's stencil slot, $(Δr + h)(2h + 1) + Δc + h$ for its offset (Δr, Δc)
+    from the sample's own pixel (-1: none); ``weight`` (n, m): $k(s - p) / q(s)$; ``cx`` and
+    ``cy`` (n, 2j + 1): the centres of the reached columns and rows, ``on_x`` and ``on_y``
+    whether any reached pixel lies in them.
+    """
+
+    slot: np.ndarray
+    weight: np.ndarray
     cx: np.ndarray
     cy: np.ndarray
-    weight: np.ndarray
+    on_x: np.ndarray
+    on_y: np.ndarray
 
-    def unit_weights(self, fx: Any, fy: Any, log_rest: Any, rows: np.ndarray, kind: str) -> Any:
-        r"""$k(f - p) · \mathrm{rest} / \mathrm{detach}(…)$ per reached pixel p at the rotated film
-        points (fx, fy) of samples ``rows``: value 1, derivative of the filter at each pixel plus
-        ``log_rest``'s.
+    def weight_tangents(self, fx: Any, fy: Any, log_rest: Any, rows: np.ndarray, kind: str) -> np.ndarray:
+        r"""Tangents of $k(f - p) · \mathrm{rest} / \mathrm{detach}(…)$ (value 1) per reached pixel p at the
+        rotated film points (fx, fy) of samples ``rows``: plain (len(rows), m).
 
-        Unreached entries (weight 0) are evaluated at offset 0 (finite); their weight value 0
-        cancels them.
+        The filter is a product, $\log k(f - p) = \log k_1(f_x - p_x) + \log k_1(f_y - p_y)$, so the
+        tangent is the column's term plus the row's plus ``log_rest``'s: each axis's term is taken
+        once per column and row (2j + 1 each, the other axis held at offset 0 with tangent 0, which
+        adds an exact 0), not once per pixel. Columns and rows with no reached pixel are evaluated
+        at offset 0 (finite); their pixels' weight value 0 cancels them.
         """
-        on = (self.weight[rows] > 0.0).astype(np.float64)
-        dx = (fx[:, None] - self.cx[rows]) * on
-        dy = (fy[:, None] - self.cy[rows]) * on
-        offsets = Dual(np.stack([dx.value, dy.value], axis=-1), np.stack([dx.tangent, dy.tangent], axis=-1))
-        return unit_weight(
-            log_filter_value(offsets, kind) + (log_rest[:, None] if np.ndim(log_rest) else log_rest)
-        )
+        k = self.cx.shape[1]
+        axes = []
+        for f, c, on in ((fx, self.cx, self.on_x), (fy, self.cy, self.on_y)):
+            d = (f[:, None] - c[rows]) * on[rows].astype(np.float64)
+            value, slope = np.zeros((2, *d.shape)), np.zeros((2, *d.shape))
+            value[0], slope[0] = d.value, d.tangent  # (2, rows, k): each axis's offsets contiguous
+            offsets = Dual(np.moveaxis(value, 0, -1), np.moveaxis(slope, 0, -1))
+            axes.append(tangent(log_filter_value(offsets, kind)))
+        tx, ty = axes
+        rest = tangent(log_rest)
+        total = tx[:, None, :] + ty[:, :, None]  # pixel (a, b): row a, column b
+        return (total + (rest[:, None, None] if np.ndim(rest) else rest)).reshape(len(tx), k * k)
 
 
-def splat_weights(x: np.ndarray, y: np.ndarray, width: int, height: int, kind: str) -> Splat:
-    r"""The pixels film points (x, y) reach and the weights $k(s - p) / q(s)$, $q(s) = Σ_{p'} p(s - p')$
-    over the image's pixels (module docstring)."""
-    j, _ = reach(kind)
-    span = np.arange(-j, j + 1)
-    cols = (np.floor(x).astype(np.int64)[:, None, None] + span[None, None, :]).repeat(span.size, axis=1)
-    rows = (np.floor(y).astype(np.int64)[:, None, None] + span[None, :, None]).repeat(span.size, axis=2)
-    cols, rows = cols.reshape(len(x), -1), rows.reshape(len(x), -1)
-    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
-    cx, cy = cols + 0.5, rows + 0.5
-    offsets = np.stack([x[:, None] - cx, y[:, None] - cy], axis=-1)
+def splat_weights(
+    x: np.ndarray, y: np.ndarray, rows: np.ndarray, cols: np.ndarray, width: int, height: int, kind: str
+) -> Splat:
+    r"""The pixels film points (x, y) of samples of pixels (``rows``, ``cols``) reach and the weights
+    $k(s - p) / q(s)$, $q(s) = Σ_{p'} p(s - p')$ over the image's pixels (module docstring)."""
+    j, h = reach(kind)
+    n, k, span = len(x), 2 * j + 1, np.arange(-j, j + 1)
+    ib, ia = np.tile(np.arange(k), k), np.repeat(np.arange(k), k)  # pixel (a, b): row a, column b
+    col = (np.floor(x).astype(np.int64)[None, :] + span[:, None]).T  # (n, k) each
+    row = (np.floor(y).astype(np.int64)[None, :] + span[:, None]).T
+    cx, cy = col + 0.5, row + 0.5
+    offsets = np.empty((2, n, k * k))  # each axis contiguous
+    offsets[0], offsets[1] = (x[:, None] - cx)[:, ib], (y[:, None] - cy)[:, ia]
+    offsets = np.moveaxis(offsets, 0, -1)
+    inside = ((col >= 0) & (col < width))[:, ib] & ((row >= 0) & (row < height))[:, ia]
     density = np.where(inside, pdf_filter(offsets, kind), 0.0)
     q = np.sum(density, axis=1)  # > 0: the sample's own pixel is among them, with p > 0 at s
-    k = np.where(inside, filter_value(offsets, kind), 0.0)
-    weight = k / np.where(q > 0.0, q, 1.0)[:, None]
-    pixel = np.where(weight > 0.0, rows * width + cols, -1)
-    return Splat(pixel, cx, cy, weight)
+    value = np.where(inside, filter_value(offsets, kind), 0.0)
+    weight = value / np.where(q > 0.0, q, 1.0)[:, None]
+    side = 2 * h + 1
+    d_row, d_col = row - rows[:, None], col - cols[:, None]  # offsets from the sample's own pixel
+    slot_row = np.where(np.abs(d_row) <= h, (d_row + h) * side, -side * side).astype(np.int16)
+    slot_col = np.where(np.abs(d_col) <= h, d_col + h, -side * side).astype(np.int16)
+    reached = weight > 0.0
+    slot = slot_row[:, ia] + slot_col[:, ib]
+    slot = np.where(reached & (slot >= 0), slot, np.int16(-1))
+    grid = reached.reshape(n, k, k)
+    on_x, on_y = grid[:, 0, :].copy(), grid[:, :, 0].copy()
+    for a in range(1, k):  # 3 at most: a loop over offsets
+        on_x |= grid[:, a, :]
+        on_y |= grid[:, :, a]
+    return Splat(slot, weight, cx, cy, on_x, on_y)
 
 
-def stencil(values: np.ndarray, pixel: np.ndarray, source: np.ndarray, width: int, h: int) -> np.ndarray:
-    """Per source pixel and target offset, the sum over the samples of ``values`` (groups, pixels,
-    samples, m).
+def stencil(values: tuple[np.ndarray, ...], slot: np.ndarray, h: int, out: np.ndarray) -> None:
+    """Per quantity, group, target offset and source pixel, the sum over the source's samples of each of
+    ``values`` (groups, pixels, samples, m), written to ``out`` (len(values), groups, (2h + 1)², pixels).
 
-    ``pixel`` (same shape): target flat index (-1: none); ``source`` (pixels,): the source pixels'
-    flat indices. Returns (groups, pixels, (2h + 1)²). ``np.bincount`` adds each bin's entries
-    one by one in their order, a source pixel's samples in sample order, so every sum is the
-    same whatever chunk holds the pixel.
+    ``slot`` (same shape): the target's slot (:class:`Splat`; -1: none). ``np.bincount`` adds each
+    bin's entries one by one in their order, a source pixel's samples in sample order, so every
+    sum is the same whatever chunk holds the pixel.
     """
-    side = 2 * h + 1
-    g, p, _, _ = values.shape
-    src = source[None, :, None, None]
-    drow = np.floor_divide(pixel, width) - src // width
-    dcol = np.mod(pixel, width) - src % width
-    ok = (pixel >= 0) & (np.abs(drow) <= h) & (np.abs(dcol) <= h)
-    group = np.arange(g * p).reshape(g, p, 1, 1)
-    key = (group * side + drow + h) * side + dcol + h
-    sums = np.bincount(key[ok], weights=values[ok], minlength=g * p * side * side)
-    return sums.reshape(g, p, side * side)
+    g, p = slot.shape[:2]
+    slots = (2 * h + 1) ** 2
+    bins = g * p * slots
+    # bins pixel-major, (group, pixel, slot): a pixel's entries hit neighbouring bins (slot-major bins
+    # a pixel count apart would alias in the cache); ``out`` is slot-major, for gather
+    base = (np.arange(g * p) * slots).reshape(g, p, 1, 1)
+    key = np.where(slot >= 0, base + slot, bins).ravel()  # none: one more bin, dropped
+    for i, v in enumerate(values):
+        sums = np.bincount(key, weights=v.ravel(), minlength=bins + 1)[:bins]
+        out[i] = sums.reshape(g, p, slots).transpose(0, 2, 1)
 
 
-def gather(parts: np.ndarray, height: int, width: int, h: int) -> np.ndarray:
-    """Image (groups, height * width) from stencils (groups, pixels, (2h + 1)²), summed in a fixed order."""
+def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range) -> np.ndarray:
+    """Image rows ``rows`` (..., len(rows), width) from stencils (..., (2h + 1)², height * width),
+    each pixel the sum of its sources' slots in a fixed order (offsets row-major)."""
     side = 2 * h + 1
-    g = parts.shape[0]
-    st = parts.reshape(g, height, width, side, side)
-    image = np.zeros((g, height + 2 * h, width + 2 * h))
+    st = parts.reshape(*parts.shape[:-2], side * side, height, width)
+    r0, r1 = rows.start, rows.stop
+    image = np.zeros((*parts.shape[:-2], r1 - r0, width))
     for a in range(side):  # 25 slots at most: a loop over offsets, not samples
         for b in range(side):
-            image[:, a : a + height, b : b + width] += st[:, :, :, a, b]
-    return image[:, h : h + height, h : h + width].reshape(g, -1)
+            da, db = a - h, b - h  # target = source + (da, db)
+            t0, t1, u0, u1 = max(r0, da), min(r1, height + da), max(0, db), min(width, width + db)
+            if t0 < t1 and u0 < u1:
+                image[..., t0 - r0 : t1 - r0, u0:u1] += st[
+                    ..., a * side + b, t0 - da : t1 - da, u0 - db : u1 - db
+                ]
+    return image

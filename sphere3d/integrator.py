@@ -167,7 +167,7 @@ class PixelSamples:
 
     radiance: Any
     weight: Any
-    pixel: Any = None  # film splatting: (n, m) flat indices of the pixels each weight is for (-1: none)
+    slot: Any = None  # film splatting: (n, m) stencil slots of the pixels each weight is for (-1: none)
 
     @property
     def estimate(self) -> Any:
@@ -305,20 +305,23 @@ def pixel_samples(
             if splat is None:
                 log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
                 w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
-            else:  # the same with each reached pixel's centre (sphere3d.film)
+                w_dot[live] += tangent(w)
+            else:  # the same with each reached pixel's centre (sphere3d.film): its tangent only
                 rest = cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live)
-                w = splat.unit_weights(fx, fy, rest, live, cam.filter)
+                w_dot[live] += splat.weight_tangents(fx, fy, rest, live, cam.filter)
             r_dot[live] += tangent(r)
-            w_dot[live] += tangent(w)
         # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is
         # linear in the direction's, so one evaluation along the mean tangent gives the mean of
         # the tangents; values exactly ω and 1 (the primal stays the naive one)
         m = len(film.rotations)
-        rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
+        if splat is None:
+            rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
+        else:  # the same product, written out: value weight, tangent weight · ẇ / m
+            rotated, weight = Dual(d, r_dot / m), Dual(weight, weight * (w_dot / m))
     else:
         rotated = d
-    pixel = None if splat is None else splat.pixel
-    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight, pixel)
+    slot = None if splat is None else splat.slot
+    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight, slot)
 
 
 def camera_radiance(

@@ -200,32 +200,45 @@ class ImageTask:
         rows_all, cols_all = np.divmod(pixels, width)
         chunk_pixels = max(1, CHUNK // self.spp)
 
-        def chunk(c: int) -> np.ndarray:
+        splat = self._splat_buffers(batches, per_batch) if self.film == "splat" else None
+
+        def chunk(c: int) -> np.ndarray | None:
             pix = pixels[c * chunk_pixels : (c + 1) * chunk_pixels]
             # sample order: batch, pixel, sample; sample s of batch b is its pixel's j = b * per_batch + s
             b_idx, p_idx, s_idx = np.meshgrid(np.arange(batches), pix, np.arange(per_batch), indexing="ij")
             draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
             u = draws.uniforms("samples", PRIMARY_UNIFORMS)
-            sample_pix = p_idx.ravel()
-            if self.film == "splat":
+            rows, cols = rows_all[p_idx.ravel()], cols_all[p_idx.ravel()]
+            if splat is not None:
                 kind = self.scene.camera.filter
-                splat = lambda x, y: splat_weights(x, y, width, height, kind)  # noqa: E731
-                est = pixel_samples(
-                    state, transforms, rows_all[sample_pix], cols_all[sample_pix], u, draws, splat
-                )
-                return self._splat_chunk(est, pix, batches, per_batch)
-            est = pixel_samples(state, transforms, rows_all[sample_pix], cols_all[sample_pix], u, draws)
+                reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
+                est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of)
+                self._splat_chunk(est, pix, batches, per_batch, splat)
+                return None
+            est = pixel_samples(state, transforms, rows, cols, u, draws)
             return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
         parts = _map(chunk, range(-(-pixels.size // chunk_pixels)))
-        if self.film == "splat":
-            return self._splat_image(parts, batches, per_batch)
+        if splat is not None:
+            return self._splat_image(splat, batches, per_batch)
         return _tally(list(np.concatenate(parts, axis=1)), self.shape)
 
-    def _splat_chunk(self, samples: PixelSamples, pix: np.ndarray, batches: int, per_batch: int) -> tuple:
-        r"""One chunk's splatted estimates as stencils (:func:`~sphere3d.film.stencil`): value and
-        tangent, then those of the weights $w_{i,p}$ of samples i in pixels p other than their own
-        (or None), and the radiance totals of the chunk's pixels.
+    def _splat_buffers(self, batches: int, per_batch: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The chunks' outputs for :meth:`_splat_chunk`: stencils (quantities, batches, slots, pixels),
+        four quantities with the control variate and two without, and the pixels' radiance totals."""
+        n = batches * per_batch if self.cv_scope == "pixel" else per_batch
+        cv = not (self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box")
+        _, h = reach(self.scene.camera.filter)
+        pixels = self.shape[0] * self.shape[1]
+        stencils = np.empty((4 if cv else 2, batches, (2 * h + 1) ** 2, pixels))
+        return stencils, (np.empty((1 if self.cv_scope == "pixel" else batches, pixels)) if cv else None)
+
+    def _splat_chunk(
+        self, samples: PixelSamples, pix: np.ndarray, batches: int, per_batch: int, out: tuple
+    ) -> None:
+        r"""One chunk's splatted estimates as stencils (:func:`~sphere3d.film.stencil`), written to its
+        pixels' columns of ``out`` (:meth:`_splat_buffers`): value and tangent, then those of the weights
+        $w_{i,p}$ of samples i in pixels p other than their own, and the radiance totals of its pixels.
 
         Control variate (:mod:`sphere3d.film`), value and tangent: $Σ_i e_{i,p}$ minus
         $Σ_i c_{p,-i} (w_{i,p} - [i ∈ p])$, $c_{p,-i}$ the mean radiance of pixel p's samples
@@ -238,41 +251,54 @@ class ImageTask:
         Off where :meth:`_control_variate` is (``cv_scope="off"``, one sample per scope, box).
         """
         _, h = reach(self.scene.camera.filter)
-        width = self.scene.camera.width
+        stencils, totals = (part[..., pix[0] : pix[-1] + 1] if part is not None else None for part in out)
         shape = (batches, pix.size, per_batch, samples.weight.shape[-1])
-        target = samples.pixel.reshape(shape)
-        e = samples.radiance[:, None] * samples.weight
-        ev, et = (np.asarray(f(e), dtype=np.float64).reshape(shape) for f in (detach, tangent))
+        slot = samples.slot.reshape(shape)
+        wv, wt = (np.asarray(f(samples.weight), dtype=np.float64).reshape(shape) for f in (detach, tangent))
+        rv, rt = (
+            np.asarray(f(samples.radiance), dtype=np.float64).reshape(*shape[:3], 1)
+            for f in (detach, tangent)
+        )
+        ev, et = rv * wv, rt * wv + rv * wt  # e = radiance * weight, as Dual arithmetic (product rule)
+        if totals is None:
+            stencil((ev, et), slot, h, stencils)
+            return
         n = batches * per_batch if self.cv_scope == "pixel" else per_batch
-        if self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box":
-            return stencil(np.concatenate([ev, et]), np.tile(target, (2, 1, 1, 1)), pix, width, h), None
-        radiance = np.asarray(detach(samples.radiance), dtype=np.float64).reshape(batches, -1, per_batch)
+        radiance = rv[..., 0]
         rows = radiance.transpose(1, 0, 2).reshape(pix.size, -1) if self.cv_scope == "pixel" else radiance
         total = np.sum(np.ascontiguousarray(rows), axis=-1)  # per pixel (and batch), as _control_variate
         total = total[None, :, None] if self.cv_scope == "pixel" else total[..., None]
-        own = target == pix[None, :, None, None]
-        scale = ((total - radiance) / (n - 1))[..., None]  # leave sample i out of its own pixel
-        wv, wt = (np.asarray(f(samples.weight), dtype=np.float64).reshape(shape) for f in (detach, tangent))
-        ev = ev - np.where(own, scale * (wv - 1.0), 0.0)
-        et = et - np.where(own, scale * wt, 0.0)
-        ov, ot = np.where(own, 0.0, wv), np.where(own, 0.0, wt)
-        parts = stencil(np.concatenate([ev, et, ov, ot]), np.tile(target, (4, 1, 1, 1)), pix, width, h)
-        return parts, total.reshape(-1 if self.cv_scope == "pixel" else batches, pix.size)
+        centre = (2 * h + 1) * h + h  # the slot of the sample's own pixel
+        own = np.flatnonzero(slot == centre)  # one entry per sample at most: only there is i ∈ p
+        scale = ((total - radiance) / (n - 1)).ravel()  # leave sample i out of its own pixel
+        scale = scale[own // shape[-1]]
+        ev.ravel()[own] -= scale * (wv.ravel()[own] - 1.0)
+        et.ravel()[own] -= scale * wt.ravel()[own]
+        stencil((ev, et, wv, wt), slot, h, stencils)
+        stencils[2:, :, centre] = 0.0  # the weights of other pixels' samples only
+        totals[...] = total.reshape(totals.shape)
 
-    def _splat_image(self, parts: list[tuple], batches: int, per_batch: int) -> Tally:
-        """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`):
-        value and tangent, minus the other pixels' samples' weights times their target's mean radiance."""
+    def _splat_image(self, out: tuple, batches: int, per_batch: int) -> Tally:
+        """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`, in
+        bands of rows on the threads): value and tangent, minus the other pixels' samples' weights times
+        their target's mean radiance."""
         height, width = self.shape
         _, h = reach(self.scene.camera.filter)
-        sums = gather(np.concatenate([part[0] for part in parts], axis=1), height, width, h) / per_batch
-        value, deriv = sums[:batches], sums[batches : 2 * batches]
-        if parts[0][1] is not None:
-            total = np.concatenate([part[1] for part in parts], axis=1)
-            mean = total / (batches * per_batch if self.cv_scope == "pixel" else per_batch)
-            value = value - mean * sums[2 * batches : 3 * batches]
-            deriv = deriv - mean * sums[3 * batches :]
-        shape = (batches, height, width)
-        return Tally(value=value.reshape(shape), derivative=deriv.reshape(shape))
+        stencils, totals = out
+        step = -(-height // (2 * WORKERS))
+
+        def band(i: int) -> np.ndarray:
+            rows = range(i * step, min(height, (i + 1) * step))
+            sums = gather(stencils, height, width, h, rows).reshape(len(stencils), batches, -1) / per_batch
+            value, deriv = sums[0], sums[1]
+            if totals is not None:
+                mean = totals[:, rows.start * width : rows.stop * width]
+                mean = mean / (batches * per_batch if self.cv_scope == "pixel" else per_batch)
+                value, deriv = value - mean * sums[2], deriv - mean * sums[3]
+            return np.stack([value, deriv]).reshape(2, batches, len(rows), width)
+
+        image = np.concatenate(_map(band, range(-(-height // step))), axis=2)
+        return Tally(value=image[0], derivative=image[1])
 
 
 @dataclass(frozen=True)
