@@ -303,49 +303,37 @@ def reparam(
     0 follows the probe's own hit. flatland's option of the same name defaults to 2.
 
     Measured bias on the ``hard_shadow`` benchmark scenes (a sharp, ``fade`` 0 light;
-    d/d ``occluder.translate.x``, default options, 4 seeds x 256 spp against the
+    d/d ``occluder.translate.x``, default options, 8 seeds x 128 spp against the
     Richardson finite-difference reference of ``benchmarks/reference``; regions as in
     ``tests/sphere3d/test_hard_shadow.py``), as the least-squares fraction of the
-    reference kept, $Σ g·\mathrm{ref} / Σ \mathrm{ref}^2$, and the region's part of the bias floor (the rms
-    per-pixel bias over the image, noise subtracted, ``benchmarks/bench_hard_shadow.py``):
+    reference kept, $Σ g·\mathrm{ref} / Σ \mathrm{ref}^2$, and the bias floor (the rms
+    per-pixel bias over the image, noise subtracted, ``make bench``: 2 seeds at 256 spp):
 
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
     ================  ===========================  ===========================
-    penumbra          98.0 ± 0.4 % kept (0.09)     102.3 ± 0.3 % kept (0.11)
-    silhouette        95.6 ± 1.4 % kept (0.11)     95.7 ± 1.8 % kept (0.18)
-    occluder          95 ± 6 % kept (< noise)      100.1 ± 1.9 % kept (0.10)
-    bias floor        0.12 rms per pixel           0.24 rms per pixel
+    penumbra          99.0 ± 0.3 % kept            99.8 ± 0.3 % kept
+    silhouette        98.1 ± 1.4 % kept            99.3 ± 1.0 % kept
+    occluder          109 ± 6 % kept               98.4 ± 1.9 % kept
+    bias floor        0.035 (splat 0.055)          0.018 (splat 0.068)
     ================  ===========================  ===========================
 
-    The table was measured before the per-sample film kernel (:mod:`sphere3d.camera_kernel`)
-    and the pooled pixel control variate (:class:`~sphere3d.tasks.ImageTask`). With all of
-    them (``make bench``, table ``hard_shadow``, 2 seeds at 256 spp, one idle 2-core
-    machine) the bias floor is 0.088 (sphere) and 0.155 (cube) rms per pixel, the RMSE at
-    16 / 64 / 256 spp 0.96 / 0.50 / 0.29 and 1.54 / 0.76 / 0.40, and a 64 spp image took
-    0.72 s / 0.67 s. Dual arithmetic only on the rows that carry a tangent (:mod:`sphere3d.live`)
-    and chunks that reuse their memory (:mod:`sphere3d.tasks`) then cut one thread's CPU time per
-    64 spp image by 30 %, 1.32 → 0.93 s and 1.43 → 1.00 s (best of 3, same-minute comparison on a
-    loaded machine; bit-identical images). With ``film_one_plane`` (the identity on the film where a
-    kernel sees one face of the cube; :mod:`sphere3d.camera_kernel`, Noise) the cube's RMSE is 1.22 /
-    0.61 / 0.33 and its bias floor 0.11, the sphere's image unchanged; the cube's silhouette keeps
-    99.3 ± 1.0 % (8 seeds × 128 spp; 96.1 ± 1.1 % without). Bias floors from 2 seeds are
-    noisy: by region, the sphere's 0.088 is the penumbra's part alone (0.087), the
-    silhouette's and the occluder's parts being below their noise.
-
-    Without ``emitter_edges`` the penumbra kept 3.2 / 3.3 % (bias floor 0.31 / 0.38): the
-    emitter rotation follows the occluder, and in its frame the light's sharp edge moves.
-    With the term, the emitter rotation following the mean occluded probe hit kept 98.4 / 102.9 %
-    (8 seeds × 128 spp) only because errors of -45 % to +60 % point by point cancelled across the
-    penumbra; following the silhouette between a shadowed and a lit probe, with probes along the
-    light's edges (:mod:`sphere3d.emitter_probes`, Bias: the breakdown by strategy) it keeps
-    99.0 ± 0.3 / 99.8 ± 0.3 %, and the bias floor (``make bench``, 2 seeds) fell from 0.088 / 0.109
-    to 0.035 / 0.018 (``film="splat"``: 0.103 / 0.128 to 0.055 / 0.068), for 60-80 % more CPU time
-    per 64 spp image (process time, old and new rule alternating in one run: 0.95-1.25 → 1.69-1.96 s;
-    splat 1.6-2.0 → 2.3-2.6 s) and 1.5 % more variance (standard errors 0.7-0.9 % larger). What
-    remains is the cosine strategy's loss near the light's edge (its rotation follows the
-    occluder and drags that edge: -1 to -3.5 % of the derivative at penumbra points) and, on the
-    cube, two shadow edges at different depths that one rotation cannot both follow (+7 % at one point).
+    How it got there (bias floor sphere / cube): 0.31 / 0.38 as published, the emitter
+    rotation following the occluder and dragging the light's sharp edge (the penumbra kept
+    3.2 / 3.3 %); the emitters' edge term (``emitter_edges``) and the per-sample film kernel,
+    0.088 / 0.155; the identity on one face of the cube (``film_one_plane``), cube 0.109; the
+    emitter rotation following the shadow edge between a shadowed and a lit probe, with probes
+    along the light's edges (:mod:`sphere3d.emitter_probes`), 0.035 / 0.018. The old rule
+    (the mean occluded probe hit) kept 98.4 / 102.9 % of the penumbra only because point-by-point
+    errors of -45 % to +60 % cancelled. That rule's replacement costs 60-80 % more CPU time per
+    image (process time, old and new alternating in one run: 0.95-1.25 → 1.69-1.96 s per 64 spp)
+    and 1.5 % more variance; a 64 spp image now takes 0.91 / 0.94 s of wall time on an idle
+    2-core machine (``make bench``), RMSE at 16 / 64 / 256 spp 0.96 / 0.49 / 0.27 and 1.21 / 0.60
+    / 0.31; with ``film="splat"`` (:mod:`sphere3d.film`) 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15.
+    What remains in the penumbra is the cosine strategy's loss near the light's edge (its rotation
+    follows the occluder and drags that edge: -1 to -3.5 % of the derivative at penumbra points)
+    and, on the cube, two shadow edges at different depths that one rotation cannot both follow
+    (+7 % at one point).
     The silhouette loss sits where the occluder's silhouette and the ground's far edge
     share a film kernel: one rotation cannot follow two edges. On the cube's
     faces the error has both signs (the edges between faces inside a footprint); the lit

@@ -199,11 +199,9 @@ def kept_fraction(g, ref, mask):
 REPARAM = {
     # scene: {region: (documented kept fraction, its standard error)}: 8 seeds x REPARAM_SPP against
     # the stored reference (the larger of the seeds' spread and the propagated per-pixel errors);
-    # the docstring's table, at 256 spp, agrees within 1.7 standard errors (the cube's silhouette:
-    # 0.961 ± 0.011 before film_one_plane, 0.993 ± 0.010 with it, seeds 1-8; re-measured with the
-    # cosine strategy's snaps: 0.984 / 0.981 and 1.029 / 0.993, each within its standard error;
-    # the penumbra re-measured with the emitter rotation on the silhouette, sphere3d.emitter_probes:
-    # 0.984 -> 0.990 and 1.029 -> 0.998, the silhouettes unchanged)
+    # the docstring's table is this measurement, seeds 1-8 (history: the cube's silhouette 0.961 ±
+    # 0.011 before film_one_plane, 0.993 ± 0.010 with it; the penumbra 0.984 -> 0.990 and 1.029 ->
+    # 0.998 with the emitter rotation on the silhouette, sphere3d.emitter_probes)
     "hard_shadow": {"penumbra": (0.990, 0.003), "silhouette": (0.981, 0.014)},
     "hard_shadow_cube": {"penumbra": (0.998, 0.003), "silhouette": (0.993, 0.010)},
 }
