@@ -50,7 +50,15 @@ from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
 from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["POINTS", "EmitterEdgeSamples", "add_tangent", "emitter_edge_term", "sample_emitter_edges"]
+__all__ = [
+    "POINTS",
+    "EdgeTable",
+    "EmitterEdgeSamples",
+    "add_tangent",
+    "edge_table",
+    "emitter_edge_term",
+    "sample_emitter_edges",
+]
 
 INV_PI = 1.0 / np.pi
 POINTS = 2
@@ -58,7 +66,7 @@ POINTS = 2
 
 
 @dataclass(frozen=True)
-class _EdgeTable:
+class EdgeTable:
     """The emitters' edges that carry a term, in loop order, with per-face data (small arrays, θ0)."""
 
     a: np.ndarray  # (E, 3) start, in face 0's winding order
@@ -88,7 +96,7 @@ class EmitterEdgeSamples:
         emitter strategy samples only those).
     dist, cos_x : ndarray, shape (k,)
         Distance to the edge point and $\cos θ_x$ there.
-    table : _EdgeTable
+    table : EdgeTable
         The edges: endpoints, triangles, normals, outward normals in the triangles' planes.
     weight : float
         The edges' total length P over :data:`POINTS`: each point's weight.
@@ -100,7 +108,7 @@ class EmitterEdgeSamples:
     front: np.ndarray
     dist: np.ndarray
     cos_x: np.ndarray
-    table: _EdgeTable
+    table: EdgeTable
     weight: float
 
     def take(self, rows: np.ndarray) -> EmitterEdgeSamples:
@@ -174,7 +182,7 @@ def _faded_out(state: Any, edges: Any) -> np.ndarray:
     return (edges.other < 0) & (state.fade[face] > 0.0) & (kind != FADE_NONE) & zero
 
 
-def _edge_table(state: Any) -> _EdgeTable | None:
+def edge_table(state: Any) -> EdgeTable | None:
     """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
 
     Ordered along their loops (each edge followed by the one starting where it ends, a
@@ -203,7 +211,7 @@ def _edge_table(state: Any) -> _EdgeTable | None:
     outward = cross((edges.b - edges.a)[:, None], normals)
     outward = outward / norm(outward)[..., None]
     away = dot(outward, edges.a[:, None] - tri.mean(axis=2)) > 0.0  # away from the face's centroid
-    return _EdgeTable(
+    return EdgeTable(
         a=edges.a,
         b=edges.b,
         faces=np.where(local >= 0, state.emitters[np.maximum(local, 0)], -1),
@@ -224,7 +232,7 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     emitters have no such edge (a closed mesh without creases) or no point faces one.
     No ray is traced here (:meth:`EmitterEdgeSamples.term` traces the shadow rays).
     """
-    table = _edge_table(state)
+    table = edge_table(state)
     if table is None:
         return None
     perimeter = float(table.cdf[-1])

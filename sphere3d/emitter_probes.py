@@ -69,9 +69,9 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach, tangent
-from sphere3d.emitter_edges import _edge_table
+from sphere3d.emitter_edges import edge_table
 from sphere3d.live import emitters_change, triangles_change
-from sphere3d.probes import _bisect, _towards, mean_point_direction
+from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points
@@ -90,7 +90,7 @@ REFINE = 6
 def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     """``count`` points per row evenly spaced in arc length along the emitters' edges (random phase
     ``u``), as :func:`~sphere3d.emitter_edges.sample_emitter_edges` places its pair; None without edges."""
-    table = _edge_table(state)
+    table = edge_table(state)
     if table is None or count == 0:
         return None
     perimeter = float(table.cdf[-1])
@@ -195,9 +195,9 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
         inside, outside = w[s, i], w[s, j]
         hits = state.tracer.intersect(shading.origin[s], inside)
         normal = detach(shading.n)[s]
-        edge, _, _ = _bisect(state, shading.origin[s], inside, outside, hits, normal, refine)
+        edge, _, _ = bisect_silhouette(state, shading.origin[s], inside, outside, hits, normal, refine)
         point = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
-        target[s], found[s] = _towards(point, shading.x[s], np.ones(s.size, dtype=bool))
+        target[s], found[s] = direction_towards(point, shading.x[s], np.ones(s.size, dtype=bool))
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
     moving = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_move

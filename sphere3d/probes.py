@@ -54,6 +54,8 @@ from sphere3d.vector import cross, dot, frame, norm
 
 __all__ = [
     "PARALLEL",
+    "bisect_silhouette",
+    "direction_towards",
     "follow_probes",
     "mean_point_direction",
     "pair_index",
@@ -129,14 +131,14 @@ def pair_index(shape: np.ndarray) -> np.ndarray:
     return np.where(different.any(axis=1), last, 0)
 
 
-def _towards(point: Any, origin: Any, found: np.ndarray) -> tuple[Any, np.ndarray]:
+def direction_towards(point: Any, origin: Any, found: np.ndarray) -> tuple[Any, np.ndarray]:
     """point - origin (Dual), and ``found`` cleared where its direction is undefined."""
     to = point - origin
     length = norm(detach(to))  # the value only
     return to, found & (length > 0.0) & np.isfinite(length)
 
 
-def _bisect(
+def bisect_silhouette(
     state: SceneState,
     trace_origin: np.ndarray,
     inside: np.ndarray,
@@ -207,7 +209,7 @@ def select_points(
 
     - When the point comes from one probe of a pair whose other probe sees something
       else, that probe's hit is first moved towards the silhouette between the two
-      by ``refine`` bisection rays (:func:`_bisect`). A rotation that follows a
+      by ``refine`` bisection rays (:func:`bisect_silhouette`). A rotation that follows a
       point on a moving object matches the silhouette's motion only to first order
       in their distance, and the apparent motion of a translating object changes by
       about its own size per radian: following a ring probe's hit, up to $3 σ$ inside
@@ -284,7 +286,7 @@ def _choose(
         start = h0.take(single).where(first, h1.take(single))
         tro = np.broadcast_to(trace_origin, (m, 3))[single]
         nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
-        edge, inside, outside = _bisect(state, tro, inside, outside, start, nrm, refine)
+        edge, inside, outside = bisect_silhouette(state, tro, inside, outside, start, nrm, refine)
         if snap is None:
             u, v = edge.u, edge.v
         else:
@@ -319,7 +321,7 @@ def follow_probes(
     weighted by the kernel.
     """
     point, found, snapped = _choose(state, origin, trace_origin, directions, hits, normal, refine, snap)
-    to, found = _towards(point, origin, found)
+    to, found = direction_towards(point, origin, found)
     if spin is None or snapped is None:
         return Rotation.following(to, found)
     rows, triangle, lines = snapped
@@ -353,4 +355,4 @@ def mean_point_direction(origin: Any, points: Any, mask: np.ndarray) -> tuple[An
     """
     count = mask.sum(axis=1)
     total = np.einsum("mpk,mp->mk", points, mask.astype(np.float64))
-    return _towards(total / np.maximum(count, 1)[:, None], origin, count > 0)
+    return direction_towards(total / np.maximum(count, 1)[:, None], origin, count > 0)

@@ -19,11 +19,14 @@ from flatland.core.dual import Dual, detach, tangent, variable
 from flatland.core.rng import Draws
 from sphere3d import closed_form as cf
 from sphere3d.camera_kernel import KAPPA_FILM
-from sphere3d.integrator import Shading
+from sphere3d.film import FilmTransform
+from sphere3d.integrator import Identity, Shading
 from sphere3d.methods.reparam import ReparamTransforms
+from sphere3d.rotation import Rotation
 from sphere3d.sampling import GAUSSIAN_RADIUS, sample_cosine_hemisphere, sample_vmf
 from sphere3d.scene import load_scene
 from sphere3d.state import euler_matrix
+from sphere3d.vector import norm
 
 SKY = 1.5
 TRIANGLE = np.array([[0.0, -0.5, 1.0], [0.9, 0.0, 1.0], [0.0, 0.5, 1.0]])
@@ -220,3 +223,19 @@ def rotation_loss(vertices, param, n, seed, **options):
     q = (1.0 / np.tanh(kappa) - 1.0 / kappa) * omega[:, 2] / np.pi
     share = -(bias / q) / exact
     return float(share.mean()), float(share.std(ddof=1) / np.sqrt(n))
+
+
+class FollowPlane(Identity):
+    """One rotation per camera sample following the point of the plane z = 0 under its film point.
+
+    The point moves with the triangle (``tri.translate.x``: velocity (1, 0, 0)), so the
+    rotation ``R(detach ω_p → ω_p)`` (Loubet et al. 2019, Sec. 4.1) carries its film motion.
+    """
+
+    def camera(self, state, x, y, draws):
+        cam = state.camera
+        o = np.asarray(detach(cam.origin))
+        d = np.asarray(detach(cam.directions(x, y)))
+        p = o + (-o[2] / d[:, 2])[:, None] * d  # on the plane z = 0 of the triangle
+        moving = Dual(p, np.broadcast_to([1.0, 0.0, 0.0], p.shape)) - o
+        return FilmTransform((Rotation.following(moving / norm(moving)[:, None]),))

@@ -29,35 +29,16 @@ import pytest
 from scipy import stats
 
 import sphere3d as s3
-from flatland.core.dual import Dual, detach
+from flatland.core.dual import Dual
 from flatland.core.stats import sidak
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form as cf
-from sphere3d.film import FilmTransform
-from sphere3d.integrator import Identity
-from sphere3d.rotation import Rotation
 from sphere3d.tasks import ImageTask
-from sphere3d.vector import norm
+from tests.sphere3d.helpers import FollowPlane
 
 ALPHA = 1e-3
 BATCHES = 16
 PARAM = "tri.translate.x"
-
-
-class FollowPlane(Identity):
-    """One rotation per camera sample following the point of the plane z = 0 under its film point.
-
-    The point moves with the triangle (``tri.translate.x``: velocity (1, 0, 0)), so the
-    rotation ``R(detach ω_p → ω_p)`` (Loubet et al. 2019, Sec. 4.1) carries its film motion.
-    """
-
-    def camera(self, state, x, y, draws):
-        cam = state.camera
-        o = np.asarray(detach(cam.origin))
-        d = np.asarray(detach(cam.directions(x, y)))
-        p = o + (-o[2] / d[:, 2])[:, None] * d  # on the plane z = 0 of the triangle
-        moving = Dual(p, np.broadcast_to([1.0, 0.0, 0.0], p.shape)) - o
-        return FilmTransform((Rotation.following(moving / norm(moving)[:, None]),))
 
 
 def _task(spp, seed, scope):

@@ -29,7 +29,7 @@ from sphere3d import closed_form as cf
 from sphere3d import tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.tasks import ImageTask
-from tests.sphere3d.test_control_variate import FollowPlane
+from tests.sphere3d.helpers import FollowPlane
 
 ALPHA = 1e-3
 BATCHES = 16
