@@ -61,17 +61,17 @@ predicted about 6 for the filter-weight term, 88-91 % of the unsplatted variance
 against 0.121 (0.088) on the sphere, 0.131 (0.128) against 0.142 (0.108) on the cube: no sign of
 added bias; at 256 spp it is now about half the squared error. (Both measured before the emitter
 rotation followed the shadow edge, :mod:`sphere3d.emitter_probes`; since then ``make bench``
-gives bias floors 0.035 / 0.055 per-pixel / splatted on the sphere, 0.018 / 0.068 on the cube,
-and splatted RMSE 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15.) The value's standard error halves
-(0.0135 → 0.0075 at 64 spp). Cost per 64 spp image, the two films alternating in one run (best
-of seeds 1-3, a loaded 2-core machine): one thread's CPU time (process time) 0.85 → 1.02 s
-(sphere) and 0.94 → 1.19 s (cube), +19 % and +26 %; wall clock on two threads 0.55 → 0.63 s
-(sphere, +16 %). Before the stencils' slots came from the film point's offset, with one bincount
-per quantity, and the gather ran on the threads: +48 % and +35 % CPU, +39 % wall (same images,
-bit for bit). The batches' standard errors understate the spread by a few percent: on the sphere
-at 16 spp the derivative's variance over 32 seeds is 1.03 times the mean squared standard error
-(16 other seeds: 1.08; without splatting 0.96), the pooled scale coupling the batches weakly
-(:meth:`~sphere3d.tasks.ImageTask._control_variate`).
+gives bias floors (6 seeds) 0.086 / 0.058 per-pixel / splatted on the sphere, 0.092 / 0.074 on
+the cube, and splatted RMSE 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15.) The value's standard
+error halves (0.0135 → 0.0075 at 64 spp). Cost per 64 spp image, the two films alternating in
+one run (best of seeds 1-3, a loaded 2-core machine): one thread's CPU time (process time) 0.85
+→ 1.02 s (sphere) and 0.94 → 1.19 s (cube), +19 % and +26 %; wall clock on two threads 0.55 →
+0.63 s (sphere, +16 %). Before the stencils' slots came from the film point's offset, with one
+bincount per quantity, and the gather ran on the threads: +48 % and +35 % CPU, +39 % wall (same
+images, bit for bit). The batches' standard errors understate the spread by a few percent: on
+the sphere at 16 spp the derivative's variance over 32 seeds is 1.03 times the mean squared
+standard error (16 other seeds: 1.08; without splatting 0.96), the pooled scale coupling the
+batches weakly (:meth:`~sphere3d.tasks.ImageTask._control_variate`).
 
 Independence of chunks and threads: each chunk holds whole pixels and sums, per source
 pixel p', batch and target offset p - p', over the source's own samples (:func:`stencil`);

@@ -307,7 +307,7 @@ def reparam(
     Richardson finite-difference reference of ``benchmarks/reference``; regions as in
     ``tests/sphere3d/test_hard_shadow.py``), as the least-squares fraction of the
     reference kept, $Σ g·\mathrm{ref} / Σ \mathrm{ref}^2$, and the bias floor (the rms
-    per-pixel bias over the image, noise subtracted, ``make bench``: 2 seeds at 256 spp):
+    per-pixel bias over the image, noise subtracted, ``make bench``: 6 seeds at 256 spp):
 
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
@@ -315,7 +315,7 @@ def reparam(
     penumbra          99.0 ± 0.3 % kept            99.8 ± 0.3 % kept
     silhouette        98.1 ± 1.4 % kept            99.3 ± 1.0 % kept
     occluder          109 ± 6 % kept               98.4 ± 1.9 % kept
-    bias floor        0.035 (splat 0.055)          0.018 (splat 0.068)
+    bias floor        0.086 (splat 0.058)          0.092 (splat 0.074)
     ================  ===========================  ===========================
 
     How it got there (bias floor sphere / cube): 0.31 / 0.38 as published, the emitter
@@ -323,13 +323,15 @@ def reparam(
     3.2 / 3.3 %); the emitters' edge term (``emitter_edges``) and the per-sample film kernel,
     0.088 / 0.155; the identity on one face of the cube (``film_one_plane``), cube 0.109; the
     emitter rotation following the shadow edge between a shadowed and a lit probe, with probes
-    along the light's edges (:mod:`sphere3d.emitter_probes`), 0.035 / 0.018. The old rule
+    along the light's edges (:mod:`sphere3d.emitter_probes`), 0.035 / 0.018 on the same 2 seeds,
+    0.086 / 0.092 on 6 (splatted, the steadier estimate: 0.058 / 0.074). The old rule
     (the mean occluded probe hit) kept 98.4 / 102.9 % of the penumbra only because point-by-point
     errors of -45 % to +60 % cancelled. That rule's replacement costs 60-80 % more CPU time per
     image (process time, old and new alternating in one run: 0.95-1.25 → 1.69-1.96 s per 64 spp)
-    and 1.5 % more variance; a 64 spp image now takes 0.91 / 0.94 s of wall time on an idle
-    2-core machine (``make bench``), RMSE at 16 / 64 / 256 spp 0.96 / 0.49 / 0.27 and 1.21 / 0.60
-    / 0.31; with ``film="splat"`` (:mod:`sphere3d.film`) 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15.
+    and 1.5 % more variance; a 64 spp image now takes 0.73-0.91 / 0.94-0.99 s of wall time on an
+    idle 2-core machine (``make bench``, two runs), RMSE at 16 / 64 / 256 spp 0.96 / 0.49 / 0.26 and
+    1.21 / 0.60 / 0.30; with ``film="splat"`` (:mod:`sphere3d.film`) 0.42 / 0.22 / 0.12 and 0.49 /
+    0.26 / 0.15.
     What remains in the penumbra is the cosine strategy's loss near the light's edge (its rotation
     follows the occluder and drags that edge: -1 to -3.5 % of the derivative at penumbra points)
     and, on the cube, two shadow edges at different depths that one rotation cannot both follow
