@@ -134,9 +134,8 @@ def reach(kind: str) -> tuple[int, int]:
     a sample lies within r of its pixel's centre, so $\lfloor s \rfloor - p' ∈ [-h + j, h - j]$.
     Gaussian (r = 1.5) and tent (r = 1): (1, 2); box (r = ½): (0, 0).
     """
-    r = filter_radius(kind)
-    j = math.ceil(r - 0.5)
-    return j, (j + math.ceil(r - 0.5)) if j else 0
+    j = math.ceil(filter_radius(kind) - 0.5)
+    return j, 2 * j  # h = j + j: the sample's offset from its pixel plus the film point's reach
 
 
 @dataclass(frozen=True)
@@ -207,10 +206,7 @@ def splat_weights(
     slot = slot_row[:, ia] + slot_col[:, ib]
     slot = np.where(reached & (slot >= 0), slot, np.int16(-1))
     grid = reached.reshape(n, k, k)
-    on_x, on_y = grid[:, 0, :].copy(), grid[:, :, 0].copy()
-    for a in range(1, k):  # 3 at most: a loop over offsets
-        on_x |= grid[:, a, :]
-        on_y |= grid[:, :, a]
+    on_x, on_y = np.any(grid, axis=1), np.any(grid, axis=2)  # a reached pixel in the column, the row
     return Splat(slot, weight, cx, cy, on_x, on_y)
 
 

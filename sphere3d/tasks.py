@@ -137,6 +137,22 @@ class ImageTask:
         check_choice("cv_scope", self.cv_scope, CV_SCOPES)
         check_choice("film", self.film, FILMS)
 
+    def _cv_samples(self, batches: int, per_batch: int) -> int:
+        """Samples per scope of the control variate's scale (all of a pixel's, or one batch's), 0 where
+        it is off: ``cv_scope="off"``, one sample per scope, or the box filter (:meth:`_control_variate`)."""
+        n = batches * per_batch if self.cv_scope == "pixel" else per_batch
+        return 0 if self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box" else n
+
+    def _leave_one_out(self, radiance: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Radiance totals per pixel (and batch) of ``radiance`` (batches, pixels, samples), broadcastable
+        to it, and each sample's scale: the mean of the other ``n - 1`` samples of its scope."""
+        pooled = self.cv_scope == "pixel"
+        # each pixel's sum over one contiguous row (batch-major), so it does not depend on the chunk's layout
+        rows = radiance.transpose(1, 0, 2).reshape(radiance.shape[1], -1) if pooled else radiance
+        total = np.sum(np.ascontiguousarray(rows), axis=-1)
+        total = total[None, :, None] if pooled else total[..., None]
+        return total, (total - radiance) / (n - 1)  # leave sample i out
+
     def _control_variate(self, samples: PixelSamples, batches: int, per_batch: int) -> Any:
         r"""Per-sample estimates (batches × pixels × samples) with the filter-weight control variate.
 
@@ -172,15 +188,11 @@ class ImageTask:
         coefficient ($Σ \dot e \dot w / Σ \dot w^2$ over the others) was no better there (1.04 / 0.58 / 0.41).
         """
         est = samples.estimate.reshape(batches, -1, per_batch)
-        axes, n = ((0, 2), batches * per_batch) if self.cv_scope == "pixel" else ((2,), per_batch)
-        if not isinstance(est, Dual) or self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box":
+        n = self._cv_samples(batches, per_batch)
+        if not isinstance(est, Dual) or not n:
             return est.reshape(-1, per_batch)
         radiance = np.asarray(detach(samples.radiance), dtype=np.float64).reshape(batches, -1, per_batch)
-        # each pixel's sum over one contiguous row (batch-major), so it does not depend on the chunk's layout
-        rows = radiance.transpose(1, 0, 2).reshape(radiance.shape[1], -1) if len(axes) == 2 else radiance
-        total = np.sum(np.ascontiguousarray(rows), axis=-1)
-        total = total[None, :, None] if len(axes) == 2 else total[..., None]
-        others = (total - radiance) / (n - 1)  # leave sample i out
+        _, others = self._leave_one_out(radiance, n)
         weight = samples.weight.reshape(batches, -1, per_batch)
         return control_variate(est, others, weight).reshape(-1, per_batch)
 
@@ -226,8 +238,7 @@ class ImageTask:
     def _splat_buffers(self, batches: int, per_batch: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The chunks' outputs for :meth:`_splat_chunk`: stencils (quantities, batches, slots, pixels),
         four quantities with the control variate and two without, and the pixels' radiance totals."""
-        n = batches * per_batch if self.cv_scope == "pixel" else per_batch
-        cv = not (self.cv_scope == "off" or n < 2 or self.scene.camera.filter == "box")
+        cv = self._cv_samples(batches, per_batch) > 0
         _, h = reach(self.scene.camera.filter)
         pixels = self.shape[0] * self.shape[1]
         stencils = np.empty((4 if cv else 2, batches, (2 * h + 1) ** 2, pixels))
@@ -263,15 +274,10 @@ class ImageTask:
         if totals is None:
             stencil((ev, et), slot, h, stencils)
             return
-        n = batches * per_batch if self.cv_scope == "pixel" else per_batch
-        radiance = rv[..., 0]
-        rows = radiance.transpose(1, 0, 2).reshape(pix.size, -1) if self.cv_scope == "pixel" else radiance
-        total = np.sum(np.ascontiguousarray(rows), axis=-1)  # per pixel (and batch), as _control_variate
-        total = total[None, :, None] if self.cv_scope == "pixel" else total[..., None]
+        total, scale = self._leave_one_out(rv[..., 0], self._cv_samples(batches, per_batch))
         centre = (2 * h + 1) * h + h  # the slot of the sample's own pixel
         own = np.flatnonzero(slot == centre)  # one entry per sample at most: only there is i ∈ p
-        scale = ((total - radiance) / (n - 1)).ravel()  # leave sample i out of its own pixel
-        scale = scale[own // shape[-1]]
+        scale = scale.ravel()[own // shape[-1]]  # sample i left out of its own pixel
         ev.ravel()[own] -= scale * (wv.ravel()[own] - 1.0)
         et.ravel()[own] -= scale * wt.ravel()[own]
         stencil((ev, et, wv, wt), slot, h, stencils)
@@ -293,7 +299,7 @@ class ImageTask:
             value, deriv = sums[0], sums[1]
             if totals is not None:
                 mean = totals[:, rows.start * width : rows.stop * width]
-                mean = mean / (batches * per_batch if self.cv_scope == "pixel" else per_batch)
+                mean = mean / self._cv_samples(batches, per_batch)
                 value, deriv = value - mean * sums[2], deriv - mean * sums[3]
             return np.stack([value, deriv]).reshape(2, batches, len(rows), width)
 
