@@ -10,26 +10,12 @@ from flatland import plot
 from flatland.__main__ import PACKAGE
 from flatland.app.study import run_study
 from flatland.app.study_config import StudyConfig
-from flatland.core.image import GradientImage, Image
+from flatland.core.image import Image
 from flatland.plotting import films, study, style
+from tests.flatland.helpers import capture_figures
+from tests.flatland.helpers import gradient_image as _grad
 
 W = 48
-
-
-def _grad(derivative, method="reparam"):
-    derivative = np.asarray(derivative, dtype=np.float64)
-    return GradientImage(
-        value=np.abs(derivative) + 0.5,
-        derivative=derivative,
-        value_stderr=np.full(derivative.shape, 0.01),
-        derivative_stderr=np.full(derivative.shape, 0.02),
-        param="occluder.translate.x",
-        method=method,
-        spp=16,
-        seed=0,
-        batches=4,
-        scene="test",
-    )
 
 
 def _pixels(path):
@@ -149,35 +135,20 @@ def test06_error_time_figure_is_log_log_with_one_line_per_method(tmp_path, monke
         package=PACKAGE,
     )
     result = run_study(config, progress=False)
-    seen = {}
-    original = films.save_png
-
-    def keep(fig, path):  # inspect the axes of the figure being written
-        ax = fig.axes[0]
-        seen.update(
-            x=ax.get_xscale(), y=ax.get_yscale(), labels=[line.get_label() for line in ax.get_lines()]
-        )
-        return original(fig, path)
-
-    monkeypatch.setattr(study, "save_png", keep)
+    figures = capture_figures(monkeypatch, study)
     path = plot.plot_error_time(result, tmp_path / "et.png")
-    assert path.stat().st_size > 10_000 and seen["x"] == "log" and seen["y"] == "log"
-    methods = [label for label in seen["labels"] if not label.startswith(("∝", "_"))]
-    assert methods == ["naive (BIASED)", "reparam"] and "∝ 1/√t (guide)" in seen["labels"]
+    ax = figures[-1].axes[0]
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert path.stat().st_size > 10_000 and ax.get_xscale() == "log" and ax.get_yscale() == "log"
+    methods = [label for label in labels if not label.startswith(("∝", "_"))]
+    assert methods == ["naive (BIASED)", "reparam"] and "∝ 1/√t (guide)" in labels
 
 
 @pytest.mark.parametrize("shape", [(W,), (24, 32)], ids=["film1d", "film2d"])
 def test07_a_sketch_gets_a_left_panel_spanning_every_row_of_each_film_figure(tmp_path, shape, monkeypatch):
     x = np.linspace(-1.0, 1.0, int(np.prod(shape))).reshape(shape)
     image = Image(value=1.0 + x**2, stderr=np.full(shape, 0.01), spp=16, seed=0, batches=4, scene="t")
-    figures = []
-    original = films.save_png
-
-    def keep(fig, path):
-        figures.append(fig)
-        return original(fig, path)
-
-    monkeypatch.setattr(films, "save_png", keep)
+    figures = capture_figures(monkeypatch, films)
     drawn = []
     sketch = drawn.append  # a sketch draws into the Axes it is given; this one records it
     writers = [

@@ -33,24 +33,12 @@ from flatland.plotting.style import (
     series_styles,
     symmetric_limit,
 )
-from tests.flatland.test_plot import _grad
+from tests.flatland.helpers import capture_figures
+from tests.flatland.helpers import gradient_image as _grad
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ("naive", "boundary", "reparam")
 """Methods drawn by the demo, study, textbook and tutorial figures of the tests below."""
-
-
-def _capture(monkeypatch, module):
-    """Figures a file-writing module saves, in order (they are written as usual)."""
-    figures = []
-    original = films.save_png
-
-    def keep(fig, path):
-        figures.append(fig)
-        return original(fig, path)
-
-    monkeypatch.setattr(module, "save_png", keep)
-    return figures
 
 
 def _line_colours(ax):
@@ -130,14 +118,14 @@ def test02_a_method_has_the_same_colour_in_demo_study_textbook_and_tutorial_figu
     shapes = {"naive": 0 * x, "boundary": np.exp(-20 * x**2), "reparam": np.exp(-20 * x**2) + 0.05 * x}
     seen = {}  # figure -> {method: colour}
 
-    saved = _capture(monkeypatch, films)
+    saved = capture_figures(monkeypatch, films)
     primal = _gradient(1 + x**2, "naive")
     columns = {m: _gradient(d, m) for m, d in shapes.items()} | {"finite differences": _gradient(x, "fd")}
     films.plot_panel(primal, columns, tmp_path / "panel.png")
     curves = next(ax for ax in saved[-1].axes if ax.lines and not ax.images)
     seen["demo panel"] = _line_colours(curves)
 
-    saved = _capture(monkeypatch, study)
+    saved = capture_figures(monkeypatch, study)
     study.plot_error_time(small_study, tmp_path / "et.png")
     seen["study error/time"] = _line_colours(saved[-1].axes[0])
     study.plot_efficiency(small_study, tmp_path / "eff.png")
@@ -171,7 +159,7 @@ def test03_bands_state_their_coverage_in_the_legend(tmp_path, monkeypatch, small
     film = ptu.plot_film({"reparam": (x, np.full(16, 0.1)), "bare": x}, level=0.99).axes[0]
     assert _legend_texts(film) == ["reparam ± 99 % interval", "bare"]
 
-    saved = _capture(monkeypatch, films)
+    saved = capture_figures(monkeypatch, films)
     films.plot_panel(_gradient(1 + x**2, "naive"), {"boundary": _gradient(x, "boundary")}, tmp_path / "p.png")
     curves = next(ax for ax in saved[-1].axes if ax.lines and not ax.images)
     assert _legend_texts(curves) == ["boundary ± 95.45 % interval"]  # ± 2 standard errors
@@ -181,7 +169,7 @@ def test03_bands_state_their_coverage_in_the_legend(tmp_path, monkeypatch, small
     tradeoff = pt.plot_kappa_tradeoff([1, 10], [0.1, 0.0], [0.01, 0.02], [1.0, 3.0], level=0.999)
     assert "measured bias ± 99.9 % interval" in _legend_texts(tradeoff.axes[0])
 
-    saved = _capture(monkeypatch, study)
+    saved = capture_figures(monkeypatch, study)
     study.plot_kappa(small_study, tmp_path / "k.png")
     level = coverage_label(small_study.rows[0].level)
     texts = _legend_texts(saved[-1].axes[0])
