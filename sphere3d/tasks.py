@@ -61,7 +61,7 @@ class Tally:
 
 
 @functools.cache
-def _heap_for_temporaries() -> bool:
+def _heap_for_temporaries() -> Any:
     """Let glibc's malloc serve a chunk's temporaries (up to 32 MiB each) from its heap and keep them.
 
     By default glibc maps large arrays with ``mmap`` and unmaps them when freed (and trims
@@ -72,14 +72,16 @@ def _heap_for_temporaries() -> bool:
     Raising the mmap and trim thresholds (``mallopt``) reuses the freed memory instead;
     :func:`_map` hands it back with ``malloc_trim`` after each task. Process-wide, set
     once, on glibc only (elsewhere a no-op); the arithmetic, hence every result, is unchanged.
+    Returns the C library where the thresholds were set, else None.
     """
     try:
         libc = ctypes.CDLL(None)
         mallopt, _ = libc.mallopt, libc.malloc_trim  # both must exist (glibc)
     except (OSError, AttributeError, TypeError):  # no C library by that name, or not glibc
-        return False
+        return None
     m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
-    return bool(mallopt(m_mmap_threshold, 32 << 20)) and bool(mallopt(m_trim_threshold, 512 << 20))
+    done = bool(mallopt(m_mmap_threshold, 32 << 20)) and bool(mallopt(m_trim_threshold, 512 << 20))
+    return libc if done else None
 
 
 def _map(func: Callable[[int], Any], items: range) -> list[Any]:
@@ -88,11 +90,12 @@ def _map(func: Callable[[int], Any], items: range) -> list[Any]:
     Each chunk draws from its own named streams, so the result does not depend on
     the number of threads or the order they finish in.
     """
-    if _heap_for_temporaries():
+    libc = _heap_for_temporaries()
+    if libc is not None:
         try:
             return _map_threads(func, items)
         finally:
-            ctypes.CDLL(None).malloc_trim(0)  # give the chunks' memory back
+            libc.malloc_trim(0)  # give the chunks' memory back
     return _map_threads(func, items)
 
 
