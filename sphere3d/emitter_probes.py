@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach, tangent
-from sphere3d.emitter_edges import edge_table
+from sphere3d.emitter_edges import edge_points, edge_table
 from sphere3d.live import emitters_change, triangles_change
 from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
@@ -93,12 +93,7 @@ def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     table = edge_table(state)
     if table is None or count == 0:
         return None
-    perimeter = float(table.cdf[-1])
-    arc = np.add.outer(u, np.arange(count) / count) % 1.0 * perimeter
-    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
-    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
-    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
-    return table.a[e] + along[..., None] * (table.b[e] - table.a[e])
+    return edge_points(table, u, count)[1]
 
 
 def _bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
