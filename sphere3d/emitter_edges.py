@@ -120,16 +120,12 @@ class EmitterEdgeSamples:
     def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
         """The shading points and the boundary term's tangents, given each edge point's emitter rotation.
 
-        V_T is exactly 0 where the rotation is the identity (no point followed) and neither
-        the shading point nor an emitter moves: those edge points are dropped untraced
-        (on ``hard_shadow`` the lit ground). The others get their shadow ray, and the
-        visible ones the estimate of :meth:`tangent_term`.
+        Every edge point gets its shadow ray, and the visible ones the estimate of
+        :meth:`tangent_term`; the points whose V_T is exactly 0 are left out before the draw
+        (:func:`emitter_edge_term`).
         """
-        x_moves = np.any(tangent(shading.x)[self.index] != 0.0, axis=1)
-        emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
-        k = np.flatnonzero(rotation.active | x_moves | emitters_move)
-        tmax = self.dist[k] - 2.0 * state.epsilon
-        k = k[~state.tracer.occluded(shading.origin[self.index[k]], self.w[k], tmax)]
+        tmax = self.dist - 2.0 * state.epsilon
+        k = np.flatnonzero(~state.tracer.occluded(shading.origin[self.index], self.w, tmax))
         sub = self.take(k)
         return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
 
