@@ -118,10 +118,10 @@ def _may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
     triangles = np.asarray(detach(state.triangles))
     (c_m, r_m), (c_l, r_l) = _bounding_sphere(triangles[moving]), _bounding_sphere(triangles[state.emitters])
     to_m, to_l = c_m - x, c_l - x
-    d_m, d_l = np.sqrt(np.sum(to_m**2, axis=1)), np.sqrt(np.sum(to_l**2, axis=1))
+    d_m, d_l = norm(to_m), norm(to_l)
     inside = (d_m <= r_m) | (d_l <= r_l)
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos_a = np.clip(np.sum(to_m * to_l, axis=1) / (d_m * d_l), -1.0, 1.0)
+        cos_a = np.clip(dot(to_m, to_l) / (d_m * d_l), -1.0, 1.0)
         reach = np.arcsin(np.minimum(1.0, r_l / d_l)) + np.arcsin(np.minimum(1.0, r_m / d_m))
     overlap = np.arccos(cos_a) < reach * (1.0 + 1e-9) + 1e-9
     return inside | (overlap & (d_m - r_m < d_l + r_l))
