@@ -55,6 +55,7 @@ __all__ = [
     "EdgeTable",
     "EmitterEdgeSamples",
     "add_tangent",
+    "edge_points",
     "edge_table",
     "emitter_edge_term",
     "sample_emitter_edges",
@@ -119,16 +120,12 @@ class EmitterEdgeSamples:
     def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
         """The shading points and the boundary term's tangents, given each edge point's emitter rotation.
 
-        V_T is exactly 0 where the rotation is the identity (no point followed) and neither
-        the shading point nor an emitter moves: those edge points are dropped untraced
-        (on ``hard_shadow`` the lit ground). The others get their shadow ray, and the
-        visible ones the estimate of :meth:`tangent_term`.
+        Every edge point gets its shadow ray, and the visible ones the estimate of
+        :meth:`tangent_term`; the points whose V_T is exactly 0 are left out before the draw
+        (:func:`emitter_edge_term`).
         """
-        x_moves = np.any(tangent(shading.x)[self.index] != 0.0, axis=1)
-        emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
-        k = np.flatnonzero(rotation.active | x_moves | emitters_move)
-        tmax = self.dist[k] - 2.0 * state.epsilon
-        k = k[~state.tracer.occluded(shading.origin[self.index[k]], self.w[k], tmax)]
+        tmax = self.dist - 2.0 * state.epsilon
+        k = np.flatnonzero(~state.tracer.occluded(shading.origin[self.index], self.w, tmax))
         sub = self.take(k)
         return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
 
@@ -221,6 +218,16 @@ def edge_table(state: Any) -> EdgeTable | None:
     )
 
 
+def edge_points(table: EdgeTable, u: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` points per row evenly spaced in arc length along the edges, random phase ``u`` (m,):
+    their edges (m, count) and positions (m, count, 3)."""
+    arc = np.add.outer(u, np.arange(count) / count) % 1.0 * float(table.cdf[-1])
+    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
+    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
+    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
+    return e, table.a[e] + along[..., None] * (table.b[e] - table.a[e])
+
+
 def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     """:data:`POINTS` points per shading point on the emitters' edges (module docstring).
 
@@ -236,13 +243,9 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     if table is None:
         return None
     perimeter = float(table.cdf[-1])
-    u = shading.draws.uniforms("emitter.edge")
-    arc = (np.add.outer(u, np.arange(POINTS) / POINTS) % 1.0).ravel() * perimeter
+    e, y = edge_points(table, shading.draws.uniforms("emitter.edge"), POINTS)
+    e, y = e.ravel(), y.reshape(-1, 3)
     point = np.repeat(np.arange(len(shading)), POINTS)
-    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
-    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
-    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
-    y = table.a[e] + along[:, None] * (table.b[e] - table.a[e])
     to = y - detach(shading.x)[point]
     dist = norm(to)
     w = to / np.where(dist > 0.0, dist, 1.0)[:, None]

@@ -69,7 +69,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach, tangent
-from sphere3d.emitter_edges import edge_table
+from sphere3d.emitter_edges import edge_points, edge_table
 from sphere3d.live import emitters_change, triangles_change
 from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
@@ -93,12 +93,7 @@ def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     table = edge_table(state)
     if table is None or count == 0:
         return None
-    perimeter = float(table.cdf[-1])
-    arc = np.add.outer(u, np.arange(count) / count) % 1.0 * perimeter
-    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
-    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
-    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
-    return table.a[e] + along[..., None] * (table.b[e] - table.a[e])
+    return edge_points(table, u, count)[1]
 
 
 def _bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
@@ -123,10 +118,10 @@ def _may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
     triangles = np.asarray(detach(state.triangles))
     (c_m, r_m), (c_l, r_l) = _bounding_sphere(triangles[moving]), _bounding_sphere(triangles[state.emitters])
     to_m, to_l = c_m - x, c_l - x
-    d_m, d_l = np.sqrt(np.sum(to_m**2, axis=1)), np.sqrt(np.sum(to_l**2, axis=1))
+    d_m, d_l = norm(to_m), norm(to_l)
     inside = (d_m <= r_m) | (d_l <= r_l)
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos_a = np.clip(np.sum(to_m * to_l, axis=1) / (d_m * d_l), -1.0, 1.0)
+        cos_a = np.clip(dot(to_m, to_l) / (d_m * d_l), -1.0, 1.0)
         reach = np.arcsin(np.minimum(1.0, r_l / d_l)) + np.arcsin(np.minimum(1.0, r_m / d_m))
     overlap = np.arccos(cos_a) < reach * (1.0 + 1e-9) + 1e-9
     return inside | (overlap & (d_m - r_m < d_l + r_l))

@@ -120,7 +120,7 @@ class Rotation:
         omega_p = omega_p if isinstance(omega_p, Dual) else Dual(omega_p)
         if active is None:
             active = np.ones(omega_p.shape[:-1], dtype=bool)
-        length = np.sqrt(dot(omega_p.value, omega_p.value))  # the value of norm(omega_p)
+        length = norm(omega_p.value)
         active = np.asarray(active, dtype=bool) & (length > 0.0) & np.isfinite(length)
         active = active & np.all(np.isfinite(omega_p.tangent), axis=-1)
         if spin is not None:

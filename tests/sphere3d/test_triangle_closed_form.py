@@ -39,7 +39,7 @@ import pytest
 from scipy import integrate, stats
 
 import sphere3d as s3
-from flatland.core.stats import sidak
+from flatland.core.stats import normal_quantile, sidak
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form as cf
 from sphere3d.methods import GRADIENT_METHODS
@@ -503,5 +503,5 @@ def test15_the_cosine_strategys_rotations_lose_a_documented_share(param):
     documented, documented_se = (x / 100.0 for x in ROTATION_LOSS[param])
     print(f"{param}: {100 * mean:.2f} % +- {100 * stderr:.2f} %")
     assert mean / stderr > 4.0
-    q = stats.norm.ppf(1.0 - 0.5 * sidak(ALPHA, len(ROTATION_LOSS)))
+    q = normal_quantile(1.0 - sidak(ALPHA, len(ROTATION_LOSS)))
     assert abs(mean - documented) <= q * math.hypot(stderr, documented_se)
