@@ -20,7 +20,10 @@ import numpy as np
 import pytest
 
 import sphere3d as s3
+from flatland.core.dual import detach, variable
 from flatland.core.stats import normal_quantile, sidak
+from sphere3d.emitter_probes import _may_see_motion
+from sphere3d.sampling import sample_mesh
 
 PARAM = "occluder.translate.x"
 N = 16384
@@ -66,16 +69,11 @@ def test03_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the
     """The cull of :func:`sphere3d.emitter_probes._may_see_motion` is conservative: every ground or
     occluder point from which one of 64 rays to the light meets the moving occluder is kept,
     and the cull skips a good share of the ground (else it would be pointless)."""
-    from flatland.core.dual import detach, variable
-    from sphere3d.emitter_probes import _may_see_motion
-    from sphere3d.sampling import sample_mesh
-
-    state = s3.load_scene(scene).state(PARAM, variable(0.0))
+    loaded = s3.load_scene(scene)
+    state = loaded.state(PARAM, variable(0.0))
     rng = np.random.default_rng(5)
     x = np.column_stack([rng.uniform(-2.5, 2.5, 4000), rng.uniform(-2.5, 2.5, 4000), np.zeros(4000)])
-    occluder = np.asarray(detach(state.triangles))[
-        state.shape_of == s3.load_scene(scene).shape_index("occluder")
-    ]
+    occluder = np.asarray(detach(state.triangles))[state.shape_of == loaded.shape_index("occluder")]
     on_occluder, _ = sample_mesh(rng.uniform(size=(1000, 1, 3)), occluder)
     x = np.concatenate([x + np.array([0.0, 0.0, 1e-6]), on_occluder[:, 0]])
     y, _ = sample_mesh(rng.uniform(size=(len(x), 64, 3)), np.asarray(detach(state.triangles))[state.emitters])
