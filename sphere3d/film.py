@@ -223,14 +223,14 @@ def stencil(values: tuple[np.ndarray, ...], slot: np.ndarray, h: int, out: np.nd
     """
     g, p = slot.shape[:2]
     slots = (2 * h + 1) ** 2
-    bins = g * p * slots
     # bins pixel-major, (group, pixel, slot): a pixel's entries hit neighbouring bins (slot-major bins
-    # a pixel count apart would alias in the cache); ``out`` is slot-major, for gather
-    base = (np.arange(g * p) * slots).reshape(g, p, 1, 1)
-    key = np.where(slot >= 0, base + slot, bins).ravel()  # none: one more bin, dropped
+    # a pixel count apart would alias in the cache); ``out`` is slot-major, for gather. Each pixel has
+    # one more bin, first, for its entries reaching no slot (-1), dropped
+    base = (np.arange(g * p) * (slots + 1) + 1).reshape(g, p, 1, 1)
+    key = np.add(base, slot).ravel()
     for i, v in enumerate(values):
-        sums = np.bincount(key, weights=v.ravel(), minlength=bins + 1)[:bins]
-        out[i] = sums.reshape(g, p, slots).transpose(0, 2, 1)
+        sums = np.bincount(key, weights=v.ravel(), minlength=g * p * (slots + 1))
+        out[i] = sums.reshape(g, p, slots + 1)[:, :, 1:].transpose(0, 2, 1)
 
 
 def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range) -> np.ndarray:
