@@ -124,16 +124,17 @@ def _trim_later(libc: Any, delay: float | None) -> None:
 
 
 @functools.cache
-def _pool(workers: int) -> ThreadPoolExecutor:
-    """One pool per thread count, kept: its threads keep their malloc heaps (and the memory freed
-    there) from task to task, where new threads got whichever heaps and faulted memory in again."""
-    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="sphere3d")
+def _pool(workers: int, pid: int) -> ThreadPoolExecutor:
+    """One pool per thread count (and process: a forked child has none of its parent's threads), kept:
+    its threads keep their malloc heaps (and the memory freed there) from task to task, where new
+    threads got whichever heaps and faulted memory in again."""
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"sphere3d-{pid}")
 
 
 def _map_threads(func: Callable[[int], Any], items: range) -> list[Any]:
     if WORKERS <= 1 or len(items) <= 1:
         return [func(i) for i in items]
-    return list(_pool(WORKERS).map(func, items))
+    return list(_pool(WORKERS, os.getpid()).map(func, items))
 
 
 def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
