@@ -92,10 +92,11 @@ def _map(func: Callable[[int], Any], items: range) -> list[Any]:
 
     Each chunk draws from its own named streams, so the result does not depend on
     the number of threads or the order they finish in. The chunks' memory is handed back
-    :data:`TRIM_DELAY` seconds after the last task, not after each: trimmed after each, every
-    task page-faulted its temporaries in again, in every thread's heap (``hard_shadow``, reparam,
-    64 spp, splat, two threads: 30 000 to 37 000 page faults and 0.13 to 0.15 s of system time per
-    image, against 6 000 to 9 000 and 0.05 to 0.07 s back to back).
+    :data:`TRIM_DELAY` seconds after the last task, not after each, and the threads are kept
+    (:func:`_pool`): trimmed after each, every task page-faulted its temporaries in again, in every
+    thread's heap. ``hard_shadow`` (reparam, 64 spp, splat, images back to back, medians of 6): two
+    threads 29 000 to 32 000 page faults and 0.19 s of system time per image, against 1 600 to 2 200
+    and 0.02 to 0.03 s; one thread 20 000 and 0.06 to 0.10 s, against 200 to 2 600 and 0.015 s.
     """
     libc = _heap_for_temporaries()
     if libc is None:
