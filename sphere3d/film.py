@@ -87,9 +87,9 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, tangent
+from flatland.core.dual import tangent
 from sphere3d.rotation import Rotation
-from sphere3d.sampling import filter_radius, filter_value, log_filter_value, pdf_filter
+from sphere3d.sampling import filter_radius, filter_value_1d, log_filter_value_1d, pdf_filter_1d
 
 __all__ = ["FILMS", "FilmTransform", "Splat", "gather", "reach", "splat_weights", "stencil"]
 
@@ -169,10 +169,7 @@ class Splat:
         axes = []
         for f, c, on in ((fx, self.cx, self.on_x), (fy, self.cy, self.on_y)):
             d = (f[:, None] - c[rows]) * on[rows].astype(np.float64)
-            value, slope = np.zeros((2, *d.shape)), np.zeros((2, *d.shape))
-            value[0], slope[0] = d.value, d.tangent  # (2, rows, k): each axis's offsets contiguous
-            offsets = Dual(np.moveaxis(value, 0, -1), np.moveaxis(slope, 0, -1))
-            axes.append(tangent(log_filter_value(offsets, kind)))
+            axes.append(tangent(log_filter_value_1d(d, kind)))  # (rows, k): this axis's term alone
         tx, ty = axes
         rest = tangent(log_rest)
         total = tx[:, None, :] + ty[:, :, None]  # pixel (a, b): row a, column b
@@ -187,26 +184,32 @@ def splat_weights(
     j, h = reach(kind)
     n, k, span = len(x), 2 * j + 1, np.arange(-j, j + 1)
     ib, ia = np.tile(np.arange(k), k), np.repeat(np.arange(k), k)  # pixel (a, b): row a, column b
-    col = (np.floor(x).astype(np.int64)[None, :] + span[:, None]).T  # (n, k) each
-    row = (np.floor(y).astype(np.int64)[None, :] + span[:, None]).T
+    col = np.floor(x).astype(np.int64)[:, None] + span  # (n, k) each
+    row = np.floor(y).astype(np.int64)[:, None] + span
     cx, cy = col + 0.5, row + 0.5
-    offsets = np.empty((2, n, k * k))  # each axis contiguous
-    offsets[0], offsets[1] = (x[:, None] - cx)[:, ib], (y[:, None] - cy)[:, ia]
-    offsets = np.moveaxis(offsets, 0, -1)
-    inside = ((col >= 0) & (col < width))[:, ib] & ((row >= 0) & (row < height))[:, ia]
-    density = np.where(inside, pdf_filter(offsets, kind), 0.0)
+    # k and p are products over the axes: each axis's factor once per column and row (zero outside the
+    # image), then per pixel, x factor times y factor (np.take: C-ordered, as np.sum's rounding below
+    # depends on the layout; faster than broadcasting over k = 3)
+    dx, dy = x[:, None] - cx, y[:, None] - cy
+    in_x, in_y = (col >= 0) & (col < width), (row >= 0) & (row < height)
+    px, py = (np.where(inside, pdf_filter_1d(d, kind), 0.0) for inside, d in ((in_x, dx), (in_y, dy)))
+    vx, vy = (np.where(inside, filter_value_1d(d, kind), 0.0) for inside, d in ((in_x, dx), (in_y, dy)))
+    density = np.take(px, ib, axis=1) * np.take(py, ia, axis=1)
     q = np.sum(density, axis=1)  # > 0: the sample's own pixel is among them, with p > 0 at s
-    value = np.where(inside, filter_value(offsets, kind), 0.0)
+    value = np.take(vx, ib, axis=1) * np.take(vy, ia, axis=1)
     weight = value / np.where(q > 0.0, q, 1.0)[:, None]
     side = 2 * h + 1
     d_row, d_col = row - rows[:, None], col - cols[:, None]  # offsets from the sample's own pixel
     slot_row = np.where(np.abs(d_row) <= h, (d_row + h) * side, -side * side).astype(np.int16)
     slot_col = np.where(np.abs(d_col) <= h, d_col + h, -side * side).astype(np.int16)
     reached = weight > 0.0
-    slot = slot_row[:, ia] + slot_col[:, ib]
+    slot = np.take(slot_row, ia, axis=1) + np.take(slot_col, ib, axis=1)
     slot = np.where(reached & (slot >= 0), slot, np.int16(-1))
     grid = reached.reshape(n, k, k)
-    on_x, on_y = np.any(grid, axis=1), np.any(grid, axis=2)  # a reached pixel in the column, the row
+    on_x, on_y = grid[:, 0].copy(), grid[:, :, 0].copy()  # a reached pixel in the column, the row
+    for a in range(1, k):  # k <= 3 (np.any over an axis this short is slower)
+        on_x |= grid[:, a]
+        on_y |= grid[:, :, a]
     return Splat(slot, weight, cx, cy, on_x, on_y)
 
 
@@ -220,14 +223,14 @@ def stencil(values: tuple[np.ndarray, ...], slot: np.ndarray, h: int, out: np.nd
     """
     g, p = slot.shape[:2]
     slots = (2 * h + 1) ** 2
-    bins = g * p * slots
     # bins pixel-major, (group, pixel, slot): a pixel's entries hit neighbouring bins (slot-major bins
-    # a pixel count apart would alias in the cache); ``out`` is slot-major, for gather
-    base = (np.arange(g * p) * slots).reshape(g, p, 1, 1)
-    key = np.where(slot >= 0, base + slot, bins).ravel()  # none: one more bin, dropped
+    # a pixel count apart would alias in the cache); ``out`` is slot-major, for gather. Each pixel has
+    # one more bin, first, for its entries reaching no slot (-1), dropped
+    base = (np.arange(g * p) * (slots + 1) + 1).reshape(g, p, 1, 1)
+    key = np.add(base, slot).ravel()
     for i, v in enumerate(values):
-        sums = np.bincount(key, weights=v.ravel(), minlength=bins + 1)[:bins]
-        out[i] = sums.reshape(g, p, slots).transpose(0, 2, 1)
+        sums = np.bincount(key, weights=v.ravel(), minlength=g * p * (slots + 1))
+        out[i] = sums.reshape(g, p, slots + 1)[:, :, 1:].transpose(0, 2, 1)
 
 
 def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range) -> np.ndarray:

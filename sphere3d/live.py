@@ -54,7 +54,8 @@ def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sourc
     tuple of Dual
         ``func``'s outputs for all ``rows``: tangents +0 where not ``live``.
     """
-    li, di = rows[live], rows[~live]
+    on, off = np.flatnonzero(live), np.flatnonzero(~live)  # positions in rows, found once for every output
+    li, di = rows[on], rows[off]
     plain = func(False, *(detach(s)[di] for s in sources)) if di.size or not li.size else None
     dual = func(True, *(s[li] for s in sources)) if li.size else None
     outputs = []
@@ -63,10 +64,10 @@ def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sourc
         value = np.empty((len(rows), *np.shape(first)[1:]))
         grad = np.zeros(value.shape)
         if plain is not None:
-            value[~live] = detach(plain[j])
+            value[off] = detach(plain[j])
         if dual is not None:
-            value[live] = detach(dual[j])
-            grad[live] = tangent(dual[j])
+            value[on] = detach(dual[j])
+            grad[on] = tangent(dual[j])
         outputs.append(Dual(value, grad))
     return tuple(outputs)
 

@@ -25,10 +25,13 @@ __all__ = [
     "FILTER_STD",
     "filter_radius",
     "filter_value",
+    "filter_value_1d",
     "log_filter_value",
+    "log_filter_value_1d",
     "log_vmf",
     "pdf_cosine_hemisphere",
     "pdf_filter",
+    "pdf_filter_1d",
     "pdf_mesh",
     "pdf_triangle",
     "pdf_uniform_sphere",
@@ -262,6 +265,19 @@ def filter_value(s, kind: str):
     return _filter_1d(s[..., 0], kind) * _filter_1d(s[..., 1], kind)
 
 
+def filter_value_1d(x, kind: str):
+    """The 1D profile $k_1$ of :func:`filter_value` ($k(x, y) = k_1(x) k_1(y)$) at ``x``; Dual-aware."""
+    return _filter_1d(x, check_choice("filter", kind, FILTERS))
+
+
+def log_filter_value_1d(x, kind: str):
+    r"""$\log k_1(x)$, one axis's term of :func:`log_filter_value` (finite inside the support); Dual-aware."""
+    kind = check_choice("filter", kind, FILTERS)
+    if kind == "box":
+        return 0.0 * x
+    return np.log(1.0 - np.abs(x)) if kind == "tent" else np.log(_gauss_1d(x) - _G_EDGE)
+
+
 def log_filter_value(s, kind: str):
     r"""$\log k(s)$ (finite inside the support); Dual-aware. Used for weights $k / \mathrm{detach}(k)$."""
     if kind == "box":
@@ -305,6 +321,11 @@ def sample_filter(u: np.ndarray, kind: str) -> np.ndarray:
     kind = check_choice("filter", kind, FILTERS)
     u = np.asarray(u, dtype=np.float64)
     return np.stack([_sample_filter_1d(u[..., 0], kind), _sample_filter_1d(u[..., 1], kind)], axis=-1)
+
+
+def pdf_filter_1d(x: np.ndarray, kind: str) -> np.ndarray:
+    """One axis's factor of :func:`pdf_filter` at offsets ``x`` (per pixel)."""
+    return _pdf_filter_1d(np.asarray(x, dtype=np.float64), check_choice("filter", kind, FILTERS))
 
 
 def pdf_filter(s: np.ndarray, kind: str) -> np.ndarray:

@@ -71,8 +71,16 @@ class CameraState:
         """Unit directions through continuous pixel coordinates (x, y) (plain)."""
         sx = (2.0 * x / self.width - 1.0) * self.tan_half
         sy = (1.0 - 2.0 * y / self.height) * self.tan_half * self.height / self.width
-        d = self.forward + sx[..., None] * self.right + sy[..., None] * self.up
-        return d / np.sqrt(np.einsum("...i,...i->...", d, d))[..., None]
+        # forward + sx right + sy up, then divided by its length: component by component (the same
+        # operations as broadcasting over the last axis, about twice as fast for 3-vectors)
+        f, r, u = (np.asarray(v, dtype=np.float64) for v in (self.forward, self.right, self.up))
+        d = np.empty((*np.shape(sx), 3))
+        for k in range(3):
+            np.add(f[k] + sx * r[k], sy * u[k], out=d[..., k])
+        length = np.sqrt(np.einsum("...i,...i->...", d, d))
+        for k in range(3):
+            np.divide(d[..., k], length, out=d[..., k])
+        return d
 
     def film(self, omega: Any) -> tuple[Any, Any]:
         """Continuous pixel coordinates (x, y) where direction ``omega`` meets the film; Dual-aware."""

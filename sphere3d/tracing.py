@@ -108,6 +108,23 @@ def _tmax(tmax: Any, shape: tuple[int, ...]) -> np.ndarray:
     return np.broadcast_to(np.asarray(tmax, dtype=np.float64), shape).reshape(-1)
 
 
+def _embree_rays(origins: Any, directions: Any, tmax: Any) -> tuple[np.ndarray, ...]:
+    """Embree's contiguous float32 origins (N, 3), directions (N, 3) and ray lengths (N,) (at most 3e38),
+    and the rays' shape: each written once from the float64 inputs (the same float32 numbers as
+    :func:`_rays` and :func:`_tmax` converted, without their float64 copies)."""
+    origins = np.asarray(origins, dtype=np.float64)
+    directions = np.asarray(directions, dtype=np.float64)
+    shape = np.broadcast_shapes(origins.shape, directions.shape)
+    o, d = np.empty(shape, dtype=np.float32), np.empty(shape, dtype=np.float32)
+    o[...], d[...] = origins, directions
+    lengths = np.empty(shape[:-1], dtype=np.float32)
+    if tmax is None:
+        lengths[...] = 3e38  # min(FAR, 3e38)
+    else:
+        np.minimum(np.asarray(tmax, dtype=np.float64), 3e38, out=lengths)
+    return o.reshape(-1, 3), d.reshape(-1, 3), lengths.reshape(-1), shape[:-1]
+
+
 class EmbreeTracer:
     """Embree scene of triangles, queried in batches (float32, multithreaded inside Embree).
 
@@ -140,17 +157,11 @@ class EmbreeTracer:
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, tmax: Any = None) -> Hits:
         """First hit along each ray with 0 <= t <= tmax (unit ``directions``)."""
-        o, d, shape = _rays(origins, directions)
-        t_max = _tmax(tmax, shape)
+        o, d, lengths, shape = _embree_rays(origins, directions, tmax)
         if o.shape[0] == 0:
             empty = np.zeros(shape, dtype=np.int64)
             return Hits(empty - 1, empty - 1, np.full(shape, FAR), np.zeros(shape), np.zeros(shape))
-        out = self._scene.run(
-            np.ascontiguousarray(o, dtype=np.float32),
-            np.ascontiguousarray(d, dtype=np.float32),
-            dists=np.ascontiguousarray(np.minimum(t_max, 3e38), dtype=np.float32),
-            output=1,
-        )
+        out = self._scene.run(o, d, dists=lengths, output=1)
         geom = out["geomID"].astype(np.int64)
         hit = geom >= 0
         g = np.where(hit, geom, 0)
@@ -169,15 +180,10 @@ class EmbreeTracer:
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, tmax: Any) -> np.ndarray:
         """True where something lies along the ray with 0 <= t <= tmax."""
-        o, d, shape = _rays(origins, directions)
+        o, d, lengths, shape = _embree_rays(origins, directions, tmax)
         if o.shape[0] == 0:
             return np.zeros(shape, dtype=bool)
-        out = self._scene.run(
-            np.ascontiguousarray(o, dtype=np.float32),
-            np.ascontiguousarray(d, dtype=np.float32),
-            dists=np.ascontiguousarray(np.minimum(_tmax(tmax, shape), 3e38), dtype=np.float32),
-            query="OCCLUDED",
-        )
+        out = self._scene.run(o, d, dists=lengths, query="OCCLUDED")
         # the occlusion query returns 0 for an occluded ray and -1 for a free one
         return (np.asarray(out) != -1).reshape(shape)
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flatland.core.dual import Dual
 from flatland.core.rng import stream
 from flatland.core.stats import chi2_gof_counts, sidak
 from sphere3d import sampling as s
@@ -217,3 +218,19 @@ def test08_emitter_solid_angle_density_integrates_the_solid_angle():
     inverse = 1.0 / p
     exact = sum(_solid_angle(t) for t in MESH_TRI)
     assert abs(inverse.mean() - exact) <= Z * inverse.std(ddof=1) / np.sqrt(N)
+
+
+@pytest.mark.parametrize("kind", FILM_CASES)
+def test09_filter_is_the_product_of_its_1d_factors_bit_for_bit(kind):
+    # sphere3d.film evaluates k and p once per column and row and multiplies: the same numbers as the
+    # 2D functions (bit-identity is the claim); log k is the sum of the axes' terms, tangents included
+    r = s.filter_radius(kind)
+    pts = np.random.default_rng(9).uniform(-1.2 * r, 1.2 * r, (500, 2))
+    x, y = pts[:, 0], pts[:, 1]
+    assert np.array_equal(s.filter_value(pts, kind), s.filter_value_1d(x, kind) * s.filter_value_1d(y, kind))
+    assert np.array_equal(s.pdf_filter(pts, kind), s.pdf_filter_1d(x, kind) * s.pdf_filter_1d(y, kind))
+    inside = np.all(np.abs(pts) < r, axis=1)
+    d = Dual(pts[inside], np.ones_like(pts[inside]))
+    both = s.log_filter_value(d, kind)
+    terms = s.log_filter_value_1d(d[:, 0], kind) + s.log_filter_value_1d(d[:, 1], kind)
+    assert np.array_equal(both.value, terms.value) and np.array_equal(both.tangent, terms.tangent)
