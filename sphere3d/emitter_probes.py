@@ -184,9 +184,10 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
         target[s], found[s] = mean_point_direction(shading.x[s], points, occluded[s])
     s = np.flatnonzero(occluded.any(axis=1) & visible.any(axis=1))
     if s.size:  # a shadow edge crosses the light: its silhouette point between the closest pair
-        cosine = np.einsum("mpk,mqk->mpq", w[s], w[s])
-        pair = occluded[s][:, :, None] & visible[s][:, None, :]
-        i, j = np.divmod(np.argmax(np.where(pair, cosine, -2.0).reshape(len(s), -1), axis=1), probes)
+        ws = w[s]
+        cosine = np.matmul(ws, np.ascontiguousarray(ws.transpose(0, 2, 1)))  # (s, p, p): w_i . w_j
+        np.putmask(cosine, ~(occluded[s][:, :, None] & visible[s][:, None, :]), -2.0)  # pairs only
+        i, j = np.divmod(np.argmax(cosine.reshape(len(s), -1), axis=1), probes)
         inside, outside = w[s, i], w[s, j]
         hits = state.tracer.intersect(shading.origin[s], inside)
         normal = detach(shading.n)[s]
