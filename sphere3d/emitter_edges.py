@@ -221,11 +221,20 @@ def edge_table(state: Any) -> EdgeTable | None:
 def edge_points(table: EdgeTable, u: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """``count`` points per row evenly spaced in arc length along the edges, random phase ``u`` (m,):
     their edges (m, count) and positions (m, count, 3)."""
-    arc = np.add.outer(u, np.arange(count) / count) % 1.0 * float(table.cdf[-1])
-    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
-    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
-    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
-    return e, table.a[e] + along[..., None] * (table.b[e] - table.a[e])
+    cdf = table.cdf
+    arc = np.add.outer(u, np.arange(count) / count)
+    np.subtract(arc, 1.0, out=arc, where=arc >= 1.0)  # in [0, 2): that is arc % 1.0, exactly (Sterbenz)
+    arc *= float(cdf[-1])
+    e = np.searchsorted(cdf, arc, side="right")
+    np.minimum(e, len(cdf) - 1, out=e)
+    # per edge, then gathered: the same numbers as computing them per point (elementwise operations)
+    length = cdf - np.concatenate([[0.0], cdf[:-1]])
+    along = arc - np.take(cdf - length, e)
+    along /= np.take(length, e)
+    np.clip(along, 0.0, 1.0, out=along)
+    point = along[..., None] * np.take(table.b - table.a, e, axis=0)
+    point += np.take(table.a, e, axis=0)
+    return e, point
 
 
 def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
