@@ -38,7 +38,8 @@ s and s + P/2 along their loops), one shadow ray each.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import weakref
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -179,6 +180,10 @@ def _faded_out(state: Any, edges: Any) -> np.ndarray:
     return (edges.other < 0) & (state.fade[face] > 0.0) & (kind != FADE_NONE) & zero
 
 
+_TABLES: dict[int, tuple[weakref.ref, EdgeTable | None]] = {}
+"""Edge tables by ``id(state)``, each with a weak reference to its state (dropped with it)."""
+
+
 def edge_table(state: Any) -> EdgeTable | None:
     """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
 
@@ -186,7 +191,21 @@ def edge_table(state: Any) -> EdgeTable | None:
     walk over the few edges, not over samples) so that arc length ``s`` and ``s + P/2``
     are opposite points of a loop: on a parallelogram light, reflections through its
     centre (the antithetic pair of :func:`sample_emitter_edges`).
+
+    Built once per state (states are immutable; every chunk of a render asks for it) and
+    read-only. Two threads asking at once may both build it: the same table, either is kept.
     """
+    key = id(state)
+    cached = _TABLES.get(key)
+    if cached is not None and cached[0]() is state:
+        return cached[1]
+    table = _build_edge_table(state)
+    _TABLES[key] = (weakref.ref(state, lambda _, key=key: _TABLES.pop(key, None)), table)
+    return table
+
+
+def _build_edge_table(state: Any) -> EdgeTable | None:
+    """:func:`edge_table`, computed."""
     emitters = np.asarray(detach(state.triangles))[state.emitters]
     edges = mesh_edges(emitters, state.shape_of[state.emitters])
     keep = np.flatnonzero((edges.always | edges.crease) & ~_faded_out(state, edges))
@@ -208,7 +227,7 @@ def edge_table(state: Any) -> EdgeTable | None:
     outward = cross((edges.b - edges.a)[:, None], normals)
     outward = outward / norm(outward)[..., None]
     away = dot(outward, edges.a[:, None] - tri.mean(axis=2)) > 0.0  # away from the face's centroid
-    return EdgeTable(
+    table = EdgeTable(
         a=edges.a,
         b=edges.b,
         faces=np.where(local >= 0, state.emitters[np.maximum(local, 0)], -1),
@@ -216,6 +235,9 @@ def edge_table(state: Any) -> EdgeTable | None:
         outward=np.where(away[..., None], outward, -outward),
         cdf=np.cumsum(norm(edges.b - edges.a)),
     )
+    for f in fields(table):  # shared by every caller: read-only
+        getattr(table, f.name).setflags(write=False)
+    return table
 
 
 def edge_points(table: EdgeTable, u: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
