@@ -140,13 +140,18 @@ class EmitterEdgeSamples:
         rotated = rotation.apply(self.w)
         area = float(detach(state.emitter_area))
         tri0 = np.asarray(detach(state.triangles))
+        # operands without a tangent enter plain: the Dual rules give the same nonzero tangents
+        # (a constant's tangent is a scalar 0), and a zero one ends as +0 in ``out`` either way
+        faces_move = np.any(tangent(state.triangles)[self.table.faces[self.table.faces >= 0]])
+        tri = state.triangles if faces_move else tri0
+        x = x if np.any(tangent(x)) else detach(x)
         out = np.zeros(len(self.index))
         for j in range(2):  # the edge's two faces (not a loop over samples)
             s = np.flatnonzero(self.front[:, j])
             if s.size == 0:
                 continue
             f = self.table.faces[self.edge[s], j]
-            it = intersect_triangles(x[s], rotated[s], state.triangles[f])
+            it = intersect_triangles(x[s], rotated[s], tri[f])
             t0 = tri0[f]
             # velocity of the re-attached point relative to the emitter, V_T = ḃ₁ e₁ + ḃ₂ e₂
             v = tangent(it.b1)[:, None] * (t0[:, 1] - t0[:, 0]) + tangent(it.b2)[:, None] * (
