@@ -119,7 +119,7 @@ class EmitterEdgeSamples:
         return EmitterEdgeSamples(*fields, self.table, self.weight)
 
     def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
-        """The shading points and the boundary term's tangents, given each edge point's emitter rotation.
+        """The shading points and the boundary term's tangents, given one emitter rotation per shading point.
 
         Every edge point gets its shadow ray, and the visible ones the estimate of
         :meth:`tangent_term`; the points whose V_T is exactly 0 are left out before the draw
@@ -128,7 +128,7 @@ class EmitterEdgeSamples:
         tmax = self.dist - 2.0 * state.epsilon
         k = np.flatnonzero(~state.tracer.occluded(shading.origin[self.index], self.w, tmax))
         sub = self.take(k)
-        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
+        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index))
 
     def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
         r"""The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
@@ -315,7 +315,7 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
     edge = sample_emitter_edges(state, sub) if rows.size else None
     if edge is None:
         return rows[:0], np.zeros(0)
-    index, term = edge.term(state, sub, rotation.take(rows[edge.index]))
+    index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows))
     return rows[index], term
 
 
