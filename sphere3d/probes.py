@@ -157,8 +157,9 @@ def bisect_silhouette(
         on = h.shape == hits.shape  # the shape never changes: hits are only replaced where it matches
         if normal is not None:
             on = on & (dot(mid, normal) > 0.0)
-        inside = np.where(on[:, None], mid, inside)
-        outside = np.where(on[:, None], outside, mid)
+        side = np.repeat(on[:, None], 3, axis=1)  # a contiguous mask: np.where is several times faster
+        inside = np.where(side, mid, inside)
+        outside = np.where(side, outside, mid)
         hits = h.where(on, hits)
     return hits, inside, outside
 
