@@ -38,7 +38,8 @@ s and s + P/2 along their loops), one shadow ray each.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import weakref
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -118,7 +119,7 @@ class EmitterEdgeSamples:
         return EmitterEdgeSamples(*fields, self.table, self.weight)
 
     def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
-        """The shading points and the boundary term's tangents, given each edge point's emitter rotation.
+        """The shading points and the boundary term's tangents, given one emitter rotation per shading point.
 
         Every edge point gets its shadow ray, and the visible ones the estimate of
         :meth:`tangent_term`; the points whose V_T is exactly 0 are left out before the draw
@@ -127,7 +128,7 @@ class EmitterEdgeSamples:
         tmax = self.dist - 2.0 * state.epsilon
         k = np.flatnonzero(~state.tracer.occluded(shading.origin[self.index], self.w, tmax))
         sub = self.take(k)
-        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(k))
+        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index))
 
     def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
         r"""The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
@@ -139,13 +140,18 @@ class EmitterEdgeSamples:
         rotated = rotation.apply(self.w)
         area = float(detach(state.emitter_area))
         tri0 = np.asarray(detach(state.triangles))
+        # operands without a tangent enter plain: the Dual rules give the same nonzero tangents
+        # (a constant's tangent is a scalar 0), and a zero one ends as +0 in ``out`` either way
+        faces_move = np.any(tangent(state.triangles)[self.table.faces[self.table.faces >= 0]])
+        tri = state.triangles if faces_move else tri0
+        x = x if np.any(tangent(x)) else detach(x)
         out = np.zeros(len(self.index))
         for j in range(2):  # the edge's two faces (not a loop over samples)
             s = np.flatnonzero(self.front[:, j])
             if s.size == 0:
                 continue
             f = self.table.faces[self.edge[s], j]
-            it = intersect_triangles(x[s], rotated[s], state.triangles[f])
+            it = intersect_triangles(x[s], rotated[s], tri[f])
             t0 = tri0[f]
             # velocity of the re-attached point relative to the emitter, V_T = ḃ₁ e₁ + ḃ₂ e₂
             v = tangent(it.b1)[:, None] * (t0[:, 1] - t0[:, 0]) + tangent(it.b2)[:, None] * (
@@ -179,6 +185,10 @@ def _faded_out(state: Any, edges: Any) -> np.ndarray:
     return (edges.other < 0) & (state.fade[face] > 0.0) & (kind != FADE_NONE) & zero
 
 
+_TABLES: dict[int, tuple[weakref.ref, EdgeTable | None]] = {}
+"""Edge tables by ``id(state)``, each with a weak reference to its state (dropped with it)."""
+
+
 def edge_table(state: Any) -> EdgeTable | None:
     """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
 
@@ -186,7 +196,21 @@ def edge_table(state: Any) -> EdgeTable | None:
     walk over the few edges, not over samples) so that arc length ``s`` and ``s + P/2``
     are opposite points of a loop: on a parallelogram light, reflections through its
     centre (the antithetic pair of :func:`sample_emitter_edges`).
+
+    Built once per state (states are immutable; every chunk of a render asks for it) and
+    read-only. Two threads asking at once may both build it: the same table, either is kept.
     """
+    key = id(state)
+    cached = _TABLES.get(key)
+    if cached is not None and cached[0]() is state:
+        return cached[1]
+    table = _build_edge_table(state)
+    _TABLES[key] = (weakref.ref(state, lambda _, key=key: _TABLES.pop(key, None)), table)
+    return table
+
+
+def _build_edge_table(state: Any) -> EdgeTable | None:
+    """:func:`edge_table`, computed."""
     emitters = np.asarray(detach(state.triangles))[state.emitters]
     edges = mesh_edges(emitters, state.shape_of[state.emitters])
     keep = np.flatnonzero((edges.always | edges.crease) & ~_faded_out(state, edges))
@@ -208,7 +232,7 @@ def edge_table(state: Any) -> EdgeTable | None:
     outward = cross((edges.b - edges.a)[:, None], normals)
     outward = outward / norm(outward)[..., None]
     away = dot(outward, edges.a[:, None] - tri.mean(axis=2)) > 0.0  # away from the face's centroid
-    return EdgeTable(
+    table = EdgeTable(
         a=edges.a,
         b=edges.b,
         faces=np.where(local >= 0, state.emitters[np.maximum(local, 0)], -1),
@@ -216,16 +240,28 @@ def edge_table(state: Any) -> EdgeTable | None:
         outward=np.where(away[..., None], outward, -outward),
         cdf=np.cumsum(norm(edges.b - edges.a)),
     )
+    for f in fields(table):  # shared by every caller: read-only
+        getattr(table, f.name).setflags(write=False)
+    return table
 
 
 def edge_points(table: EdgeTable, u: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """``count`` points per row evenly spaced in arc length along the edges, random phase ``u`` (m,):
     their edges (m, count) and positions (m, count, 3)."""
-    arc = np.add.outer(u, np.arange(count) / count) % 1.0 * float(table.cdf[-1])
-    e = np.minimum(np.searchsorted(table.cdf, arc, side="right"), len(table.cdf) - 1)
-    length = table.cdf[e] - np.where(e > 0, table.cdf[np.maximum(e - 1, 0)], 0.0)
-    along = np.clip((arc - (table.cdf[e] - length)) / length, 0.0, 1.0)
-    return e, table.a[e] + along[..., None] * (table.b[e] - table.a[e])
+    cdf = table.cdf
+    arc = np.add.outer(u, np.arange(count) / count)
+    np.subtract(arc, 1.0, out=arc, where=arc >= 1.0)  # in [0, 2): that is arc % 1.0, exactly (Sterbenz)
+    arc *= float(cdf[-1])
+    e = np.searchsorted(cdf, arc, side="right")
+    np.minimum(e, len(cdf) - 1, out=e)
+    # per edge, then gathered: the same numbers as computing them per point (elementwise operations)
+    length = cdf - np.concatenate([[0.0], cdf[:-1]])
+    along = arc - np.take(cdf - length, e)
+    along /= np.take(length, e)
+    np.clip(along, 0.0, 1.0, out=along)
+    point = along[..., None] * np.take(table.b - table.a, e, axis=0)
+    point += np.take(table.a, e, axis=0)
+    return e, point
 
 
 def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
@@ -279,7 +315,7 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
     edge = sample_emitter_edges(state, sub) if rows.size else None
     if edge is None:
         return rows[:0], np.zeros(0)
-    index, term = edge.term(state, sub, rotation.take(rows[edge.index]))
+    index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows))
     return rows[index], term
 
 

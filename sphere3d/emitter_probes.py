@@ -175,19 +175,22 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
     usable = (dot(w, detach(shading.n)[:, None]) > 0.0) & (dist > 4.0 * state.epsilon)
     occluded = state.tracer.occluded(shading.origin[:, None], w, tmax) & usable
     visible = usable & ~occluded
+    some_occluded, some_visible = occluded.any(axis=1), visible.any(axis=1)
     target = zeros((m, 3), state.dual)
     found = np.zeros(m, dtype=bool)
-    s = np.flatnonzero(occluded.any(axis=1) & ~visible.any(axis=1))
+    s = np.flatnonzero(some_occluded & ~some_visible)
     if s.size:  # all occluded: the mean attached hit of the occluded probes (the authors' rule)
         hits = state.tracer.intersect(shading.origin[s, None], w[s], tmax[s])
         points = attached_points(state.triangles[np.where(occluded[s], hits.triangle, 0)], hits.u, hits.v)
         target[s], found[s] = mean_point_direction(shading.x[s], points, occluded[s])
-    s = np.flatnonzero(occluded.any(axis=1) & visible.any(axis=1))
+    s = np.flatnonzero(some_occluded & some_visible)
     if s.size:  # a shadow edge crosses the light: its silhouette point between the closest pair
-        cosine = np.einsum("mpk,mqk->mpq", w[s], w[s])
-        pair = occluded[s][:, :, None] & visible[s][:, None, :]
-        i, j = np.divmod(np.argmax(np.where(pair, cosine, -2.0).reshape(len(s), -1), axis=1), probes)
-        inside, outside = w[s, i], w[s, j]
+        ws = w[s]
+        cosine = np.matmul(ws, np.ascontiguousarray(ws.transpose(0, 2, 1)))  # (s, p, p): w_i . w_j
+        np.putmask(cosine, ~(occluded[s][:, :, None] & visible[s][:, None, :]), -2.0)  # pairs only
+        i, j = np.divmod(np.argmax(cosine.reshape(len(s), -1), axis=1), probes)
+        rows = np.arange(s.size)
+        inside, outside = ws[rows, i], ws[rows, j]
         hits = state.tracer.intersect(shading.origin[s], inside)
         normal = detach(shading.n)[s]
         edge, _, _ = bisect_silhouette(state, shading.origin[s], inside, outside, hits, normal, refine)
@@ -196,7 +199,7 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
     moving = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_move
-    f = np.flatnonzero(~occluded.any(axis=1) & usable.any(axis=1) & moving)
+    f = np.flatnonzero(~some_occluded & usable.any(axis=1) & moving)
     if f.size:  # no shadow edge: the mean attached probe point on the emitters
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])
         points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)

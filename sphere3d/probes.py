@@ -157,8 +157,9 @@ def bisect_silhouette(
         on = h.shape == hits.shape  # the shape never changes: hits are only replaced where it matches
         if normal is not None:
             on = on & (dot(mid, normal) > 0.0)
-        inside = np.where(on[:, None], mid, inside)
-        outside = np.where(on[:, None], outside, mid)
+        side = np.repeat(on[:, None], 3, axis=1)  # a contiguous mask: np.where is several times faster
+        inside = np.where(side, mid, inside)
+        outside = np.where(side, outside, mid)
         hits = h.where(on, hits)
     return hits, inside, outside
 
@@ -281,8 +282,9 @@ def _choose(
     snapped = None
     if single.size and refine:
         first = use_p0[single]
-        inside = np.where(first[:, None], d0[single], d1[single])
-        outside = np.where(first[:, None], d1[single], d0[single])
+        first3 = np.repeat(first[:, None], 3, axis=1)  # contiguous masks: np.where is faster with them
+        inside = np.where(first3, d0[single], d1[single])
+        outside = np.where(first3, d1[single], d0[single])
         start = h0.take(single).where(first, h1.take(single))
         tro = np.broadcast_to(trace_origin, (m, 3))[single]
         nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
@@ -293,9 +295,9 @@ def _choose(
             u, v, lines = snap(single, tro, inside, outside, edge)
             snapped = (single, edge.triangle, lines)
         moved = attached_points(state.triangles[edge.triangle], u, v)
-        p0[single] = np.where(first[:, None], moved, p0[single])
-        p1[single] = np.where(first[:, None], p1[single], moved)
-    point = np.where(use_p1[:, None], p1, p0)
+        p0[single] = np.where(first3, moved, p0[single])
+        p1[single] = np.where(first3, p1[single], moved)
+    point = np.where(np.repeat(use_p1[:, None], 3, axis=1), p1, p0)
     c = np.flatnonzero(use_cross)
     if c.size:  # with tangents only where the crossing is used (row by row the same numbers)
         point[c] = crossing_of(face_normals(t0[c]), face_normals(t1[c]), p0[c], p1[c], o[c], mv[c])[0]

@@ -21,15 +21,18 @@ quantile (Šidák over the file's 3 comparisons: family-wise level 3e-4); fixed 
 from __future__ import annotations
 
 import functools
+from dataclasses import fields
 
 import numpy as np
 
 import sphere3d as s3
 from flatland.core.dual import Dual, tangent, variable
 from flatland.core.stats import normal_quantile
+from sphere3d.emitter_edges import _build_edge_table, edge_table
 from sphere3d.integrator import Identity
 from sphere3d.rotation import Rotation
 from sphere3d.scene import load_scene
+from sphere3d.state import build_state
 from sphere3d.tasks import PointTask
 
 Z = normal_quantile(0.9999)
@@ -128,3 +131,16 @@ def test05_reparam_keeps_the_primal_of_naive_bit_for_bit():
     naive = s3.render_gradient("hard_shadow", "occluder.translate.x", method="naive", **kwargs)
     reparam = s3.render_gradient("hard_shadow", "occluder.translate.x", method="reparam", **kwargs)
     assert np.array_equal(naive.value, reparam.value)
+
+
+def test06_the_edge_table_is_built_once_per_state_and_read_only():
+    # identity of the cached object is the claim; a fresh build gives the same numbers
+    state = build_state(load_scene(_scene()), "floor.translate.x", variable(0.0))
+    table = edge_table(state)
+    assert edge_table(state) is table
+    fresh = _build_edge_table(state)
+    for f in fields(table):
+        assert np.array_equal(getattr(table, f.name), getattr(fresh, f.name))
+        assert not getattr(table, f.name).flags.writeable
+    other = build_state(load_scene(_scene()), "floor.translate.x", variable(0.0))
+    assert edge_table(other) is not table
