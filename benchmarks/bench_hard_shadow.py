@@ -24,8 +24,9 @@ never to be ranked above an unbiased one by its RMSE alone):
 - **seconds per 64 spp** image: wall clock (best of the seeds' runs, all cores the renderer
   uses), meaningful on an idle machine only.
 
-``reparam (splat)`` is ``reparam`` with ``film="splat"`` (:mod:`sphere3d.film`: every sample in
-every pixel its filter covers, as Mitsuba's film); its numbers are in that module's docstring.
+Every method renders with the default film, ``film="splat"`` (:mod:`sphere3d.film`: every sample
+in every pixel its filter covers, as Mitsuba's film); ``reparam (pixel film)`` is ``reparam`` with
+``film="pixel"`` (each sample in the pixel that drew it), the default before.
 
 Next to them the numbers issue 11 quotes for Mitsuba 3.4.1 ``direct_reparam`` on the
 same scene (RMSE 16/64/256 and bias), the target the project's ``reparam`` aims below.
@@ -99,11 +100,11 @@ METHODS = (
     ("naive", "naive", {}),
     ("finite_difference", "finite_difference", {}),
     ("reparam", "reparam", {}),
-    ("reparam (splat)", "reparam", {"film": "splat"}),
+    ("reparam (pixel film)", "reparam", {"film": "pixel"}),
     ("boundary", "boundary", {}),
 )
-"""(row label, method, options): ``reparam (splat)`` splats every sample into every pixel its filter
-covers (:mod:`sphere3d.film`), as Mitsuba's film does."""
+"""(row label, method, options), each with the default film (splatted, :mod:`sphere3d.film`, as
+Mitsuba's film) but ``reparam (pixel film)``: each sample in the pixel that drew it."""
 MITSUBA = {
     "hard_shadow": {16: 0.73, 64: 0.43, 256: 0.27, "bias": 0.21},
     "hard_shadow_cube": {16: 0.83, 64: 0.48, 256: 0.32, "bias": 0.25},

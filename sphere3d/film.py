@@ -1,7 +1,8 @@
 r"""Film splatting: every camera sample contributes to every pixel whose filter covers it.
 
-Opt-in (``ImageTask(film="splat")``, ``render(..., film="splat")``); the default ``"pixel"``
-keeps each sample in the pixel that drew it.
+The default film of :class:`~sphere3d.tasks.ImageTask`, :func:`~sphere3d.render` and
+:func:`~sphere3d.render_gradient` (``film="splat"``); ``film="pixel"`` keeps each sample in the
+pixel that drew it.
 The film transform of a camera sample (:class:`FilmTransform`: its rotations and film kernels,
 what a method's ``camera`` returns) is defined here too.
 
@@ -93,8 +94,9 @@ from sphere3d.sampling import filter_radius, filter_value, log_filter_value, pdf
 
 __all__ = ["FILMS", "FilmTransform", "Splat", "gather", "reach", "splat_weights", "stencil"]
 
-FILMS = ("pixel", "splat")
-"""Image options: each sample in its own pixel, or splatted into every pixel its filter covers."""
+FILMS = ("splat", "pixel")
+"""Image options, the default first: each sample splatted into every pixel its filter covers, or
+counted in its own pixel only."""
 
 
 @dataclass(frozen=True)

@@ -117,7 +117,7 @@ def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
 class ImageTask:
     """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``.
 
-    ``cv_scope``: :meth:`_control_variate`; ``film``: ``"pixel"`` (default) or ``"splat"``
+    ``cv_scope``: :meth:`_control_variate`; ``film``: ``"splat"`` (default) or ``"pixel"``
     (:mod:`sphere3d.film`, :meth:`_splat_chunk`), for every method alike.
     """
 
@@ -128,9 +128,9 @@ class ImageTask:
     batches: int
     tracer: str = "embree"
     cv_scope: str = "pixel"
-    film: str = "pixel"
-    """``"pixel"``: each sample in the pixel that drew it; ``"splat"``: in every pixel its filter
-    covers, weighted by $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`; not the default)."""
+    film: str = "splat"
+    """``"splat"`` (default): each sample in every pixel its filter covers, weighted by
+    $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`); ``"pixel"``: in the pixel that drew it."""
 
     @property
     def shape(self) -> tuple[int, int]:
