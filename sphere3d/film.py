@@ -1,7 +1,7 @@
 r"""Film splatting: every camera sample contributes to every pixel whose filter covers it.
 
-The default film of :class:`~sphere3d.tasks.ImageTask`, :func:`~sphere3d.render` and
-:func:`~sphere3d.render_gradient` (``film="splat"``); ``film="pixel"`` keeps each sample in the
+The default film of :class:`~sphere3d.tasks.ImageTask`, :func:`~sphere3d.render.render` and
+:func:`~sphere3d.render.render_gradient` (``film="splat"``); ``film="pixel"`` keeps each sample in the
 pixel that drew it.
 The film transform of a camera sample (:class:`FilmTransform`: its rotations and film kernels,
 what a method's ``camera`` returns) is defined here too.
