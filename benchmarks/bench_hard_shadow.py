@@ -45,7 +45,9 @@ scene                         RMSE 16 spp  RMSE 64 spp  RMSE 256    bias floor  
 
 The bias floors are below the references' own noise (rms se 0.020 and 0.024). These are
 per-pixel film numbers; with the splatted film (the default since) this benchmark gave RMSE
-0.085 / 0.048 / 0.030 (sphere) and 0.098 / 0.054 / 0.033 (cube), bias floors 0.007 / 0.006. On an idle
+0.079 / 0.044 / 0.029 (sphere) and 0.093 / 0.051 / 0.032 (cube), bias floors 0.007 / 0.006
+(without the tangent of the splatted value's control variate, :mod:`sphere3d.film`: 0.085 /
+0.048 / 0.030 and 0.098 / 0.054 / 0.033, the cube's above the per-pixel film's). On an idle
 2-core machine (``make bench``) a 64 spp image takes 1.43 s (sphere) and 0.83 s (cube) of wall
 time, at RMSE 0.069 and 0.052. Before the
 secondary edges were clipped to the light's image and the fixed ones culled
@@ -64,15 +66,16 @@ wall clock on that machine (load about 5): ``reparam`` 0.95 s and 0.78 s.
 Measured by this benchmark on an idle 2-core machine after reparam's emitter rotation learnt
 to follow the shadow edge (:mod:`sphere3d.emitter_probes`), with film splatting
 (:mod:`sphere3d.film`, now the default) and the per-pixel film; bias floors from 6 seeds at
-256 spp; seconds from two runs (the same bias floors and RMSE, to the digits shown, in a run
-after splatting became the default, on a loaded machine):
+256 spp; seconds from two runs. The default film's rows are from a later run (loaded machine,
+seconds left as they were), after the splatted derivative got the tangent of the value's control
+variate (:mod:`sphere3d.film`): it changed only the cube's RMSE at 16 spp, 0.493 → 0.492.
 
 ========================  ==========  =====================  ===========
 ``reparam``               bias floor  RMSE 16 / 64 / 256     s / 64 spp
 ========================  ==========  =====================  ===========
 sphere                    0.058       0.424 / 0.215 / 0.117  0.91-0.98
 sphere, per-pixel film    0.086       0.956 / 0.491 / 0.263  0.73-0.91
-cube                      0.074       0.493 / 0.257 / 0.149  0.90-1.11
+cube                      0.074       0.492 / 0.257 / 0.149  0.90-1.11
 cube, per-pixel film      0.092       1.211 / 0.597 / 0.302  0.94-0.99
 Mitsuba (sphere/cube)     0.21/0.25   0.73/0.43/0.27,
                                       0.83/0.48/0.32

@@ -406,7 +406,7 @@ def test10_hard_shadow_cube_creases_and_regions_match_the_reference():
       beside the edges, and ~1e-15 rounding in the reference).
 
     Measured (default, splatted film): region |z| <= 1.5 (crease -6.58 vs -5.45, z -0.59); per pixel
-    rms z 1.07 over 1254 pixels, max |z| 3.97 (limit 8.05). With the per-pixel film: region |z| <=
+    rms z 1.02 over 1254 pixels, max |z| 3.97 (limit 8.05). With the per-pixel film: region |z| <=
     0.65 (crease -6.57 vs -5.45 ± 1.92), rms z 1.04, the 55 crease pixels alone max 2.9; at 256 spp
     (seed 6): crease -5.26 vs -5.45 ± 0.92, rms z 1.2, 1.1, 1.0.
     """
