@@ -24,8 +24,9 @@ never to be ranked above an unbiased one by its RMSE alone):
 - **seconds per 64 spp** image: wall clock (best of the seeds' runs, all cores the renderer
   uses), meaningful on an idle machine only.
 
-``reparam (splat)`` is ``reparam`` with ``film="splat"`` (:mod:`sphere3d.film`: every sample in
-every pixel its filter covers, as Mitsuba's film); its numbers are in that module's docstring.
+Every method renders with the default film, ``film="splat"`` (:mod:`sphere3d.film`: every sample
+in every pixel its filter covers, as Mitsuba's film); ``reparam (pixel film)`` is ``reparam`` with
+``film="pixel"`` (each sample in the pixel that drew it), the default before.
 
 Next to them the numbers issue 11 quotes for Mitsuba 3.4.1 ``direct_reparam`` on the
 same scene (RMSE 16/64/256 and bias), the target the project's ``reparam`` aims below.
@@ -42,7 +43,11 @@ scene                         RMSE 16 spp  RMSE 64 spp  RMSE 256    bias floor  
 ``hard_shadow_cube``          0.096        0.052        0.031       0.0          1.8
 ============================  ===========  ===========  ==========  ===========  =============
 
-The bias floors are below the references' own noise (rms se 0.020 and 0.024). On an idle
+The bias floors are below the references' own noise (rms se 0.020 and 0.024). These are
+per-pixel film numbers; with the splatted film (the default since) this benchmark gave RMSE
+0.079 / 0.044 / 0.029 (sphere) and 0.093 / 0.051 / 0.032 (cube), bias floors 0.007 / 0.006
+(without the tangent of the splatted value's control variate, :mod:`sphere3d.film`: 0.085 /
+0.048 / 0.030 and 0.098 / 0.054 / 0.033, the cube's above the per-pixel film's). On an idle
 2-core machine (``make bench``) a 64 spp image takes 1.43 s (sphere) and 0.83 s (cube) of wall
 time, at RMSE 0.069 and 0.052. Before the
 secondary edges were clipped to the light's image and the fixed ones culled
@@ -59,23 +64,27 @@ every image bit-identical. One thread's CPU seconds per 64 spp image, before →
 wall clock on that machine (load about 5): ``reparam`` 0.95 s and 0.78 s.
 
 Measured by this benchmark on an idle 2-core machine after reparam's emitter rotation learnt
-to follow the shadow edge (:mod:`sphere3d.emitter_probes`) and with film splatting as an option
-(:mod:`sphere3d.film`); bias floors from 6 seeds at 256 spp; seconds from two runs:
+to follow the shadow edge (:mod:`sphere3d.emitter_probes`), with film splatting
+(:mod:`sphere3d.film`, now the default) and the per-pixel film; bias floors from 6 seeds at
+256 spp; seconds from two runs. The default film's rows are from a later run (loaded machine,
+seconds left as they were), after the splatted derivative got the tangent of the value's control
+variate (:mod:`sphere3d.film`): it changed only the cube's RMSE at 16 spp, 0.493 → 0.492.
 
-=====================  ==========  =====================  ===========
-``reparam``            bias floor  RMSE 16 / 64 / 256     s / 64 spp
-=====================  ==========  =====================  ===========
-sphere                 0.086       0.956 / 0.491 / 0.263  0.73-0.91
-sphere, splat          0.058       0.424 / 0.215 / 0.117  0.91-0.98
-cube                   0.092       1.211 / 0.597 / 0.302  0.94-0.99
-cube, splat            0.074       0.493 / 0.257 / 0.149  0.90-1.11
-Mitsuba (sphere/cube)  0.21/0.25   0.73/0.43/0.27,
-                                   0.83/0.48/0.32
-=====================  ==========  =====================  ===========
+========================  ==========  =====================  ===========
+``reparam``               bias floor  RMSE 16 / 64 / 256     s / 64 spp
+========================  ==========  =====================  ===========
+sphere                    0.058       0.424 / 0.215 / 0.117  0.91-0.98
+sphere, per-pixel film    0.086       0.956 / 0.491 / 0.263  0.73-0.91
+cube                      0.074       0.492 / 0.257 / 0.149  0.90-1.11
+cube, per-pixel film      0.092       1.211 / 0.597 / 0.302  0.94-0.99
+Mitsuba (sphere/cube)     0.21/0.25   0.73/0.43/0.27,
+                                      0.83/0.48/0.32
+========================  ==========  =====================  ===========
 
-Splatted, the bias floor is within issue 11's 0.08 and the RMSE below Mitsuba's at every spp;
-per pixel, the 6-seed bias floor is above 0.08 (seeds 1-2 alone: 0.035 / 0.018, seeds 3-6: 0.098
-/ 0.101: see the bias floor's notes above) and the RMSE below Mitsuba's only at 256 spp.
+With the default film the bias floor is within issue 11's 0.08 and the RMSE below Mitsuba's at
+every spp; with the per-pixel film the 6-seed bias floor is above 0.08 (seeds 1-2 alone: 0.035 /
+0.018, seeds 3-6: 0.098 / 0.101: see the bias floor's notes above) and the RMSE below Mitsuba's
+only at 256 spp.
 Neither film reaches 0.45 s per 64 spp: the emitter probes (4 on the light's area, 8 along its
 edges, 6 bisections) cost about 60 % more than the 4 area probes they replaced. ``boundary``'s
 6-seed bias floors in the same run: 0.009 / 0.006; ``finite_difference``'s 0.038 / 0.047 (its
@@ -99,11 +108,11 @@ METHODS = (
     ("naive", "naive", {}),
     ("finite_difference", "finite_difference", {}),
     ("reparam", "reparam", {}),
-    ("reparam (splat)", "reparam", {"film": "splat"}),
+    ("reparam (pixel film)", "reparam", {"film": "pixel"}),
     ("boundary", "boundary", {}),
 )
-"""(row label, method, options): ``reparam (splat)`` splats every sample into every pixel its filter
-covers (:mod:`sphere3d.film`), as Mitsuba's film does."""
+"""(row label, method, options), each with the default film (splatted, :mod:`sphere3d.film`, as
+Mitsuba's film) but ``reparam (pixel film)``: each sample in the pixel that drew it."""
 MITSUBA = {
     "hard_shadow": {16: 0.73, 64: 0.43, 256: 0.27, "bias": 0.21},
     "hard_shadow_cube": {16: 0.83, 64: 0.48, 256: 0.32, "bias": 0.25},

@@ -37,6 +37,10 @@ estimate of R(0.02)'s residual; R(0.01), the stored one, is closer. Its noise is
 1.5 × that of D(0.005) alone; at 64 passes of 1024 spp, about 0.016 (sphere) and
 0.023 (cube) rms per pixel.
 
+The passes use the per-pixel film (``film="pixel"``, each sample in the pixel that drew it),
+as the stored files were made before film splatting (:mod:`sphere3d.film`) became the default:
+``--resume`` adds passes of the same estimator. Both films estimate the same pixel integrals.
+
 The file is rewritten after every pass, so a run cut short keeps what it completed,
 and ``--resume`` adds passes to a stored file.
 
@@ -70,7 +74,7 @@ DIRECTORY = Path(__file__).parent / "reference"
 
 def richardson_pass(scene_name: str, seed: int, spp: int = SPP_PER_PASS, h: float = H) -> np.ndarray:
     """One pass: arrays D(h), D(h/2) and R = (4 D(h/2) - D(h)) / 3, each (height, width), stacked."""
-    task = ImageTask(load_scene(scene_name), PARAM, spp, seed, 1)
+    task = ImageTask(load_scene(scene_name), PARAM, spp, seed, 1, film="pixel")  # the stored files' film
     image = {theta: task.evaluate(theta).value[0] for theta in (h, -h, h / 2, -h / 2)}
     d_h = (image[h] - image[-h]) / (2 * h)
     d_h2 = (image[h / 2] - image[-h / 2]) / h

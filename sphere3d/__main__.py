@@ -23,6 +23,7 @@ from flatland.app.cli import main as _main
 from flatland.integrals import INTEGRALS as _INTEGRALS
 from flatland.textbook import METHODS as _ESTIMATORS
 from flatland.textbook import estimate as _estimate
+from sphere3d.film import FILMS
 from sphere3d.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from sphere3d.scene import list_scenes, load_scene, parameter_names
 
@@ -68,6 +69,7 @@ PACKAGE = Package(
     integrals=_INTEGRALS,  # study problems {"integral": ...}: flatland's textbook, as before
     estimate=_estimate,
     estimators=_ESTIMATORS,
+    films=FILMS,  # --film for render and gradient, "splat" (the default) first
 )
 """What the command line and the study runner (:mod:`flatland.app`) need to know about sphere3d."""
 

@@ -40,7 +40,8 @@ Bias
 ----
 Measured against the closed forms of :mod:`sphere3d.closed_form` by
 ``python -m benchmarks --only reparam_bias`` (``reparam`` defaults: ``kappa_film`` 12.5,
-4 probes (7 on the film), spread 3, refine 3; seed 11, 16 batches; ± one standard error);
+4 probes (7 on the film), spread 3, refine 3; the default, splatted film; seed 11, 16 batches;
+± one standard error; with the per-pixel film 2 px lost 2.3 ± 0.4 / 4.8 ± 0.5 %);
 tested as biases in ``tests/sphere3d/test_triangle_closed_form.py`` (test10).
 
 A black triangle about s pixels across against a constant sky
@@ -52,11 +53,11 @@ derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
 ========  ==================  ==================  ==================
 size      image, spp          sideways            depth
 ========  ==================  ==================  ==================
-1 px      8 × 8, 65536        32.2 % ± 0.6 %      49.4 % ± 0.6 %
-2 px      8 × 8, 65536        2.3 % ± 0.4 %       4.8 % ± 0.5 %
-4 px      8 × 8, 65536        1.2 % ± 0.2 %       1.8 % ± 0.3 %
-8 px      16 × 16, 16384      0.8 % ± 0.3 %       1.0 % ± 0.3 %
-20 px     32 × 32, 4096       1.0 % ± 0.4 %       0.1 % ± 0.4 %
+1 px      8 × 8, 65536        31.7 % ± 0.4 %      49.4 % ± 0.5 %
+2 px      8 × 8, 65536        2.4 % ± 0.2 %       4.6 % ± 0.4 %
+4 px      8 × 8, 65536        1.4 % ± 0.1 %       1.8 % ± 0.1 %
+8 px      16 × 16, 16384      0.9 % ± 0.1 %       1.1 % ± 0.1 %
+20 px     32 × 32, 4096       0.8 % ± 0.1 %       0.8 % ± 0.1 %
 ========  ==================  ==================  ==================
 
 Short of the exact derivative where a kernel reaches a discontinuity that its rotation
@@ -68,6 +69,9 @@ edge alike. Not fixed by more samples.
 
 Noise
 -----
+Measured with the per-pixel film (``film="pixel"``, the default until film splatting,
+:mod:`sphere3d.film`, became it; the splatted film shares the filter weight's derivative
+among up to nine pixels' samples: its numbers are in that module).
 On ``hard_shadow`` (64 spp in one batch, 4 seeds, against the stored reference) one
 kernel centre per sample doubled the derivative's RMSE (0.57 to 1.00), from the kernel
 scores on the occluder's lit silhouette; with the antithetic pair it is 0.57, as with one

@@ -26,7 +26,7 @@ __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
 
 def render(
-    scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None, film: str = "pixel"
+    scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None, film: str = "splat"
 ) -> Image:
     """Render ``scene`` (a built-in name, a .json path, a dict or a Scene).
 
@@ -39,10 +39,10 @@ def render(
     batches : int, optional
         Independent batches behind the standard errors (must divide ``spp``);
         default: the largest divisor of ``spp`` up to 16 (:func:`~flatland.core.image.resolve_batches`).
-    film : {"pixel", "splat"}
-        ``"pixel"`` (default): each sample counts in the pixel that drew it; ``"splat"``: in every
-        pixel its filter covers, with multi-sample MIS weights over the pixels' samplers
-        (:mod:`sphere3d.film`).
+    film : {"splat", "pixel"}
+        ``"splat"`` (default): each sample counts in every pixel its filter covers, with
+        multi-sample MIS weights over the pixels' samplers (:mod:`sphere3d.film`); ``"pixel"``:
+        only in the pixel that drew it.
 
     Returns
     -------
@@ -84,7 +84,7 @@ def render_gradient(
     spp: int = 64,
     seed: int = 0,
     batches: int | None = None,
-    film: str = "pixel",
+    film: str = "splat",
     **options: Any,
 ) -> GradientImage:
     """Render ``scene`` and its derivative with respect to ``param`` by ``method``.
@@ -95,7 +95,8 @@ def render_gradient(
         A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
     method : {"naive", "finite_difference", "reparam", "boundary"}
     spp, seed, batches, film
-        As in :func:`render`; ``film="splat"`` applies to every method alike (their values stay equal).
+        As in :func:`render`; the film (default ``"splat"``) applies to every method alike (their
+        values stay equal).
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,

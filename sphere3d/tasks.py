@@ -149,7 +149,7 @@ def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
 class ImageTask:
     """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``.
 
-    ``cv_scope``: :meth:`_control_variate`; ``film``: ``"pixel"`` (default) or ``"splat"``
+    ``cv_scope``: :meth:`_control_variate`; ``film``: ``"splat"`` (default) or ``"pixel"``
     (:mod:`sphere3d.film`, :meth:`_splat_chunk`), for every method alike.
     """
 
@@ -160,9 +160,9 @@ class ImageTask:
     batches: int
     tracer: str = "embree"
     cv_scope: str = "pixel"
-    film: str = "pixel"
-    """``"pixel"``: each sample in the pixel that drew it; ``"splat"``: in every pixel its filter
-    covers, weighted by $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`; not the default)."""
+    film: str = "splat"
+    """``"splat"`` (default): each sample in every pixel its filter covers, weighted by
+    $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`); ``"pixel"``: in the pixel that drew it."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -272,12 +272,13 @@ class ImageTask:
 
     def _splat_buffers(self, batches: int, per_batch: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The chunks' outputs for :meth:`_splat_chunk`: stencils (quantities, batches, slots, pixels),
-        four quantities with the control variate and two without, and the pixels' radiance totals."""
+        four quantities with the control variate and two without, and the pixels' radiance totals (value
+        and tangent)."""
         cv = self._cv_samples(batches, per_batch) > 0
         _, h = reach(self.scene.camera.filter)
         pixels = self.shape[0] * self.shape[1]
         stencils = np.empty((4 if cv else 2, batches, (2 * h + 1) ** 2, pixels))
-        return stencils, (np.empty((1 if self.cv_scope == "pixel" else batches, pixels)) if cv else None)
+        return stencils, (np.empty((2, 1 if self.cv_scope == "pixel" else batches, pixels)) if cv else None)
 
     def _splat_chunk(
         self, samples: PixelSamples, pix: np.ndarray, batches: int, per_batch: int, out: tuple
@@ -289,11 +290,13 @@ class ImageTask:
         Control variate (:mod:`sphere3d.film`), value and tangent: $Σ_i e_{i,p}$ minus
         $Σ_i c_{p,-i} (w_{i,p} - [i ∈ p])$, $c_{p,-i}$ the mean radiance of pixel p's samples
         without i (all of them when i is another pixel's; same expectation for every i,
-        independent of i). Unbiased: a batch holds equally many samples of every pixel, so
+        independent of i), as a Dual: the tangent is the value's derivative, $c \dot w + \dot c
+        (w - [i ∈ p])$. Unbiased: a batch holds equally many samples of every pixel, so
         $E Σ_i w_{i,p} = n$ and $E Σ_i \dot w_{i,p} = 0$ for every θ (pooled over the samplers,
         :mod:`sphere3d.film`); the $[i ∈ p]$ count n. It removes the noise of the weights'
-        sum (a constant radiance gives its value exactly) and the filter derivative's $L \dot w$
-        (:meth:`_control_variate`). The other pixels' part is applied in :meth:`_splat_image`.
+        sum (a constant radiance gives its value exactly, and its derivative: the radiance's
+        $\dot L$ splatted) and the filter derivative's $L \dot w$ (:meth:`_control_variate`).
+        The other pixels' part is applied in :meth:`_splat_image`.
         Off where :meth:`_control_variate` is (``cv_scope="off"``, one sample per scope, box).
         """
         _, h = reach(self.scene.camera.filter)
@@ -310,14 +313,17 @@ class ImageTask:
             stencil((ev, et), slot, h, stencils)
             return
         total, scale = self._leave_one_out(rv[..., 0], self._cv_samples(batches, per_batch))
+        total_t, scale_t = self._leave_one_out(rt[..., 0], self._cv_samples(batches, per_batch))
         centre = (2 * h + 1) * h + h  # the slot of the sample's own pixel
         own = np.flatnonzero(slot == centre)  # one entry per sample at most: only there is i ∈ p
         scale = scale.ravel()[own // shape[-1]]  # sample i left out of its own pixel
+        scale_t = scale_t.ravel()[own // shape[-1]]
         ev.ravel()[own] -= scale * (wv.ravel()[own] - 1.0)
-        et.ravel()[own] -= scale * wt.ravel()[own]
+        et.ravel()[own] -= scale * wt.ravel()[own] + scale_t * (wv.ravel()[own] - 1.0)
         stencil((ev, et, wv, wt), slot, h, stencils)
         stencils[2:, :, centre] = 0.0  # the weights of other pixels' samples only
-        totals[...] = total.reshape(totals.shape)
+        totals[0] = total.reshape(totals.shape[1:])
+        totals[1] = total_t.reshape(totals.shape[1:])
 
     def _splat_image(self, out: tuple, batches: int, per_batch: int) -> Tally:
         """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`, in
@@ -333,9 +339,9 @@ class ImageTask:
             sums = gather(stencils, height, width, h, rows).reshape(len(stencils), batches, -1) / per_batch
             value, deriv = sums[0], sums[1]
             if totals is not None:
-                mean = totals[:, rows.start * width : rows.stop * width]
+                mean = totals[..., rows.start * width : rows.stop * width]
                 mean = mean / self._cv_samples(batches, per_batch)
-                value, deriv = value - mean * sums[2], deriv - mean * sums[3]
+                value, deriv = value - mean[0] * sums[2], deriv - mean[0] * sums[3] - mean[1] * sums[2]
             return np.stack([value, deriv]).reshape(2, batches, len(rows), width)
 
         image = np.concatenate(_map(band, range(-(-height // step))), axis=2)

@@ -107,6 +107,10 @@ class Package:
         Figure writers; None (the default) draws with the shared
         :mod:`flatland.plotting.films` and :mod:`flatland.plotting.study`, imported
         (with matplotlib) only when there is a figure to draw.
+    films : tuple of str
+        The package's films (``render(..., film=)``), the default first: ``render`` and
+        ``gradient`` then take ``--film`` (checked by the package's own renderer: a bad
+        value is one :class:`ValidationError`). Empty (the default): no such option.
     sketch : callable, optional
         ``sketch(ax, scene, param)`` draws a scene (and what ``param`` moves; None:
         nothing) into a matplotlib Axes; the figures of ``demo``, ``render`` and
@@ -140,6 +144,7 @@ class Package:
     plot_panel: Callable[..., Path] | None = None
     plot_study: Callable[..., list[Path]] | None = None
     sketch: Callable[[Any, Any, str | None], Any] | None = None
+    films: tuple[str, ...] = ()
 
     def plot(self, kind: str) -> Callable[..., Any]:
         """The figure writer ``plot_<kind>``: the package's own, else the shared one (imported now)."""
@@ -189,6 +194,9 @@ def _parser(pkg: Package) -> _Parser:
     def scene_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument("scene", metavar="SCENE", help=f"a JSON scene file or a built-in scene: {scenes}")
         p.add_argument("--batches", type=int, default=None, help="independent batches behind the stderr")
+        if pkg.films:
+            choices = " or ".join(pkg.films)
+            p.add_argument("--film", default=None, help=f"{choices} (default {pkg.films[0]})")
 
     demo = verbs.add_parser("demo", help="the default scene: panel of methods and error table (< 1 min)")
     common(demo, f"samples per pixel (default {pkg.demo_spp})", None)

@@ -79,6 +79,11 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     return options
 
 
+def _film(args: argparse.Namespace) -> dict[str, Any]:
+    """``film=`` when ``--film`` was given (only packages with films have the option)."""
+    return {} if getattr(args, "film", None) is None else {"film": args.film}
+
+
 def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int) -> int | None:
     """Reference spp that makes its film-sum stderr 1/4 of the smallest unbiased method's (x 1.25
     for the scatter of the estimated errors), or None if it already is."""
@@ -179,7 +184,7 @@ def verb_demo(pkg: Package, args: argparse.Namespace) -> int:
 def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     """``render SCENE``: the image as PNG and ``.npy``."""
     scene = _load_scene(pkg, args.scene)
-    image = pkg.render(scene, spp=args.spp, seed=args.seed, batches=args.batches)
+    image = pkg.render(scene, spp=args.spp, seed=args.seed, batches=args.batches, **_film(args))
     name = _stem(args.scene)
     out = Path(args.out)
     png = pkg.plot("image")(
@@ -198,7 +203,7 @@ def verb_gradient(pkg: Package, args: argparse.Namespace) -> int:
         raise UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
     g = pkg.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
-        **_options(args),
+        **_film(args), **_options(args),
     )  # fmt: skip
     name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
     out = Path(args.out)

@@ -303,7 +303,7 @@ def reparam(
     0 follows the probe's own hit. flatland's option of the same name defaults to 2.
 
     Measured bias on the ``hard_shadow`` benchmark scenes (a sharp, ``fade`` 0 light;
-    d/d ``occluder.translate.x``, default options, 8 seeds x 128 spp against the
+    d/d ``occluder.translate.x``, default options and film, 8 seeds x 128 spp against the
     Richardson finite-difference reference of ``benchmarks/reference``; regions as in
     ``tests/sphere3d/test_hard_shadow.py``), as the least-squares fraction of the
     reference kept, $Σ g·\mathrm{ref} / Σ \mathrm{ref}^2$, and the bias floor (the rms
@@ -312,10 +312,10 @@ def reparam(
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
     ================  ===========================  ===========================
-    penumbra          99.0 ± 0.3 % kept            99.8 ± 0.3 % kept
-    silhouette        98.1 ± 1.4 % kept            99.3 ± 1.0 % kept
-    occluder          109 ± 6 % kept               98.4 ± 1.9 % kept
-    bias floor        0.086 (splat 0.058)          0.092 (splat 0.074)
+    penumbra          98.9 ± 0.2 % kept            99.8 ± 0.2 % kept
+    silhouette        97.0 ± 0.8 % kept            97.7 ± 0.5 % kept
+    occluder          99 ± 2.5 % kept              99.3 ± 0.9 % kept
+    bias floor        0.058 (per-pixel 0.086)      0.074 (per-pixel 0.092)
     ================  ===========================  ===========================
 
     How it got there (bias floor sphere / cube): 0.31 / 0.38 as published, the emitter
@@ -330,8 +330,10 @@ def reparam(
     image (process time, old and new alternating in one run: 0.95-1.25 → 1.69-1.96 s per 64 spp)
     and 1.5 % more variance; a 64 spp image now takes 0.73-0.91 / 0.94-0.99 s of wall time on an
     idle 2-core machine (``make bench``, two runs), RMSE at 16 / 64 / 256 spp 0.96 / 0.49 / 0.26 and
-    1.21 / 0.60 / 0.30; with ``film="splat"`` (:mod:`sphere3d.film`) 0.42 / 0.22 / 0.12 and 0.49 /
-    0.26 / 0.15.
+    1.21 / 0.60 / 0.30 with the per-pixel film (``film="pixel"``); with the splatted film
+    (:mod:`sphere3d.film`, since the default) 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15. With the
+    per-pixel film the fractions in the table were 99.0 ± 0.3 / 99.8 ± 0.3 % (penumbra), 98.1 ± 1.4
+    / 99.3 ± 1.0 % (silhouette), 109 ± 6 / 98.4 ± 1.9 % (occluder).
     What remains in the penumbra is the cosine strategy's loss near the light's edge (its rotation
     follows the occluder and drags that edge: -1 to -3.5 % of the derivative at penumbra points)
     and, on the cube, two shadow edges at different depths that one rotation cannot both follow

@@ -4,7 +4,8 @@
 sample's derivative, ``ẇ_i`` the tangent of its filter weight (zero mean given the pixel's
 rotation, Loubet et al. 2019, Sec. 4.2) and ``c_{-i}`` the mean radiance of the pixel's other
 samples: all of them (``cv_scope="pixel"``, the default) or those of the same batch
-(``"batch"``, which is off at one sample per batch).
+(``"batch"``, which is off at one sample per batch). With the per-pixel film (``film="pixel"``)
+throughout: the splatted film's control variate (the default) is tested in ``test_film_splat``.
 
 The scene is :func:`sphere3d.closed_form.pinhole_triangle_scene` (a black 8 px triangle against
 the sky, 16 × 16 pixels) moving sideways, and the transform :class:`FollowPlane` gives every
@@ -43,7 +44,7 @@ PARAM = "tri.translate.x"
 
 def _task(spp, seed, scope):
     scene = s3.load_scene(cf.pinhole_triangle_scene(8, 16))
-    return ImageTask(scene, PARAM, spp, seed, BATCHES, cv_scope=scope)
+    return ImageTask(scene, PARAM, spp, seed, BATCHES, cv_scope=scope, film="pixel")
 
 
 def _derivative(spp, seed, scope):

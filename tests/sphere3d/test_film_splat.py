@@ -1,4 +1,4 @@
-"""Film splatting (:mod:`sphere3d.film`), per pixel, against the closed-form triangle image.
+"""Film splatting (:mod:`sphere3d.film`, the default film), per pixel, against the closed-form triangle image.
 
 Every camera sample contributes ``k(s - p) / q(s) · L`` to each pixel p its filter covers,
 ``q`` the pooled density of the pixels' samplers, with the control variate of
