@@ -15,6 +15,7 @@ index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.
 
 from __future__ import annotations
 
+import contextvars
 import ctypes
 import functools
 import os
@@ -133,9 +134,12 @@ def _pool(workers: int, pid: int) -> ThreadPoolExecutor:
 
 
 def _map_threads(func: Callable[[int], Any], items: range) -> list[Any]:
+    """Each task runs in a copy of the caller's context (one copy per task: a context is entered by one
+    thread at a time), so the caller's ``np.errstate``, a context variable, holds in the threads too."""
     if WORKERS <= 1 or len(items) <= 1:
         return [func(i) for i in items]
-    return list(_pool(WORKERS, os.getpid()).map(func, items))
+    caller = contextvars.copy_context()
+    return list(_pool(WORKERS, os.getpid()).map(lambda i: caller.copy().run(func, i), items))
 
 
 def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:

@@ -226,3 +226,17 @@ def test11_reparam_refine_is_a_checked_option_that_moves_only_the_derivative():
     assert default.options["refine"] == 3 and none.options["refine"] == 0
     assert np.array_equal(default.value, naive.value) and np.array_equal(none.value, naive.value)
     assert not np.array_equal(default.derivative, none.derivative)
+
+
+def test12_the_callers_floating_point_policy_holds_in_the_worker_threads(monkeypatch):
+    # np.errstate is a context variable: a thread that does not run in the caller's context
+    # would warn where the caller asked for silence, or stay silent where it asked for an error
+    monkeypatch.setattr(tasks, "WORKERS", 2)
+
+    def divide(i: int) -> float:
+        return float(np.float64(i) / np.float64(0.0))
+
+    with np.errstate(divide="raise"), pytest.raises(FloatingPointError, match="divide by zero"):
+        tasks._map_threads(divide, range(1, 4))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        assert tasks._map_threads(divide, range(1, 3)) == [np.inf, np.inf]
