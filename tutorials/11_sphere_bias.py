@@ -73,16 +73,31 @@ def run(scene, param, method, spp, seed, **options):
 
 
 def mean_se(batches):
-    """Mean image and its standard error over the batches."""
+    """Mean image and its standard error over the batches (per pixel)."""
     return batches.mean(axis=0), batches.std(axis=0, ddof=1) / np.sqrt(len(batches))
 
 
-def kept(d, se, ref, ref_se, mask):
-    """Least-squares fraction of ``ref`` that ``d`` keeps in ``mask``, Σ d r / Σ (r² - s_r²), and its
-    standard error from both images' per-pixel standard errors (pixels are independent)."""
-    r, rse, dm = ref[mask], ref_se[mask], d[mask]
-    denominator = np.sum(r**2 - rse**2)
-    return np.sum(dm * r) / denominator, np.sqrt(np.sum(se[mask] ** 2 * r**2 + dm**2 * rse**2)) / denominator
+def over_batches(values):
+    """Mean of a statistic computed once per batch, shape (batches,), and its standard error from the
+    batches' spread: the batches are independent, the pixels of one image are not (the default film
+    counts each sample in every pixel its filter covers), so Student's t with 15 degrees of freedom."""
+    return values.mean(), values.std(ddof=1) / np.sqrt(len(values))
+
+
+def fractions(batches, ref, ref_se, mask):
+    """Per batch, the least-squares fraction of ``ref`` that the batch's image keeps in ``mask``,
+    Σ d_b r / Σ (r² - s_r²): linear in the image, so their mean is the mean image's fraction."""
+    r, rse = ref[mask], ref_se[mask]
+    return batches[:, mask] @ r / np.sum(r**2 - rse**2)
+
+
+def kept(batches, ref, ref_se, mask):
+    """The mean of ``fractions`` and its standard error: the batches' spread (``over_batches``) and,
+    added in quadrature, the reference's per-pixel errors propagated, Σ d² s_r² / (Σ (r² - s_r²))²
+    (the reference counts each sample in its own pixel only: its pixels are independent)."""
+    k, se = over_batches(fractions(batches, ref, ref_se, mask))
+    r, rse, d = ref[mask], ref_se[mask], batches.mean(axis=0)[mask]
+    return k, np.hypot(se, np.sqrt(np.sum(d**2 * rse**2)) / np.sum(r**2 - rse**2))
 
 
 def floor_along(fractions, ref, masks):
@@ -94,11 +109,26 @@ def floor_along(fractions, ref, masks):
     )
 
 
-def squared_bias(d, se, ref, ref_se=0.0):
-    """Mean over pixels of (d - ref)² - se² - ref_se², an unbiased estimate of the mean squared bias,
-    and its standard error (pixels are independent)."""
-    x = ((d - ref) ** 2 - se**2 - ref_se**2).ravel()
-    return x.mean(), x.std(ddof=1) / np.sqrt(x.size)
+def squared_bias(batches, ref, ref_se=0.0):
+    """Mean over pixels of (d - ref)² - se² - ref_se² (d, se: the batches' mean image and its standard
+    error), an unbiased estimate of the mean squared bias, and its standard error.
+
+    Nonlinear in the batches, so the error is the jackknife's: the estimate without batch b, b = 1..B,
+    and se² = (B - 1) / B Σ_b (x_(b) - mean x_(.))², with Student's t at B - 1 = 15 degrees of freedom.
+    The reference is the same in every x_(b); its own noise e (s_r per pixel, independent pixels) adds
+    Var Σ_p ((b_p - e_p)² - s_r²) / P² = Σ_p (4 b_p² s_r² + 2 s_r⁴) / P² (e normal), b_p² estimated by
+    the pixel's own term, in quadrature."""
+
+    def estimate(b):
+        return np.mean((b.mean(axis=0) - ref) ** 2 - b.var(axis=0, ddof=1) / len(b) - ref_se**2)
+
+    n = len(batches)
+    leave_one_out = np.array([estimate(np.delete(batches, b, axis=0)) for b in range(n)])  # n images
+    jackknife = (n - 1) / n * np.sum((leave_one_out - leave_one_out.mean()) ** 2)
+    d, se = mean_se(batches)
+    per_pixel = (d - ref) ** 2 - se**2 - ref_se**2
+    reference = max(0.0, np.sum(4.0 * per_pixel * ref_se**2 + 2.0 * ref_se**4)) / d.size**2
+    return estimate(batches), np.sqrt(jackknife + reference)
 
 
 # %% [markdown]
@@ -190,31 +220,35 @@ assert np.sum(REF[masks.any(axis=0)] ** 2) > 0.95 * np.sum(REF**2)
 #
 # so the noise terms fall as $1/t$ and what is left when $t$ grows is the bias. Subtracting each
 # pixel's squared standard errors (unbiased estimates of the variances) from its squared error
-# leaves an unbiased estimate of the mean squared bias, with a standard error from the spread over
-# the 4096 independent pixels. For `boundary` and finite differences it should be 0. For `reparam`
-# it is positive, but at these sample counts its noise hides it; section 3 measures the part of
-# its bias that lies along the reference much more precisely, and the figure draws that.
+# leaves an unbiased estimate of the mean squared bias. Its standard error cannot come from the
+# spread over the pixels: the film counts every sample in each pixel its filter covers, so
+# neighbouring pixels share samples and their errors are correlated. The 16 batches share none;
+# the estimate is not linear in them, so the error is the jackknife's (the estimate recomputed
+# without each batch in turn, `squared_bias` in the setup cell), with 15 degrees of freedom. For
+# `boundary` and finite differences it should be 0. For `reparam` it is positive, but at these
+# sample counts its noise hides it; section 3 measures the part of its bias that lies along the
+# reference much more precisely, and the figure draws that.
 
 # %%
 SPP = {"reparam": (16, 64), "boundary": (16, 32), "finite differences": (16, 64)}
-shadow = {}  # (label, spp) -> (mean, stderr, seconds)
+shadow = {}  # (label, spp) -> (per-batch images, seconds)
 for label, method in METHODS.items():
     for spp in SPP[label]:
         batches, seconds, image = run(SCENE, PARAM, method, spp, SEED + spp)
-        shadow[label, spp] = (*mean_se(batches), seconds)
-last = {label: shadow[label, SPP[label][-1]] for label in METHODS}  # each method's largest count
-shadow_bias = {label: squared_bias(*last[label][:2], REF, REF_SE) for label in METHODS}
-for (label, spp), (d, _, seconds) in shadow.items():
-    rmse = np.sqrt(np.mean((d - REF) ** 2))
+        shadow[label, spp] = (batches, seconds)
+last = {label: shadow[label, SPP[label][-1]][0] for label in METHODS}  # each method's largest count
+shadow_bias = {label: squared_bias(last[label], REF, REF_SE) for label in METHODS}
+for (label, spp), (batches, seconds) in shadow.items():
+    rmse = np.sqrt(np.mean((batches.mean(axis=0) - REF) ** 2))
     print(f"{label:>18} {spp:3d} spp: {seconds:5.2f} s, RMSE {rmse:.3f}")
 for label, (b2, b2_se) in shadow_bias.items():
     print(f"{label:>18}: mean squared bias {b2:+.4f} ± {b2_se:.4f}")
 
 # %%
 # check: boundary and finite differences are unbiased over the image: their estimated mean squared
-# bias is within z standard errors of 0 (normal over 4096 pixels; Šidák over the 3 methods);
-# reparam's is not below 0 by more than the same tolerance (its value is reported above)
-q = stats.norm.ppf(1 - sidak(ALPHA, 3) / 2)
+# bias is within t standard errors of 0 (jackknife over the 16 batches: Student t, 15 degrees of
+# freedom; Šidák over the 3 methods); reparam's is not below 0 by more than the same tolerance
+q = quantile(3)
 for label in ("boundary", "finite differences"):
     b2, b2_se = shadow_bias[label]
     assert abs(b2) <= q * b2_se, (label, b2, b2_se)
@@ -230,51 +264,63 @@ assert b2 >= -q * b2_se, (b2, b2_se)
 # k = \frac{\sum_p d_p\, r_p}{\sum_p (r_p^2 - s_{r,p}^2)},
 # $$
 #
-# is 1 for an unbiased method (the reference's own noise $s_r^2$ is taken out of $\sum r^2$), and
-# its standard error follows from both images' per-pixel standard errors (`kept` in the setup
-# cell). The bias along the reference, $(k - 1)\,r$ in each region, is a lower bound of a method's
-# bias (`floor_along`): for `reparam` it is the floor drawn in the error-against-time figure.
+# is 1 for an unbiased method (the reference's own noise $s_r^2$ is taken out of $\sum r^2$). It is
+# linear in the image, so it is computed per batch; its standard error comes from the spread of the
+# 16 batches' fractions (the pixels are correlated, the batches are not) and from the reference's
+# per-pixel standard errors (its pixels are independent: each of its samples counts in its own
+# pixel only), `kept` in the setup cell. The bias along the reference, $(k - 1)\,r$ in each region,
+# is a lower bound of a method's bias (`floor_along`): for `reparam` it is the floor drawn in the
+# error-against-time figure.
 
 # %%
-fractions = {
-    (label, region): kept(*last[label][:2], REF, REF_SE, mask)
+kept_in = {
+    (label, region): kept(last[label], REF, REF_SE, mask)
     for label in METHODS
     for region, mask in REGIONS.items()
 }
-for (label, region), (k, se) in fractions.items():
+for (label, region), (k, se) in kept_in.items():
     print(f"{label:>18} {region:>10}: kept {k:6.1%} ± {se:.1%}")
-shadow_floor = floor_along([fractions["reparam", region] for region in REGIONS], REF, list(REGIONS.values()))
+shadow_floor = floor_along([kept_in["reparam", region] for region in REGIONS], REF, list(REGIONS.values()))
 print(f"reparam: rms bias along the reference {shadow_floor:.3f} per pixel")
 
-# the paper's estimator as published: the light's sharp edges dragged by the emitter rotation
+# the paper's estimator as published: the light's sharp edges dragged by the emitter rotation, with
+# the same seed as the default's render: batch b of both holds the same samples, so the difference of
+# their penumbra fractions is taken per batch (paired; the common reference adds nothing to a
+# difference whose expectation is 0)
 spp = SPP["reparam"][-1]
 dragged, _, _ = run(SCENE, PARAM, "reparam", spp, SEED + spp, emitter_edges=False)
-k_dragged, se_dragged = kept(*mean_se(dragged), REF, REF_SE, REGIONS["penumbra"])
+k_dragged, se_dragged = kept(dragged, REF, REF_SE, REGIONS["penumbra"])
+gain, se_gain = over_batches(
+    fractions(last["reparam"], REF, REF_SE, REGIONS["penumbra"])
+    - fractions(dragged, REF, REF_SE, REGIONS["penumbra"])
+)
 print(f"reparam, emitter_edges=False: penumbra kept {k_dragged:6.1%} ± {se_dragged:.1%}")
+print(f"the edge term keeps {gain:+.1%} ± {se_gain:.1%} more of it (paired over the batches)")
 
 # %%
 # check: boundary and finite differences keep all of the reference in every region: |k - 1| within
 # t standard errors (Student t, 15 degrees of freedom; Šidák over 2 methods x 3 regions + 3 checks of
 # reparam). Without its emitters' edge term, reparam keeps significantly less than all of the
 # penumbra's derivative (1 - k above the same quantile in standard errors); with it (the default), it
-# keeps significantly more than without (the difference above the quantile in its standard error),
+# keeps significantly more than without (the mean of the paired per-batch differences above the
+# quantile in its standard error),
 # and its fraction is consistent with the 98.9 % its docstring documents at many more samples (the
 # residual: mostly the cosine strategy's loss near the light's edge, whose rotation follows the
-# occluder; sphere3d.emitter_probes, Bias). At this notebook's precision (about ± 0.8 %) that last
+# occluder; sphere3d.emitter_probes, Bias). At this notebook's precision (about ± 1.2 %) that last
 # check cannot tell 99 % from 100 %: it rules out a loss of a few % or more, not the documented 1 %.
 # reparam's mean squared bias of section 2 is only checked not to fall below the regions' lower
 # bound (a statement of consistency; at these sample counts its noise hides the bias, section 2)
 q = quantile(2 * len(REGIONS) + 3)
 for label in ("boundary", "finite differences"):
     for region in REGIONS:
-        k, se = fractions[label, region]
+        k, se = kept_in[label, region]
         assert abs(k - 1.0) <= q * se, (label, region, k, se)
 assert (1.0 - k_dragged) / se_dragged > q, (k_dragged, se_dragged)
-k_penumbra, se_penumbra = fractions["reparam", "penumbra"]
-assert (k_penumbra - k_dragged) / np.hypot(se_penumbra, se_dragged) > q, (k_penumbra, k_dragged)
+k_penumbra, se_penumbra = kept_in["reparam", "penumbra"]
+assert gain / se_gain > q, (gain, se_gain)
 assert abs(k_penumbra - 0.989) <= q * se_penumbra, (k_penumbra, se_penumbra)
 b2, b2_se = shadow_bias["reparam"]
-assert b2 >= shadow_floor**2 - stats.norm.ppf(1 - sidak(ALPHA, 2 * len(REGIONS) + 3) / 2) * b2_se
+assert b2 >= shadow_floor**2 - q * b2_se
 print(f"reparam keeps {k_dragged:.1%} ± {se_dragged:.1%} of the penumbra's derivative with the light's")
 print(f"edges dragged, {k_penumbra:.1%} ± {se_penumbra:.1%} with them held fixed")
 
@@ -284,7 +330,7 @@ print(f"edges dragged, {k_penumbra:.1%} ± {se_penumbra:.1%} with them held fixe
 # %%
 panels = ptu.plot_grid(len(REGIONS), titles=[f"{region}: fraction kept" for region in REGIONS])
 for ax, region in zip(panels.axes, REGIONS, strict=True):
-    pt.plot_estimates({label: fractions[label, region] for label in METHODS}, 1.0, of="value",
+    pt.plot_estimates({label: kept_in[label, region] for label in METHODS}, 1.0, of="value",
                       reference_label="unbiased", ax=ax, ylabel="k")  # fmt: skip
 panels
 
@@ -297,7 +343,7 @@ panels
 # %%
 ptu.plot_gradient_panel(
     image,
-    {"reference": REF} | {label: last[label][:2] for label in METHODS},
+    {"reference": REF} | {label: mean_se(last[label]) for label in METHODS},
     title="hard_shadow: d/d occluder.translate.x",
 )
 
@@ -312,7 +358,7 @@ ptu.plot_gradient_panel(
     image,
     {"reference": REF * penumbra}
     | {"reparam, edges dragged": (mean_se(dragged)[0] * penumbra, mean_se(dragged)[1] * penumbra)}
-    | {label: (last[label][0] * penumbra, last[label][1] * penumbra) for label in METHODS},
+    | {label: tuple(x * penumbra for x in mean_se(last[label])) for label in METHODS},
     title="hard_shadow, penumbra only",
 )
 
@@ -324,8 +370,9 @@ ptu.plot_gradient_panel(
 
 # %%
 plot_error_time(
-    {label: ([shadow[label, s][2] for s in SPP[label]],
-             [np.sqrt(np.mean((shadow[label, s][0] - REF) ** 2)) for s in SPP[label]]) for label in METHODS},
+    {label: ([shadow[label, s][1] for s in SPP[label]],
+             [np.sqrt(np.mean((shadow[label, s][0].mean(axis=0) - REF) ** 2)) for s in SPP[label]])
+     for label in METHODS},
     {"reparam": shadow_floor},
     title="hard_shadow: error against time",
 )  # fmt: skip
@@ -423,10 +470,10 @@ triangle = {}
 for label, method in METHODS.items():
     for spp in TRI_SPP:
         batches, seconds, _ = run(tri, TRI_PARAM, method, spp, SEED + 7 * spp)
-        triangle[label, spp] = (*mean_se(batches), seconds)
+        triangle[label, spp] = (batches, seconds)
 film = np.ones(exact.shape, dtype=bool)
-tri_bias = {label: squared_bias(*triangle[label, TRI_SPP[-1]][:2], exact) for label in METHODS}
-tri_kept = kept(*triangle["reparam", TRI_SPP[-1]][:2], exact, np.zeros_like(exact), film)
+tri_bias = {label: squared_bias(triangle[label, TRI_SPP[-1]][0], exact) for label in METHODS}
+tri_kept = kept(triangle["reparam", TRI_SPP[-1]][0], exact, np.zeros_like(exact), film)
 tri_floor = floor_along([tri_kept], exact, [film])
 print(f"largest |dI/dθ| {np.abs(exact).max():.2f}; finite differences' truncation floor {fd_floor:.4f}")
 print(f"reparam keeps {tri_kept[0]:.1%} ± {tri_kept[1]:.1%} of the exact derivative: floor {tri_floor:.3f}")
@@ -436,9 +483,10 @@ for label, (b2, b2_se) in tri_bias.items():
 # %%
 # check: boundary's mean squared bias is within z standard errors of 0, finite differences' within z
 # standard errors of the closed form's truncation floor², reparam's not below its floor² by more
-# (normal over the 64 pixels), and reparam keeps significantly less than all of the exact
-# derivative (1 - k above the quantile in standard errors); Šidák over the 4 comparisons
-q = stats.norm.ppf(1 - sidak(ALPHA, 4) / 2)
+# (jackknife over the 16 batches), and reparam keeps significantly less than all of the exact
+# derivative (1 - k above the quantile in standard errors of its 16 batches' fractions); Student t,
+# 15 degrees of freedom, Šidák over the 4 comparisons
+q = quantile(4)
 b2, b2_se = tri_bias["boundary"]
 assert abs(b2) <= q * b2_se, (b2, b2_se)
 b2, b2_se = tri_bias["finite differences"]
@@ -455,8 +503,9 @@ assert (1.0 - tri_kept[0]) / tri_kept[1] > q, tri_kept
 
 # %%
 plot_error_time(
-    {label: ([triangle[label, s][2] for s in TRI_SPP],
-             [np.sqrt(np.mean((triangle[label, s][0] - exact) ** 2)) for s in TRI_SPP]) for label in METHODS},
+    {label: ([triangle[label, s][1] for s in TRI_SPP],
+             [np.sqrt(np.mean((triangle[label, s][0].mean(axis=0) - exact) ** 2)) for s in TRI_SPP])
+     for label in METHODS},
     {"reparam": tri_floor, "finite differences": fd_floor},
     title="1 px triangle: error against time",
 )  # fmt: skip

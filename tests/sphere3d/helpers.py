@@ -6,7 +6,8 @@ quadrature). From ``test_hard_shadow``: the regions of the ``hard_shadow`` image
 (silhouette, occluder, penumbra, umbra, lit; see that module's docstring), decided by closed
 forms and a grid of camera rays over every pixel's filter footprint. For
 ``test_triangle_closed_form``: the loss of ``reparam``'s cosine-strategy rotations given each kernel
-(:func:`rotation_loss`).
+(:func:`rotation_loss`). For every test of a statistic over several pixels: its standard error from
+the batches (:func:`over_batches`), as the splatted film correlates neighbouring pixels.
 """
 
 from __future__ import annotations
@@ -36,6 +37,22 @@ REGIONS = ("silhouette", "occluder", "penumbra", "umbra", "lit")
 MARGIN = 0.5
 """Pixels of margin around the filter footprint: the grid's spacing (0.25 px) and the
 reference's steps (the edges move up to 0.3 px at θ = ±0.01) must not hide an edge."""
+
+
+def over_batches(per_batch):
+    """Mean and standard error of a statistic computed once per batch, shape (batches,).
+
+    A statistic over several pixels (a region's sum, a paired difference of two methods' sums, a
+    kept fraction against a fixed reference) cannot take its error from the pixels' standard errors
+    as if they were independent: under the splatted film (:mod:`sphere3d.film`) every sample counts
+    in each pixel its filter covers, so neighbouring pixels share samples (and ``boundary``'s edge
+    points). The batches share none (:class:`sphere3d.tasks.ImageTask`; the control variate's pooled
+    scale couples them weakly, a few % of the variance at most: ``ImageTask._control_variate``), so
+    the statistic's value per batch is an i.i.d. sample and its mean has the standard error
+    std(ddof=1) / sqrt(batches): compare with a Student-t quantile at batches - 1 degrees of freedom.
+    """
+    x = np.asarray(per_batch, dtype=np.float64)
+    return float(x.mean()), float(x.std(ddof=1) / np.sqrt(len(x)))
 
 
 def lambert(vertices, normal=(0.0, 0.0, 1.0)):
