@@ -89,7 +89,7 @@ def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int
     for the scatter of the estimated errors), or None if it already is."""
     from flatland.core.bias import REFERENCE_RATIO, reference_spp_needed
 
-    ref_se = float(np.sqrt(np.sum(np.square(reference.derivative_stderr))))
+    ref_se = reference.film_sum().stderr
     ratio = _reference_ratio(gradients, reference)
     if ratio <= REFERENCE_RATIO:
         return None
@@ -98,20 +98,18 @@ def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int
 
 def _reference_ratio(gradients: Mapping[str, Any], reference: Any) -> float:
     """Reference film-sum stderr / the smallest among the methods the bias tests do not flag (a flag
-    already counts the reference's noise in its z); 0 when there is none."""
+    already counts the reference's noise in its z); 0 when there is none. The film sums' standard
+    errors come from the per-batch sums (:meth:`~flatland.core.image.GradientImage.film_sum`)."""
     from flatland.core.bias import Z_FLAG
 
-    def se(g: Any) -> float:
-        return float(np.sqrt(np.sum(np.square(g.derivative_stderr))))
-
+    ref = reference.film_sum()
     judged = []
     for g in gradients.values():
-        z = z_score(
-            float(np.sum(g.derivative)), float(np.sum(reference.derivative)), math.hypot(se(g), se(reference))
-        )
-        if abs(z) <= Z_FLAG and se(g) > 0.0:
-            judged.append(se(g))
-    return se(reference) / min(judged) if judged else 0.0
+        s = g.film_sum()
+        z = z_score(s.total, ref.total, math.hypot(s.stderr, ref.stderr))
+        if abs(z) <= Z_FLAG and s.stderr > 0.0:
+            judged.append(s.stderr)
+    return ref.stderr / min(judged) if judged else 0.0
 
 
 def _sketch(pkg: Package, scene: Any, param: str | None = None) -> dict[str, Any]:
@@ -123,10 +121,9 @@ def _sketch(pkg: Package, scene: Any, param: str | None = None) -> dict[str, Any
 
 
 def _film_sum(g: Any) -> str:
-    """$Σ_j dI_j/dθ$ ± its standard error (pixels estimated independently)."""
-    total = float(np.sum(g.derivative))
-    stderr = float(np.sqrt(np.sum(np.square(g.derivative_stderr))))
-    return f"{total:+.4g} ± {stderr:.2g}"
+    """$Σ_j dI_j/dθ$ ± its standard error (from the per-batch sums: the pixels may be correlated)."""
+    s = g.film_sum()
+    return f"{s.total:+.4g} ± {s.stderr:.2g}"
 
 
 # ------------------------------------------------------------------------------------------------ verbs

@@ -4,7 +4,9 @@ An integral's reference is its closed-form derivative. A scene's is a run of the
 configured reference method (``boundary``, or ``finite_difference`` where the package
 has no boundary method) at a high sample count, cached as ``<cache_dir>/<hash>.npz``
 where the hash covers the sources it depends on, the problem (scene content included),
-the method, its options, the sample count and the seed.
+the method, its options, the sample count and the seed. The file holds the derivative
+image, its per-pixel standard errors and the studied scalar's standard error (for the
+film sum, from the per-batch sums: the pixels' errors may be correlated).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from flatland.app.study_config import Cell, Problem, ReferenceSpec, StudyConfig
-from flatland.app.study_trials import _Calls, _functional, _functional_stderr, _load_scene, _run_one
+from flatland.app.study_trials import _Calls, _functional, _load_scene, _run_one
 from flatland.app.table import method_label
 
 if TYPE_CHECKING:
@@ -30,7 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Reference", "resolve_reference"]
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 # ------------------------------------------------------------------------------------------- reference
@@ -96,11 +98,14 @@ def _cache_key(package: Package, problem: Problem, spec: ReferenceSpec) -> str:
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()[:32]
 
 
-def _compute_reference(calls: _Calls, problem: Problem, spec: ReferenceSpec) -> tuple[np.ndarray, np.ndarray]:
-    """(derivative, derivative_stderr) arrays of one high-sample run."""
+def _compute_reference(
+    calls: _Calls, problem: Problem, spec: ReferenceSpec
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(derivative, derivative_stderr) arrays of one high-sample run and the standard error of the
+    scalar studied (:func:`~flatland.app.study_trials._functional_stderr`)."""
     cell = Cell(-1, spec.method, spec.options, spec.n)
     run = _run_one(calls, problem, cell, spec.seed)
-    return np.asarray(run.derivative_image), np.asarray(run.stderr_image)
+    return np.asarray(run.derivative_image), np.asarray(run.stderr_image), run.derivative_stderr
 
 
 def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None = None) -> Reference:
@@ -123,22 +128,16 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
     if path is not None and path.is_file():
         with np.load(path) as data:
             derivative, stderr = data["derivative"], data["stderr"]
+            scalar_stderr = float(data["scalar_stderr"])
         label += " (cached)"
     else:
-        derivative, stderr = _compute_reference(_Calls.of(config.package), problem, spec)
+        derivative, stderr, scalar_stderr = _compute_reference(_Calls.of(config.package), problem, spec)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
             with os.fdopen(fd, "wb") as f:
-                np.savez(f, derivative=derivative, stderr=stderr)
+                np.savez(f, derivative=derivative, stderr=stderr, scalar_stderr=scalar_stderr)
             os.replace(tmp, path)
     if not problem.is_scene:
-        return Reference(float(derivative), float(stderr), label, n=spec.n)
-    return Reference(
-        _functional(problem, derivative),
-        _functional_stderr(problem, stderr),
-        label,
-        derivative,
-        stderr,
-        spec.n,
-    )
+        return Reference(float(derivative), scalar_stderr, label, n=spec.n)
+    return Reference(_functional(problem, derivative), scalar_stderr, label, derivative, stderr, spec.n)

@@ -40,11 +40,13 @@ def _functional(problem: Problem, image: np.ndarray) -> float:
     return float(image[problem.pixel])
 
 
-def _functional_stderr(problem: Problem, stderr: np.ndarray) -> float:
-    """Standard error of :func:`_functional`, pixels being estimated independently."""
+def _functional_stderr(problem: Problem, image: Any) -> float:
+    """Standard error of :func:`_functional` of a gradient image's derivative: one pixel's, or the
+    film sum's from the per-batch sums (:meth:`~flatland.core.image.GradientImage.film_sum`; the
+    pixels' errors may be correlated, so not the pixels' standard errors in quadrature)."""
     if problem.pixel is None:
-        return float(np.sqrt(np.sum(np.square(stderr))))
-    return float(stderr[problem.pixel])
+        return image.film_sum().stderr
+    return float(np.asarray(image.derivative_stderr)[problem.pixel])  # on the film: _functional checked
 
 
 @dataclass(frozen=True)
@@ -72,12 +74,17 @@ class _Task:
 
 @dataclass(frozen=True)
 class _Run:
+    """One trial: the studied scalar's value and derivative, the derivative's standard error
+    (:func:`_functional_stderr`; the estimate's for an integral), the per-pixel images (scalars
+    for an integral), the samples and seconds it took."""
+
     value: float
     derivative: float
     samples: int
     seconds: float
     derivative_image: np.ndarray | float
     stderr_image: np.ndarray | float
+    derivative_stderr: float
 
 
 @lru_cache(maxsize=4)
@@ -94,7 +101,9 @@ def _run_one(calls: _Calls, problem: Problem, cell: Cell, seed: int) -> _Run:
             problem.integral, problem.theta, method=cell.method, n=cell.n, seed=seed, **options
         )
         seconds = time.perf_counter() - start
-        return _Run(e.value, e.derivative, e.n, seconds, e.derivative, e.derivative_stderr)
+        return _Run(
+            e.value, e.derivative, e.n, seconds, e.derivative, e.derivative_stderr, e.derivative_stderr
+        )
     scene = _load_scene(calls.load_scene, problem.scene)
     start = time.perf_counter()
     g = calls.render_gradient(scene, problem.param, method=cell.method, spp=cell.n, seed=seed, **options)
@@ -102,7 +111,13 @@ def _run_one(calls: _Calls, problem: Problem, cell: Cell, seed: int) -> _Run:
     value = _functional(problem, np.asarray(g.value))
     derivative = _functional(problem, np.asarray(g.derivative))
     return _Run(
-        value, derivative, cell.n * int(np.size(g.derivative)), seconds, g.derivative, g.derivative_stderr
+        value,
+        derivative,
+        cell.n * int(np.size(g.derivative)),
+        seconds,
+        g.derivative,
+        g.derivative_stderr,
+        _functional_stderr(problem, g),
     )
 
 

@@ -5,7 +5,10 @@ Two tests, both against a reference with its own standard error:
 film sum (the studies' functional)
     $z = (S - S_{ref}) / \sqrt{se^2 + se_{ref}^2}$, S the sum over the film (or the studied
     scalar), computed by :func:`flatland.core.stats.z_score` (the project's one rounding
-    policy); flagged when |z| > :data:`Z_FLAG` = 3.3 (two-sided normal level 99.9 %).
+    policy); flagged when |z| > :data:`Z_FLAG` = 3.3 (two-sided normal level 99.9 %). A film
+    sum's se is the spread of the per-batch sums
+    (:meth:`~flatland.core.image.GradientImage.film_sum`), not the pixels' standard errors in
+    quadrature: a splatted film and the edge points of ``boundary`` correlate neighbouring pixels.
 per pixel (image outputs)
     $z_j = (g_j - r_j) / \sqrt{se_j^2 + se_{ref,j}^2}$ for each of the m pixels whose
     method standard error is positive (a pixel where every sample of the method

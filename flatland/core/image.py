@@ -5,10 +5,17 @@ in sphere3d. Standard errors come from independent batches of samples per pixel:
 a renderer estimates every pixel once per batch and :meth:`Image.from_batches` /
 :meth:`GradientImage.from_batches` turn the per-batch arrays into the mean and its
 standard error ``std(ddof=1) / sqrt(batches)``.
+
+A sum over pixels takes its standard error from the batches too (:class:`FilmSum`,
+:func:`film_sum_stderr`): the pixels of one batch may share samples (sphere3d's
+splatted film counts each camera sample in every pixel its filter covers; an edge
+point of ``boundary`` reaches several pixels), so their errors are correlated and
+adding the pixels' standard errors in quadrature is wrong; the batches share none.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -17,14 +24,16 @@ from typing import Any
 import numpy as np
 
 from flatland.core.stats import spread
-from flatland.core.validate import ValidationError, check_int
+from flatland.core.validate import ValidationError, check_choice, check_int
 
 __all__ = [
     "DEFAULT_MAX_BATCHES",
     "BatchSummary",
+    "FilmSum",
     "GradientImage",
     "Image",
     "check_finite_result",
+    "film_sum_stderr",
     "relative_error",
     "resolve_batches",
     "summarize_batches",
@@ -83,6 +92,48 @@ def summarize_batches(per_batch: np.ndarray) -> BatchSummary:
     return BatchSummary(mean, spread(per_batch.std(axis=0, ddof=1), mean) / np.sqrt(b))
 
 
+def film_sum_stderr(per_batch: np.ndarray) -> float:
+    """Standard error of the sum over all pixels, from per-batch estimates of shape ``(batches, *film)``.
+
+    Each batch's film sum is an i.i.d. sample (the batches share no samples), so the
+    mean's standard error is ``std(ddof=1) / sqrt(batches)`` of the per-batch sums,
+    whatever the correlation between one batch's pixels; infinite with one batch.
+    Rounding-level spread is no variance (:func:`flatland.core.stats.spread`, the
+    rule of :func:`summarize_batches`), at the scale of the summed magnitudes.
+    """
+    per_batch = np.asarray(per_batch, dtype=np.float64)
+    b = per_batch.shape[0]
+    if b < 2:
+        return math.inf
+    flat = per_batch.reshape(b, -1)
+    sums = flat.sum(axis=1)
+    # a sum's rounding grows with Σ_j |x_j|, not |Σ_j x_j| (a derivative's signed pixels cancel); at
+    # this scale pixels with zero spread (each under ROUNDING |mean_j|) give a sum with zero spread
+    scale = float(np.abs(flat).sum(axis=1).mean())
+    return float(spread(sums.std(ddof=1), scale)) / math.sqrt(b)
+
+
+@dataclass(frozen=True)
+class FilmSum:
+    """The sum of an image over all pixels (Σ_j I_j or Σ_j dI_j/dθ) and its standard error.
+
+    Attributes
+    ----------
+    total : float
+        Σ over the film's pixels of the per-pixel estimates.
+    stderr : float
+        Its standard error: from the per-batch sums (:func:`film_sum_stderr`) when
+        ``from_batches``, else the pixels' standard errors added in quadrature.
+    from_batches : bool
+        False for an image built by hand without its batches' sums: the quadrature
+        is correct only when the pixels are estimated independently.
+    """
+
+    total: float
+    stderr: float
+    from_batches: bool
+
+
 def relative_error(g: np.ndarray, g_ref: np.ndarray) -> float:
     r"""The gradient-image error metric $\mathrm{mean}|g - g_{ref}| / \max|g_{ref}|$.
 
@@ -120,6 +171,10 @@ class Image:
         Number of independent batches behind ``stderr``.
     scene : str
         Name of the scene.
+
+    The pixels' errors may be correlated (a splatted film), so ``stderr`` in quadrature is
+    no sum's standard error; the film sum of I with its own, from the batches, is
+    ``GradientImage.film_sum("value")`` (:meth:`GradientImage.film_sum`).
     """
 
     value: np.ndarray
@@ -162,6 +217,11 @@ class GradientImage:
         Samples per pixel, seed, number of batches.
     scene : str
         Name of the scene.
+    value_sum_stderr, derivative_sum_stderr : float or None
+        Standard errors of the film sums Σ_j I_j and Σ_j dI_j/dθ from the per-batch
+        sums (:func:`film_sum_stderr`), set by :meth:`from_batches`; None for an image
+        built without its batches: then :meth:`film_sum` adds the pixels' standard
+        errors in quadrature, which holds only for independently estimated pixels.
     """
 
     value: np.ndarray
@@ -175,6 +235,8 @@ class GradientImage:
     batches: int
     options: Mapping[str, Any] = field(default_factory=dict)
     scene: str = ""
+    value_sum_stderr: float | None = None
+    derivative_sum_stderr: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", _frozen(self.options))
@@ -213,7 +275,27 @@ class GradientImage:
             batches=np.shape(values)[0],
             options=options or {},
             scene=scene,
+            value_sum_stderr=film_sum_stderr(values),
+            derivative_sum_stderr=film_sum_stderr(derivatives),
         )
+
+    def film_sum(self, of: str = "derivative") -> FilmSum:
+        """Σ over the film of ``of`` ("derivative": dI/dθ, or "value": I) with its standard error.
+
+        The standard error is the one :meth:`from_batches` computed from the per-batch
+        sums, valid however the pixels are correlated. An image built by hand without
+        it (``*_sum_stderr`` None) gets the pixels' standard errors in quadrature,
+        ``sqrt(Σ_j se_j²)``, flagged ``from_batches=False``: correct only when the pixels
+        are estimated independently (never NaN: infinite when a pixel's is).
+        """
+        if check_choice("of", of, ("value", "derivative")) == "value":
+            pixels, pixel_se, sum_se = self.value, self.value_stderr, self.value_sum_stderr
+        else:
+            pixels, pixel_se, sum_se = self.derivative, self.derivative_stderr, self.derivative_sum_stderr
+        total = float(np.sum(pixels))
+        if sum_se is not None:
+            return FilmSum(total, float(sum_se), True)
+        return FilmSum(total, float(np.sqrt(np.sum(np.square(pixel_se)))), False)
 
     def error_vs(self, reference: GradientImage | np.ndarray) -> float:
         """:func:`relative_error` of this derivative against a reference gradient image."""

@@ -96,3 +96,60 @@ def test07_a_zero_spread_estimate_is_exact_to_rounding_not_bit_for_bit():
     assert e.derivative_stderr == 0.0 and e.z_score(value) == 0.0
     assert z_score(value * (1 + 1e-9), value, 0.0) == -np.inf  # beyond rounding (value < 0): significant
     assert z_score(1.0, 3.0, 0.5) == -4.0
+
+
+def test08_film_sum_stderr_comes_from_the_per_batch_sums():
+    """Σ over the film's pixels, its standard error std(ddof=1) / sqrt(batches) of the per-batch sums.
+
+    Perfectly correlated pixels (every pixel of a batch moves by the same z_b): the film sum's
+    standard error is P s for P pixels of standard error s each, sqrt(P) times the quadrature
+    sqrt(P) s. Independent normal pixels (B batches, P pixels, σ = 1): with A = (B - 1) S²_sum / P
+    ~ χ²(B - 1) and the pixels' spread orthogonal to the all-ones direction W ~ χ²((P - 1)(B - 1)),
+    independent of A, (se_batches / se_quadrature)² / P = A / (A + W) ~ Beta((B - 1) / 2,
+    (P - 1)(B - 1) / 2) exactly: the check is that it lies in that law's central 1 - 1e-3 interval.
+    """
+    from scipy import stats
+
+    rng = np.random.default_rng(8)
+    b, shape = 16, (3, 5)
+    p = int(np.prod(shape))
+    offsets = rng.normal(size=shape)  # a fixed image, plus one shared deviation per batch
+    correlated = offsets + rng.normal(size=(b, 1, 1))
+    g = GradientImage.from_batches(correlated, correlated, param="a.scale", method="naive", spp=64, seed=1)
+    quadrature = np.sqrt(np.sum(g.derivative_stderr**2))
+    s = g.film_sum()
+    assert s.from_batches and s.total == pytest.approx(correlated.mean(axis=0).sum(), rel=1e-14)
+    assert s.stderr == pytest.approx(np.sqrt(p) * quadrature, rel=1e-12)
+    assert g.film_sum("value").stderr == s.stderr == g.derivative_sum_stderr
+
+    b, shape = 16, (40, 50)
+    p = int(np.prod(shape))
+    independent = rng.normal(size=(b, *shape))
+    g = GradientImage.from_batches(independent, independent, param="a.scale", method="naive", spp=64, seed=1)
+    ratio2 = (g.film_sum().stderr / np.sqrt(np.sum(g.derivative_stderr**2))) ** 2 / p
+    low, high = stats.beta.ppf([0.0005, 0.9995], (b - 1) / 2, (p - 1) * (b - 1) / 2)
+    print(f"(se_batches / se_quadrature)² / P = {ratio2:.3g} in [{low:.3g}, {high:.3g}]")
+    assert low <= ratio2 <= high
+
+
+def test09_a_film_sum_without_batches_is_the_quadrature_flagged_never_nan():
+    """An image built by hand (no per-batch sums) adds its pixels' standard errors in quadrature,
+    correct only for independent pixels, and says so (``from_batches`` False); one batch gives an
+    infinite standard error; pixels with rounding-level spread give exactly 0 even when they cancel;
+    a film sum pickles (study trials run in worker processes)."""
+    import pickle
+
+    d = np.array([1.0, -2.0, 4.0])
+    g = GradientImage(d, d, np.full(3, 0.5), np.array([0.1, 0.2, 0.2]), "a.scale", "naive", 4, 0, 4)
+    s = g.film_sum()
+    assert (s.total, s.stderr, s.from_batches) == (3.0, pytest.approx(0.3, rel=1e-15), False)
+    assert g.film_sum("value").stderr == pytest.approx(np.sqrt(3) * 0.5, rel=1e-15)
+    with pytest.raises(ValueError, match=r"^of"):
+        g.film_sum("values")
+    one = GradientImage.from_batches(d[None], d[None], param="a.scale", method="naive", spp=4, seed=0)
+    assert one.film_sum().stderr == np.inf and one.film_sum().from_batches
+    # pixels ±1e3 constant over the batches up to ulps: a sum ~1e-13, its spread rounding at 1e3's scale
+    ulps = np.array([[1e3, -1e3 + 1e-13]] * 8) + np.spacing(1e3) * (np.arange(8)[:, None] % 3)
+    flat = GradientImage.from_batches(ulps, ulps, param="a.scale", method="naive", spp=8, seed=0)
+    assert np.all(flat.derivative_stderr == 0.0) and flat.film_sum().stderr == 0.0
+    assert pickle.loads(pickle.dumps(s)) == s

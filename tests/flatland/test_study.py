@@ -17,6 +17,7 @@ from flatland.__main__ import PACKAGE
 from flatland.app import study, study_reference
 from flatland.app.study import load_config, read_csv, run_study
 from flatland.app.study_config import StudyConfig, trial_seed
+from flatland.core.image import GradientImage
 from flatland.core.stats import normal_quantile
 from flatland.core.validate import ValidationError
 from flatland.integrals import get_integral
@@ -243,9 +244,8 @@ def test11_scene_cells_study_the_film_sum_or_one_pixel_of_the_gradient_image(tmp
 
     assert np.array_equal(result.reference.image, ref.derivative)
     assert result.reference.derivative == functional(ref.derivative)
-    expected_stderr = (
-        np.sqrt(np.sum(ref.derivative_stderr**2)) if pixel is None else ref.derivative_stderr[pixel]
-    )
+    # the film sum's standard error from the batches' sums (the boundary edge term correlates pixels)
+    expected_stderr = ref.derivative_sum_stderr if pixel is None else ref.derivative_stderr[pixel]
     assert result.reference.stderr == pytest.approx(expected_stderr, rel=1e-14)
     assert row.derivatives == tuple(functional(g.derivative) for g in trials)
     assert row.samples == 4 * 16
@@ -324,3 +324,65 @@ def test16_a_method_judged_by_its_own_kind_of_reference_is_noted():
     assert note.startswith("finite_difference is the reference's own method") and "O(h²)" in note
     assert own_method_note(["naive", "reparam"], "finite_difference") == ""
     assert "O(h²)" not in own_method_note(["boundary"], "boundary")
+
+
+def _film(derivative, pixel_stderr, sum_stderr, method="reparam"):
+    """A gradient image of 10 pixels whose film sum's standard error is ``sum_stderr`` (None: not given)."""
+    return GradientImage(
+        value=np.ones(10), derivative=np.broadcast_to(derivative, 10).astype(np.float64),
+        value_stderr=np.full(10, 0.1), derivative_stderr=np.full(10, pixel_stderr),
+        param="occluder.translate.x", method=method, spp=16, seed=0, batches=16, scene="t",
+        derivative_sum_stderr=sum_stderr,
+    )  # fmt: skip
+
+
+def test17_the_error_table_judges_film_sums_by_their_batch_standard_errors():
+    """Film sum 10 against 0 (pixels ±0.5): its pixels' standard errors 0.1 in quadrature give 0.32
+    and z = 31 (flagged BIASED), the batches' sums (pixels correlated) 5.0 and z = +2.0 (not flagged):
+    the table, the reference's ratio and the printed film sum all use the batches' 5.0."""
+    from flatland.app.commands import _film_sum, _reference_ratio
+    from flatland.app.table import error_table
+
+    zero_sum = np.tile([0.5, -0.5], 5)
+    method = _film(1.0, 0.1, 5.0)
+    reference = _film(zero_sum, 0.01, 0.05, method="boundary")
+    table = error_table({"reparam": method}, {"reparam": 1.0}, reference)
+    row = next(line for line in table.splitlines() if line.startswith("reparam"))
+    assert "BIASED" not in row and row.split()[2] == "+2.0" and "+10 ± 5" in row
+    assert _reference_ratio({"reparam": method}, reference) == pytest.approx(0.05 / 5.0, rel=1e-15)
+    assert _film_sum(method) == "+10 ± 5"
+    # the same images without their batch sums: the quadrature, z = 10 / 0.32
+    assert "BIASED" in error_table(
+        {"reparam": _film(1.0, 0.1, None)}, {"reparam": 1.0}, _film(zero_sum, 0.01, None)
+    )
+
+
+def test18_a_scene_reference_caches_its_film_sums_standard_error_from_the_batches(tmp_path, monkeypatch):
+    """The cached reference reloads the film sum's standard error it stored: the render's, from the
+    per-batch sums, not the pixels' in quadrature (measured: 0.75 against 0.47, the boundary edge
+    term correlating pixels). A trial's run carries it too, and pickles (worker processes)."""
+    import pickle
+
+    from flatland import render_gradient
+    from flatland.app.study_trials import _Calls, _run_one
+
+    config = StudyConfig.from_dict(
+        {"problem": {"scene": "shadow", "param": "occluder.translate.x"}, "methods": [{"method": "naive"}],
+         "spp": 4, "trials": 2, "seed": 5, "reference": {"spp": 32, "seed": 9}}, package=PACKAGE
+    )  # fmt: skip
+    first = study_reference.resolve_reference(config, tmp_path)
+    ref = render_gradient("shadow", "occluder.translate.x", "boundary", spp=32, seed=9)
+    quadrature = float(np.sqrt(np.sum(ref.derivative_stderr**2)))
+    print(f"film sum stderr: batches {first.stderr:.3f}, quadrature {quadrature:.3f}")
+    assert first.stderr == ref.film_sum().stderr == ref.derivative_sum_stderr != quadrature
+
+    def fail(*args):
+        raise AssertionError("the cached reference should have been used")
+
+    monkeypatch.setattr(study_reference, "_compute_reference", fail)
+    second = study_reference.resolve_reference(config, tmp_path)
+    assert second.source.endswith("(cached)") and second.stderr == first.stderr
+    assert np.array_equal(second.image_stderr, ref.derivative_stderr)
+    run = _run_one(_Calls.of(PACKAGE), config.problem, config.cells[0], 5)
+    naive = render_gradient("shadow", "occluder.translate.x", "naive", spp=4, seed=5)
+    assert pickle.loads(pickle.dumps(run)).derivative_stderr == naive.derivative_sum_stderr

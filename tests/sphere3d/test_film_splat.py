@@ -135,3 +135,26 @@ def test07_box_filter_splats_nowhere_else():
         GRADIENT_METHODS.run("naive", _task(16, 9, film=f, kind="box")) for f in ("pixel", "splat")
     )
     assert np.array_equal(pixel.value, splat.value) and np.array_equal(pixel.derivative, splat.derivative)
+
+
+def test08_the_film_sums_standard_error_is_the_spread_of_the_batches_sums():
+    """A splatted render's film sums carry std(ddof=1) / sqrt(batches) of the per-batch sums.
+
+    ``shadow`` at 12 × 12 pixels, ``reparam``, 16 spp in 16 batches: the per-batch images come from
+    the task itself (the same samples: the render's means are theirs bit for bit), their sums' spread
+    is the render's film-sum standard error to rounding (rel 1e-12). The splatted film correlates
+    neighbouring pixels, so the pixels' standard errors in quadrature are too small: measured for the
+    derivative's sum, seeds 1-8, 1.1-1.9 × (mean 1.6; seed 3: 1.21 ×, which fails the equality here).
+    """
+    d = s3.load_scene("shadow").to_dict()
+    d["camera"].update(width=12, height=12)
+    g = s3.render_gradient(d, "occluder.translate.x", method="reparam", spp=16, seed=3)
+    tally = GRADIENT_METHODS.run("reparam", ImageTask(s3.load_scene(d), "occluder.translate.x", 16, 3, 16))
+    assert np.array_equal(tally.derivative.mean(axis=0), g.derivative) and g.batches == 16
+    for of, per_batch in (("value", tally.value), ("derivative", tally.derivative)):
+        sums = per_batch.sum(axis=(1, 2))
+        s = g.film_sum(of)
+        assert s.from_batches and s.total == pytest.approx(sums.mean(), rel=1e-12)
+        assert s.stderr == pytest.approx(sums.std(ddof=1) / math.sqrt(16), rel=1e-12)
+    quadrature = math.sqrt(np.sum(g.derivative_stderr**2))
+    print(f"film sum {g.film_sum().total:+.3f} ± {g.film_sum().stderr:.3f}, quadrature {quadrature:.3f}")
