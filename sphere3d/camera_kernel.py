@@ -36,6 +36,12 @@ sample rather than somewhere on the pixel's footprint: two edges or a corner in 
 footprint are followed by different samples, and a silhouette a pixel or two wide is not
 missed by a ring wider than itself.
 
+Where a ring sees a moving silhouette cross a static edge (the ground's far edge behind an
+occluder), the rotation follows their crossing instead of the silhouette point
+(:mod:`sphere3d.junctions`, the ``reparam`` option ``film_junctions``): one rotation, locally a
+translation of the film, keeps both edges where a rotation following the silhouette drags the
+static one.
+
 Bias
 ----
 Measured against the closed forms of :mod:`sphere3d.closed_form` by
@@ -129,6 +135,7 @@ from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import FilmTransform
+from sphere3d.junctions import junction_rotation
 from sphere3d.probes import follow_probes, ring_offsets
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
@@ -185,6 +192,7 @@ def film_transform(
     spread: float,
     refine: int,
     plane: bool = True,
+    junctions: bool = True,
 ) -> FilmTransform:
     r"""Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
 
@@ -209,6 +217,9 @@ def film_transform(
         The identity where every probe of a kernel hits one plane of a flat-shaded shape
         (:func:`one_plane`; the ``reparam`` option ``film_one_plane``, module docstring, Noise),
         while the camera stands still.
+    junctions : bool, optional
+        Where a ring sees a moving silhouette cross a static edge, follow their crossing
+        (:mod:`sphere3d.junctions`).
 
     Returns
     -------
@@ -242,6 +253,12 @@ def film_transform(
         snap = silhouette_snap(state, centre[rows], 2.0 * spread * sigma)
         o = cam.origin
         sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap)
+        if junctions:  # a moving silhouette across a static edge: follow their crossing (sphere3d.junctions)
+            at, crossing = junction_rotation(
+                state, o, d, hits, moving, centre[rows], 2.0 * spread * sigma, refine
+            )
+            sub.target[at] = crossing.target
+            sub.active[at] = crossing.active
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
     first, second = slice(0, n), slice(n, 2 * n)  # views, not copies

@@ -168,13 +168,17 @@ SHARED_OPTIONS = {
 """Gradient methods both packages have, and their options in order (2D-only options aside)."""
 ONLY_2D_OPTIONS: dict[str, tuple[str, ...]] = {}
 """Options flatland's methods have beyond the shared ones (none: both have the film kernel ``kappa_film``)."""
-ONLY_3D_OPTIONS = {"boundary": ("rate", "secondary"), "reparam": ("emitter_edges", "film_one_plane")}
+ONLY_3D_OPTIONS = {
+    "boundary": ("rate", "secondary"),
+    "reparam": ("emitter_edges", "film_one_plane", "film_junctions"),
+}
 """Options sphere3d's methods have beyond the shared ones (flatland's boundary terms are exact
 sums over endpoints and tangent points; sphere3d's are sampled along edges at a ``rate`` on the
 film and ``secondary`` times per shading point; flatland's lights have no area sampled in the
 reparameterized emitter strategy, whose edges sphere3d's ``emitter_edges`` term holds fixed;
 flatland's film probes already take the identity when they all see one primitive, which
-``film_one_plane`` extends to one plane of a flat-shaded mesh)."""
+``film_one_plane`` extends to one plane of a flat-shaded mesh; a 1D film has no T-junctions,
+where ``film_junctions`` follows a moving silhouette across a static edge)."""
 FD_STEP = {"flatland": 1e-3, "sphere3d": 1e-2}
 """Default finite-difference steps h, documented (with the reason) in each method's docstring."""
 

@@ -21,7 +21,12 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
    polygon formula (:func:`projected_solid_angle`), Dual-aware, so its derivative comes
    with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's $E = L Φ$.
 
-Both are written from the scene's definition (camera frame, pixel mapping, filter
+A third scene adds a static black triangle behind the moving one (:func:`junction_scene`): its
+camera image (:func:`junction_image`) is the filter integrated over the union of the two, whose
+derivative carries the two T-junctions where the moving edges cross the static one
+(:mod:`sphere3d.junctions`), by clipping on Duals (:func:`clip_convex`).
+
+All are written from the scene's definition (camera frame, pixel mapping, filter
 profiles, shape transform), not from the estimators' code. The scenes the tests and
 ``benchmarks/bench_reparam_bias.py`` use are built by :func:`pinhole_triangle_scene` and
 :func:`sky_triangle_scene`; :func:`share_lost` measures the share of an exact derivative an
@@ -40,6 +45,7 @@ from sphere3d.closed_form.film import (
     triangle_image,
     triangle_vertices,
 )
+from sphere3d.closed_form.junction import clip_convex, junction_image
 from sphere3d.closed_form.lambert import (
     occluded_sky_irradiance,
     polygon_irradiance,
@@ -49,6 +55,7 @@ from sphere3d.closed_form.scenes import (
     PIXEL,
     TRIANGLE_SHAPE,
     ShareLost,
+    junction_scene,
     pinhole_triangle_scene,
     share_lost,
     sky_triangle_scene,
@@ -60,9 +67,12 @@ __all__ = [
     "TRIANGLE_SHAPE",
     "ShareLost",
     "TriangleImage",
+    "clip_convex",
     "filter_cdf_1d",
     "filter_kinks",
     "filter_profile_1d",
+    "junction_image",
+    "junction_scene",
     "occluded_sky_irradiance",
     "pinhole_triangle_scene",
     "polygon_filter_derivative",

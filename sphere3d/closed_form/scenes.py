@@ -15,6 +15,7 @@ __all__ = [
     "PIXEL",
     "TRIANGLE_SHAPE",
     "ShareLost",
+    "junction_scene",
     "pinhole_triangle_scene",
     "share_lost",
     "sky_triangle_scene",
@@ -61,6 +62,30 @@ def pinhole_triangle_scene(size: float, width: int = 16, filter: str = "gaussian
             }
         ],
     }
+
+
+def junction_scene(size: float = 6.0, width: int = 16, filter: str = "gaussian", sky: float = 1.0) -> dict:
+    r""":func:`pinhole_triangle_scene`'s triangle ``tri`` in front of a static black triangle ``wall``.
+
+    The wall lies 0.5 behind the triangle (depth 4.5) and covers the lower part of the film below
+    an edge a few degrees off the horizontal, 0.4 px below the optical axis: the triangle's two
+    slanted edges cross it near the film's centre, two T-junctions of a moving and a static edge
+    (:func:`~sphere3d.closed_form.junction.junction_image`); its lower edge lies on the wall, in
+    front of black, no discontinuity at all.
+    """
+    scene = pinhole_triangle_scene(size, width, filter, sky)
+    scene["name"] = f"junction_{size:g}px"
+    edge = -0.4 * PIXEL * 4.5 / 4.0  # 0.4 px below the axis at the wall's depth
+    scene["shapes"].append(
+        {
+            "name": "wall",
+            "type": "mesh",
+            "vertices": [[-3.0, edge + 0.1, 0.5], [3.0, edge - 0.1, 0.5], [0.1, -6.0, 0.5]],
+            "faces": [[0, 1, 2]],
+            "albedo": 0.0,
+        }
+    )
+    return scene
 
 
 def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:

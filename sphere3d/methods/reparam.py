@@ -122,6 +122,9 @@ class ReparamTransforms:
         The identity for a camera sample whose film probes all hit one plane of a
         flat-shaded shape (:func:`~sphere3d.camera_kernel.one_plane`; module
         :mod:`sphere3d.camera_kernel`, Noise).
+    film_junctions : bool
+        Where a camera sample's film probes see a moving silhouette cross a static edge,
+        follow their crossing (:mod:`sphere3d.junctions`).
     """
 
     kappa: float | None
@@ -132,12 +135,14 @@ class ReparamTransforms:
     paired: bool
     emitter_edges: bool = True
     film_one_plane: bool = True
+    film_junctions: bool = True
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
         return film_transform(
-            state, x, y, draws, self.kappa_film, self.probes, self.spread, self.refine, self.film_one_plane
-        )
+            state, x, y, draws, self.kappa_film, self.probes, self.spread, self.refine, self.film_one_plane,
+            self.film_junctions,
+        )  # fmt: skip
 
     def emitter(self, shading: Shading) -> Rotation:
         """Emitter sampling: one rotation per shading point from shadow probes (Sec. 4.3), following
@@ -249,6 +254,7 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("paired", False, check_bool),
     Option("emitter_edges", True, check_bool),
     Option("film_one_plane", True, check_bool),
+    Option("film_junctions", True, check_bool),
 )
 def reparam(
     task: ImageTask | PointTask,
@@ -260,6 +266,7 @@ def reparam(
     paired: bool,
     emitter_edges: bool,
     film_one_plane: bool,
+    film_junctions: bool,
 ) -> Tally:
     r"""Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
@@ -312,10 +319,10 @@ def reparam(
     ================  ===========================  ===========================
     region            sphere occluder              cube occluder
     ================  ===========================  ===========================
-    penumbra          98.9 ± 0.2 % kept            99.8 ± 0.2 % kept
-    silhouette        97.0 ± 0.8 % kept            97.7 ± 0.5 % kept
-    occluder          99 ± 2.5 % kept              99.3 ± 0.9 % kept
-    bias floor        0.058 (per-pixel 0.086)      0.074 (per-pixel 0.092)
+    penumbra          98.9 ± 0.3 % kept            99.8 ± 0.3 % kept
+    silhouette        99.7 ± 0.5 % kept            99.4 ± 0.5 % kept
+    occluder          99.2 ± 1.4 % kept            99.3 ± 0.9 % kept
+    bias floor        0.028                        0.026
     ================  ===========================  ===========================
 
     How it got there (bias floor sphere / cube): 0.31 / 0.38 as published, the emitter
@@ -324,7 +331,10 @@ def reparam(
     0.088 / 0.155; the identity on one face of the cube (``film_one_plane``), cube 0.109; the
     emitter rotation following the shadow edge between a shadowed and a lit probe, with probes
     along the light's edges (:mod:`sphere3d.emitter_probes`), 0.035 / 0.018 on the same 2 seeds,
-    0.086 / 0.092 on 6 (splatted, the steadier estimate: 0.058 / 0.074). The old rule
+    0.086 / 0.092 on 6 (splatted, the steadier estimate: 0.058 / 0.074); the film kernels following
+    the junction where the occluder's silhouette crosses the ground's far edge
+    (:mod:`sphere3d.junctions`, ``film_junctions``), 0.028 / 0.026 (splatted; the silhouette kept
+    97.0 ± 0.8 / 97.7 ± 0.5 % before). The old rule
     (the mean occluded probe hit) kept 98.4 / 102.9 % of the penumbra only because point-by-point
     errors of -45 % to +60 % cancelled. That rule's replacement costs 60-80 % more CPU time per
     image (process time, old and new alternating in one run: 0.95-1.25 → 1.69-1.96 s per 64 spp)
@@ -332,15 +342,15 @@ def reparam(
     idle 2-core machine (``make bench``, two runs), RMSE at 16 / 64 / 256 spp 0.96 / 0.49 / 0.26 and
     1.21 / 0.60 / 0.30 with the per-pixel film (``film="pixel"``); with the splatted film
     (:mod:`sphere3d.film`, since the default) 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15. With the
-    per-pixel film the fractions in the table were 99.0 ± 0.3 / 99.8 ± 0.3 % (penumbra), 98.1 ± 1.4
+    per-pixel film, before the junctions, the fractions were 99.0 ± 0.3 / 99.8 ± 0.3 % (penumbra), 98.1 ± 1.4
     / 99.3 ± 1.0 % (silhouette), 109 ± 6 / 98.4 ± 1.9 % (occluder).
     What remains in the penumbra is the cosine strategy's loss near the light's edge (its rotation
     follows the occluder and drags that edge: -1 to -3.5 % of the derivative at penumbra points)
     and, on the cube, two shadow edges at different depths that one rotation cannot both follow
     (+7 % at one point).
-    The silhouette loss sits where the occluder's silhouette and the ground's far edge
-    share a film kernel: one rotation cannot follow two edges. On the cube's
-    faces the error has both signs (the edges between faces inside a footprint); the lit
+    The silhouette loss sat where the occluder's silhouette and the ground's far edge
+    share a film kernel, until the kernels followed their crossing (:mod:`sphere3d.junctions`). On
+    the cube's faces the error has both signs (the edges between faces inside a footprint); the lit
     ground and the umbra have none. ``tests/sphere3d/test_hard_shadow.py`` tests these
     fractions.
 
@@ -359,5 +369,7 @@ def reparam(
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
     return task.evaluate(
         variable(0.0),
-        ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired, emitter_edges, film_one_plane),
+        ReparamTransforms(
+            kappa, kappa_film, probes, spread, refine, paired, emitter_edges, film_one_plane, film_junctions
+        ),
     )

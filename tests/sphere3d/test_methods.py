@@ -43,6 +43,7 @@ def test01_api_exports_and_methods():
         "paired": False,
         "emitter_edges": True,
         "film_one_plane": True,
+        "film_junctions": True,
     }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 

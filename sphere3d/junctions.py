@@ -1,0 +1,195 @@
+r"""Where a moving silhouette meets a static edge on the film: the junction a film kernel follows.
+
+A film kernel (:mod:`sphere3d.camera_kernel`) whose probes see a moving shape and two different
+static things (the ground and the black sky beyond its far edge, say) holds two discontinuities:
+the moving silhouette and the static edge. One rotation per kernel, locally a translation of
+the film, cannot follow the one and hold the other still (Loubet et al. 2019, Sec. 4.1: one
+rotation per integral); following the silhouette drags the static edge, and the kernel's
+samples lose or gain the static edge's term. Near the point J where the two edges' images
+cross (a T-junction), one translation does both to first order: J's own velocity. It lies
+along the static edge (which stays on its line) and its component across the moving edge is
+that edge's normal velocity (the moving line stays on J). Seen from the camera at o, J's
+direction is the line shared by the two planes through o that hold each edge,
+$j = ((A - o) × (B - o)) × ((C - o) × (D - o))$, A B the static edge, C D the moving one,
+their ends attached to their shapes (Duals: the tangent of j is J's motion, the camera's
+included). The film kernel follows j instead of the point the
+probe pair chose (:func:`junction_rotation`).
+
+Each edge is found as the silhouette is (:func:`~sphere3d.probes.bisect_silhouette`, then
+:func:`~sphere3d.snaps.edge_snap` onto the exit edge of the bisected hit's triangle): the moving
+one between the closest pair of a probe on a moving triangle and one that is not; the static
+one between the closest pair of static probes that see different things (a miss counts as a
+thing), the nearer shape's triangle holding the edge, each bisection ray having to see one of
+the two (seeing a moving triangle instead abandons the row). A row is followed at its junction
+only where both edges are found (a corner of either is left to the single-edge rule) and J lies
+within ``radius`` pixels of the kernel's centre.
+
+Bias
+----
+Measured on the closed form of :mod:`sphere3d.closed_form.junction` (a 6 px black triangle moving
+across a static black one's edge under the sky, 16 × 16 px, 16384 spp, seed 11, 16 batches), share
+of the derivative lost (:func:`~sphere3d.closed_form.share_lost`, ± one standard error):
+sideways 4.20 ± 0.33 % without junctions, 0.82 ± 0.29 % with them; in depth 13.2 ± 0.4 % and
+1.40 ± 0.33 % (what remains is the film kernel's loss on a small triangle, its top corner:
+:mod:`sphere3d.camera_kernel`, Bias). Per pixel, at 2048 spp, the largest |z| against the closed
+form fell from 6.2 / 17.0 to 2.4 / 3.0 (Šidák limit 5.0).
+
+On the ``hard_shadow`` scenes (d/d ``occluder.translate.x``, ``reparam`` defaults, splatted film,
+against the stored reference of :mod:`benchmarks.hard_shadow_reference`) the ten pixels where the
+occluder's silhouette crosses the ground's far edge held 86 % (sphere) and 97 % (cube) of the
+squared bias floor before, up to 2.0 (of -13.1) and 3.1 (of -15.8) per pixel; the bias floor
+(6 seeds at 256 spp) fell from 0.058 to 0.028 (sphere) and from 0.074 to 0.026 (cube), the
+silhouette region's kept fraction (8 seeds × 128 spp) from 0.970 ± 0.008 to 0.997 ± 0.005 and
+from 0.977 ± 0.005 to 0.994 ± 0.005. Junction rows are few (137 of 131 072 film kernels at 16 spp
+on ``hard_shadow``): +0.3 % CPU time (one thread, medians of 5, alternating).
+
+Still biased where the two edges cross outside ``radius`` of the kernel's centre (the single-edge
+rule applies), where a third discontinuity lies between the static probes (the row is abandoned),
+and at a corner of either edge. Tested in ``tests/sphere3d/test_junctions.py`` and
+``tests/sphere3d/test_hard_shadow.py`` (test06).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach
+from sphere3d.probes import bisect_silhouette
+from sphere3d.rotation import Rotation
+from sphere3d.snaps import Snap, edge_snap
+from sphere3d.state import SceneState
+from sphere3d.tracing import Hits
+from sphere3d.vector import cross, dot, norm
+
+__all__ = ["MOVING", "junction_rotation", "probe_classes"]
+
+MOVING = -2
+"""The class of a probe on a moving triangle (:func:`probe_classes`); a miss is -1, a static hit its shape."""
+
+
+def probe_classes(hits: Hits, moving: np.ndarray) -> np.ndarray:
+    """Per probe what it sees: its shape where the triangle is static, -1 for a miss, :data:`MOVING`."""
+    on_moving = hits.hit & moving[np.maximum(hits.triangle, 0)]
+    return np.where(on_moving, MOVING, hits.shape)
+
+
+def _closest_pair(directions: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row the closest pair (i, j) among ``pairs`` (m, P, P), and whether there is one."""
+    m, p = directions.shape[:2]
+    cosine = np.matmul(directions, directions.transpose(0, 2, 1))  # (m, P, P): w_i . w_j
+    cosine = np.where(pairs, cosine, -2.0).reshape(m, -1)
+    best = np.argmax(cosine, axis=1)
+    i, j = np.divmod(best, p)
+    return i, j, cosine[np.arange(m), best] > -2.0
+
+
+def _bisect_between(
+    state: SceneState,
+    trace_origin: np.ndarray,
+    inside: np.ndarray,
+    outside: np.ndarray,
+    start: Hits,
+    inside_class: np.ndarray,
+    outside_class: np.ndarray,
+    moving: np.ndarray,
+    refine: int,
+) -> tuple[Hits, np.ndarray, np.ndarray, np.ndarray]:
+    """``refine`` bisections between two static probes that see different things; a row stays valid
+    while every bisection ray sees one of the two (anything else: a third discontinuity between)."""
+    valid = np.ones(len(inside), dtype=bool)
+    for _ in range(refine):
+        mid = inside + outside
+        mid = mid / norm(mid)[:, None]
+        h = state.tracer.intersect(trace_origin, mid)
+        seen = probe_classes(h, moving)
+        on, off = seen == inside_class, seen == outside_class
+        valid &= on | off
+        inside = np.where(on[:, None], mid, inside)
+        outside = np.where(off[:, None], mid, outside)
+        start = h.where(on, start)
+    return start, inside, outside, valid
+
+
+def _edge_ends(state: SceneState, snap: Snap, rows: np.ndarray, origin: np.ndarray, pair: tuple) -> tuple:
+    """The bisected hit's exit edge (its two ends, attached: Duals) and whether one was found."""
+    hits, inside, outside = pair
+    _, _, lines = snap(rows, origin, inside, outside, hits)
+    found = lines[:, 0, 0] >= 0
+    tri = state.triangles[np.maximum(hits.triangle, 0)]
+    k = np.arange(len(rows))
+    return tri[k, np.maximum(lines[:, 0, 0], 0)], tri[k, np.maximum(lines[:, 0, 1], 0)], found
+
+
+def junction_rotation(
+    state: SceneState,
+    origin: Any,
+    directions: np.ndarray,
+    hits: Hits,
+    moving: np.ndarray,
+    centre: np.ndarray,
+    radius: float,
+    refine: int,
+) -> tuple[np.ndarray, Rotation]:
+    r"""The rows of film probe rings that see a moving silhouette cross a static edge, and the
+    rotations following that junction (module docstring).
+
+    Parameters
+    ----------
+    state : SceneState
+        The scene at θ.
+    origin : Dual or ndarray, shape (3,)
+        The camera's origin (its tangent moves the junction too).
+    directions : ndarray, shape (m, P, 3)
+        The rings' probe directions; ``hits`` (m, P) their first hits.
+    moving : ndarray of bool
+        One flag per triangle: its vertices have a tangent.
+    centre : ndarray, shape (m, 2)
+        The kernels' centres on the film (pixels); ``radius``: how far J may lie from them.
+    refine : int
+        Bisection rays per edge.
+
+    Returns
+    -------
+    rows : ndarray of int
+        Rows (of the m) followed at their junction.
+    rotation : Rotation
+        Their rotations, shape (len(rows),).
+    """
+    seen = probe_classes(hits, moving)
+    on_moving, static = seen == MOVING, seen != MOVING
+    # two static probes that see different things, and a moving one: a candidate junction
+    differ = static[:, :, None] & static[:, None, :] & (seen[:, :, None] != seen[:, None, :])
+    rows = np.flatnonzero(on_moving.any(axis=1) & differ.any(axis=(1, 2)))
+    if rows.size == 0 or refine == 0:
+        return rows[:0], Rotation.identity((0,))
+    d, cls, h = directions[rows], seen[rows], hits.take(rows)
+    k = np.arange(rows.size)
+    snap = edge_snap(state, lambda r, ends: np.full(ends.shape[:2], np.inf), 0.0)  # exit edges, no corner
+    o = np.asarray(detach(origin), dtype=np.float64)
+    trace = np.broadcast_to(o, (rows.size, 3))
+    # the moving edge: between the closest pair of a moving probe and a static one
+    i, j, ok = _closest_pair(d, on_moving[rows][:, :, None] & static[rows][:, None, :])
+    start = h.take((k, i))
+    moved = bisect_silhouette(state, trace, d[k, i], d[k, j], start, None, refine)
+    c_end, d_end, found_m = _edge_ends(state, snap, k, trace, moved)
+    # the static edge: between the closest pair of static probes that see different things, the
+    # inside one a hit in front of what the other sees (a miss is never in front)
+    front = (cls[:, :, None] >= 0) & ((h.t[:, :, None] < h.t[:, None, :]) | (cls[:, None, :] < 0))
+    a, b, ok_s = _closest_pair(d, differ[rows] & front)
+    fixed, inside, outside, valid = _bisect_between(
+        state, trace, d[k, a], d[k, b], h.take((k, a)), cls[k, a], cls[k, b], moving, refine
+    )
+    a_end, b_end, found_s = _edge_ends(state, snap, k, trace, (fixed, inside, outside))
+    # the junction's direction: the line shared by the planes through o holding each edge
+    n_static, n_moving = cross(a_end - origin, b_end - origin), cross(c_end - origin, d_end - origin)
+    j_dir = cross(n_static, n_moving)
+    toward = d.sum(axis=1)  # roughly the kernel's centre
+    j_dir = j_dir * np.where(dot(detach(j_dir), toward) < 0.0, -1.0, 1.0)[:, None]
+    jv = detach(j_dir)
+    with np.errstate(divide="ignore", invalid="ignore"):  # rows without both edges: dropped by `keep`
+        fx, fy = (np.asarray(detach(f)) for f in state.camera.film(jv))
+        near = np.hypot(fx - centre[rows, 0], fy - centre[rows, 1]) <= radius
+    keep = ok & ok_s & found_m & found_s & valid & near & (dot(jv, state.camera.forward) > 0.0)
+    return rows[keep], Rotation.following(j_dir[keep], np.ones(int(keep.sum()), dtype=bool))
