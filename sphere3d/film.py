@@ -68,7 +68,8 @@ against 0.121 (0.088) on the sphere, 0.131 (0.128) against 0.142 (0.108) on the 
 added bias; at 256 spp it is now about half the squared error. (Both measured before the emitter
 rotation followed the shadow edge, :mod:`sphere3d.emitter_probes`; since then ``make bench``
 gives bias floors (6 seeds) 0.086 / 0.058 per-pixel / splatted on the sphere, 0.092 / 0.074 on
-the cube, and splatted RMSE 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15.) The value's standard
+the cube, and splatted RMSE 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15; with the film kernels
+following junctions, :mod:`sphere3d.junctions`, splatted bias floors 0.028 / 0.026.) The value's standard
 error halves (0.0135 → 0.0075 at 64 spp). Cost per 64 spp image, the two films alternating in
 one run (best of seeds 1-3, a loaded 2-core machine): one thread's CPU time (process time) 0.85
 → 1.02 s (sphere) and 0.94 → 1.19 s (cube), +19 % and +26 %; wall clock on two threads 0.55 →

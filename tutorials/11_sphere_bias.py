@@ -523,4 +523,8 @@ plot_error_time(
 # discontinuity, the one its probes found. An emitter border that moves in the rotated frame, or
 # a silhouette that the probes miss, is a discontinuity the rotation does not follow
 # (`docs/theory/probes.md`, `docs/theory/boundary.md`); the first has a cheap remedy, the
-# boundary term of the light's own edges, which `sphere3d` adds by default.
+# boundary term of the light's own edges, which `sphere3d` adds by default. A third case sits in
+# the silhouette of section 2: where the sphere's silhouette crosses the ground's far edge, a film
+# kernel that follows the silhouette drags that static edge. There one rotation can still do both,
+# following the point where the two edges cross (`sphere3d.junctions`, on by default): it moves
+# along the static edge at the speed that keeps the moving one.
