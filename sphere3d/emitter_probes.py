@@ -50,7 +50,7 @@ sphere, 0.12 to 0.16         +9 to +39 %     -2 to -6 %       cosine strategy, s
 sphere, 0.48 to 0.51         +13 to -2 %     -10 to -8 %      both strategies short (below)
 sphere, 0.52 to 1.03         -3 to -5.5 %    the same         cosine 0.00 against -0.26; emitter -2.5 %
 sphere, 1.10 to 1.13         -3 to -62 %     within ± 2 %
-cube, -0.47 to -0.42         -57 to -11 %    +16 to +3 %      cosine strategy (0.19 against 0.16)
+cube, -0.47 to -0.42         -57 to -11 %    +16 to +3 %      emitter (x = -0.45: 1.56 against 1.45)
 cube, -0.48                  -55 %           the same         aimed probe 0.004 beside the part
 cube, -0.41 to -0.27         +2 to +4 %      the same         two silhouette edges
 cube, -0.17 to 0.02          +1 to +26 %     the same         two silhouette edges (emitter)
@@ -81,11 +81,13 @@ share in the penumbra (sphere, x = 0.57: -0.01 against -0.26 ± 0.07 of a total 
 large at the outer lit edge (sphere, x = -0.34: 0.25 against 0.10 ± 0.04 of 1.57). Before, the
 emitter strategy's errors partly hid it. At the sphere's umbra edge on the right (x = 0.49 to
 0.51) the **emitter strategy** with the aimed probes is 4-6 % short (x = 0.50: -2.01 against
--2.12 ± 0.05, before -2.26; x = 0.51: -2.73 against -2.89 ± 0.06, before -2.92, worse): the
-followed silhouette point lies next to the light's corner, at one end of the arc that bounds
-the lit part, where one rotation matches the arc least (one far aimed point instead of two:
--6.3 / -6.5 % in total at x = 0.50 / 0.51, and the cube's x = 0.49-0.51 worse, -10 to -15 %).
-It is also too large where the cube's shadow edge is two edges at different depths
+-2.12 ± 0.05, before -2.26; x = 0.51: -2.73 against -2.89 ± 0.06, before -2.92, worse),
+likely because the followed silhouette point now lies next to the light's corner, at one end
+of the arc that bounds the lit part, where one rotation matches the arc least (inferred, not
+isolated; one far aimed point instead of two: -6.3 / -6.5 % in total at x = 0.50 / 0.51, and
+the cube's x = 0.49-0.51 worse, -10 to -15 %). At the cube's outer lit edge it is too large
+(x = -0.45: 1.56 against 1.45 ± 0.05, the cosine strategy 0.19 against 0.16 ± 0.05; not
+isolated further), and where the cube's shadow edge is two edges at different depths
 (x = -0.1: 8.04 against 7.62 ± 0.09; x = 0.01: 7.78 against 6.80 ± 0.08): one rotation follows
 one of them. At the cube's outermost lit point (x = -0.48) the hidden part, 0.07 long on the
 light's edge, lies 0.004 beside the nearest aimed point: 0.06 against 0.47 ± 0.03.
@@ -103,11 +105,12 @@ it does no harm. :data:`AIM` = 1 misses the cube's outer lit edge at x = 1.3 (-4
 none) and is worse at cube x = 0.5 (-11.8 % against -4.2 %), but better at sphere x = 0.48
 (-6.6 % against -13 %, the far side's second aimed point changing the followed point).
 
-Cost: the aimed probes are traced only where no pair was found, :data:`AIM` shadow rays per such
-point plus the bisection where they find one. A render of ``hard_shadow`` at 32 samples per
-pixel took +9 % CPU, ``hard_shadow_cube`` +2 % (medians of 6 interleaved runs on a busy
-machine); a single point on the outer lit edge (sphere x = -0.34), where 63 % of the points
-lack a pair, +60 %.
+Cost: the aimed probes are traced only where no pair was found and, with none occluded, only
+where the light reaches into the moving occluders' bounding cone: :data:`AIM` shadow rays per
+such point plus the bisection where they find a pair. A render at 128 samples per pixel took
++2.5 % CPU (``hard_shadow``) and +6.8 % (``hard_shadow_cube``), medians of 6 interleaved runs;
+a single point on the outer lit edge (sphere x = -0.34), where 63 % of the points lack a pair,
++60 %.
 
 Tested in ``tests/sphere3d/test_emitter_probes.py``.
 """
@@ -151,10 +154,14 @@ def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     return edge_points(table, u, count)[1]
 
 
-def _aimed_points(state: Any, x: np.ndarray, far: np.ndarray, count: int = AIM) -> np.ndarray | None:
+def _aimed_points(
+    state: Any, x: np.ndarray, far: np.ndarray, count: int = AIM
+) -> tuple[np.ndarray, np.ndarray] | None:
     r"""Per point of ``x`` (plain, (m, 3)) ``count`` emitter points nearest in angle to the moving
-    occluders' centre, or farthest from it in the rows ``far``: (m, count, 3); None without a
-    moving non-emitter triangle or emitter edges.
+    occluders' centre, or farthest from it in the rows ``far``: (m, count, 3), and which rows are
+    worth their rays (m,): the rows ``far``, and the others whose nearest point lies in the
+    occluders' bounding cone (else nothing moving can hide the light); None without a moving
+    non-emitter triangle or emitter edges.
 
     The centre c is that of the moving non-emitter triangles' bounding sphere
     (:func:`_bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an edge
@@ -173,7 +180,8 @@ def _aimed_points(state: Any, x: np.ndarray, far: np.ndarray, count: int = AIM) 
     if table is None or not moving.any():
         return None
     triangles = np.asarray(detach(state.triangles))
-    to = _bounding_sphere(triangles[moving])[0] - x
+    centre, radius = _bounding_sphere(triangles[moving])
+    to = centre - x
     length = norm(to)
     axis = to / np.where(length > 0.0, length, 1.0)[:, None]
     p0, e = table.a, table.b - table.a  # (E, 3)
@@ -198,6 +206,7 @@ def _aimed_points(state: Any, x: np.ndarray, far: np.ndarray, count: int = AIM) 
     # rows ``far``: the k candidates farthest from the axis in angle, else the k nearest (critical
     # points off their edge excluded)
     at = np.argsort(np.where(off, 2.0, np.where(far[:, None], cosine, -cosine)), axis=1)[:, :k]
+    nearest = np.max(np.where(off, -2.0, cosine), axis=1)
     rows = np.arange(len(x))[:, None]
     edge = np.concatenate([np.arange(len(e)), np.arange(len(e))])[at]
     points = p0[edge] + t[rows, at][..., None] * e[edge]  # (m, k, 3)
@@ -213,7 +222,12 @@ def _aimed_points(state: Any, x: np.ndarray, far: np.ndarray, count: int = AIM) 
         b1, b2, depth = dot(s0, p) * inv, dot(axis, q) * inv, (q @ f2) * inv
         hit = (b1 >= 0.0) & (b2 >= 0.0) & (b1 + b2 <= 1.0) & (depth > 0.0) & (np.abs(det) > 1e-300) & ~far
         points[hit, 0] = x[hit] + depth[hit, None] * axis[hit]
-    return points
+        nearest[hit] = 1.0
+    # a light that lies wholly outside the occluders' bounding cone (half-angle arcsin(r / |c - x|))
+    # cannot be hidden by them: no ray for those rows
+    with np.errstate(divide="ignore"):
+        cone = np.sqrt(np.maximum(1.0 - np.minimum(radius / length, 1.0) ** 2, 0.0))  # cos of the half-angle
+    return points, far | (nearest >= cone * (1.0 - 1e-9)) | (length <= radius)
 
 
 def _shadow_rays(
@@ -322,6 +336,9 @@ def _probe_rotation(
     far = occluded[lack].any(axis=1)
     aimed = _aimed_points(state, x0[lack], far, aim) if aim and lack.size else None
     if aimed is not None:
+        aimed, worth = aimed
+        lack, aimed = lack[worth], aimed[worth]
+    if aimed is not None and lack.size:
         w_a, tmax_a, usable_a = _shadow_rays(state, x0[lack], n0[lack], aimed)
         occluded_a = state.tracer.occluded(shading.origin[lack, None], w_a, tmax_a) & usable_a
         extra = (m, aimed.shape[1])
