@@ -26,7 +26,7 @@ import pytest
 import sphere3d as s3
 from flatland.core.dual import detach, variable
 from flatland.core.stats import normal_quantile, sidak
-from sphere3d.emitter_probes import _may_see_motion
+from sphere3d.emitter_probes import _aimed_points, _may_see_motion
 from sphere3d.sampling import sample_mesh
 
 PARAM = "occluder.translate.x"
@@ -137,3 +137,21 @@ def test04_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the
     kept = _may_see_motion(state, x)
     assert sees.sum() > 100 and np.all(kept[sees])
     assert 0.2 < np.mean(~kept[:4000]) < 1.0
+
+
+def test05_aimed_probes_point_where_the_light_is_first_covered():
+    """:func:`sphere3d.emitter_probes._aimed_points` on ``hard_shadow`` (the occluder's bounding
+    sphere is centred on the icosphere's centre (0.1, 0, 0.8)): from (0.3, -0.2, 0) the axis meets
+    the light inside, at (-0.325, 0.425, 2.5) (2.5 / 0.8 times (-0.2, 0.2, 0.8) on), the nearest
+    point; from the outer lit edge (-0.34, -0.1, 0), where the sphere hides 0.13 % of the light and
+    the 12 other probes mostly miss it, the nearest point on the border is hidden; from (2, 2, 0) the
+    light lies outside the occluder's bounding cone and the point gets no aimed ray."""
+    state = s3.load_scene("hard_shadow").state(PARAM, variable(0.0))
+    x = np.array([[0.3, -0.2, 0.0], [-0.34, -0.1, 0.0], [2.0, 2.0, 0.0]])
+    points, worth = _aimed_points(state, x, np.zeros(3, dtype=bool), 2)
+    assert np.allclose(points[0, 0], [-0.325, 0.425, 2.5], atol=1e-9)
+    to = points[1, 0] - x[1]
+    dist = np.linalg.norm(to)
+    origin = x[1:2] + np.array([0.0, 0.0, 1e-6])
+    assert state.tracer.occluded(origin, (to / dist)[None], np.array([dist - 1e-4]))[0]
+    assert worth.tolist() == [True, True, False]
