@@ -21,43 +21,96 @@ what the probes saw:
 Near either side of a penumbra the shadow edge cuts a thin part off the light, hidden or
 visible, which reaches the light's border: the probes along the edges find it where area
 probes alone mostly miss it (a hidden fraction q escapes 4 of them with probability
-$(1 - q)^4$).
+$(1 - q)^4$). Closer still to the penumbra's outer lit edge, or to the umbra's, the part is
+shorter along the border than the edge probes' spacing (perimeter / 8). Where the probes
+found no pair, :data:`AIM` more probes join them (:func:`_aimed_points`): with none occluded,
+the emitter points nearest in angle to the moving occluders' centre, where their shadow
+first covers the light; with all occluded, the farthest, where the light is last covered. A
+point whose probes already hold a pair is untouched (its numbers are bit-identical without
+them); a point with no moving occluder (a moving light) gets none.
 
 Bias
 ----
-Measured at single ground points (x, -0.1, 0) of the ``hard_shadow`` scenes (d/d
+Measured at single ground points (x, y, 0) of the ``hard_shadow`` scenes (d/d
 ``occluder.translate.x``, fixed point and normal, :func:`sphere3d.irradiance`) against
-``boundary`` (unbiased), and per strategy against central differences (h = 0.004) of the naive
-strategy's value at fixed samples (emitter strategy alone; the cosine strategy as the rest).
-Before (4 area probes, the mean occluded hit followed, the identity where none was occluded)
-the emitter strategy was off by -45 % to +60 % point by point: on the lit side no probe saw
-the occluder and its shadow edge was dragged (sphere, x = -0.3: 0.55 of the derivative kept);
-elsewhere the mean hit lay nearer the point than the silhouette and the rotation turned too
-fast (sphere, x = -0.05: emitter strategy 11.56 ± 0.04 against 9.08 ± 0.11; cube: 11.98 ± 0.05
-against 7.42 ± 0.11). Over the penumbra the two errors nearly cancelled (98.4 % / 102.9 %
-kept, 8 seeds). Now (reparam against ``boundary``, 3 seeds × 16384 samples, ± 0.7 %; x = -0.05: 2 seeds):
+``boundary`` (unbiased): a scan of x in steps of 0.01 across the whole penumbra (sphere
+-0.34 to 1.13, cube -0.49 to 1.33) at y = -0.1 and y = 0.2, reparam seeds 1-4 × 32768
+samples (± 0.3-0.5 % where the derivative is large), ``boundary`` seed 1 × 32768 (± < 0.1 %);
+a point counts as biased beyond 3 standard errors. Per strategy against central differences
+(h = 0.002) of the naive strategy's value at fixed samples (emitter strategy alone, 2 × 262144
+samples; the cosine strategy as the rest), reparam 2 × 65536. Of the 270 points at y = -0.1,
+29 were off by more than 10 % before the aimed probes and 10 are now; at y = 0.2 55 and 29.
+Relative bias of the total ("before": without the aimed probes):
 
-=======================  ==========================  ==========================
-point                    sphere                      cube
-=======================  ==========================  ==========================
-x = -0.3, -0.25 (lit)    -0.1 %, -0.7 %              (x = -0.2) +0.4 %
-x = 0.1 (umbra's side)   -2.6 %                      -1.8 %
-x = 0.65                                             -1.8 %
-x = -0.05                                            +6.7 % (two edges)
-=======================  ==========================  ==========================
+===========================  ==============  ===============  ====================================
+points (y = -0.1)            before          now              cause of what remains
+===========================  ==============  ===============  ====================================
+sphere, x = -0.34            -46 %           +13 %            cosine strategy (0.25 against 0.10)
+sphere, 0.12 to 0.16         +9 to +39 %     -2 to -6 %       not split (emitter 0.44 vs 0.48)
+sphere, 0.48 to 0.51         +13 to -2 %     -10 to -8 %      both strategies short (below)
+sphere, 0.52 to 1.03         -3 to -5.5 %    the same         cosine 0.00 against -0.26; emitter -2.5 %
+sphere, 1.10 to 1.13         -3 to -62 %     within ± 2 %
+cube, -0.47 to -0.42         -57 to -11 %    +16 to +3 %      emitter (x = -0.45: 1.56 against 1.45)
+cube, -0.48                  -55 %           the same         aimed probe 0.004 beside the part
+cube, -0.41 to -0.27         +2 to +4 %      the same         two silhouette edges
+cube, -0.17 to 0.02          +1 to +26 %     the same         two silhouette edges (emitter)
+cube, 0.03 to 0.14           -2 to -8 %      the same         cosine strategy, emitter -3 %
+cube, 0.48 to 0.52           -7 to -13 %     -4 to -6 %       emitter strategy
+cube, 0.53 to 0.61           -4 to -7, +7 %  the same         two silhouette edges
+cube, 0.64 to 1.14           -2 to -7.6 %    the same         cosine strategy, emitter -3 %
+cube, 1.27 to 1.30           -13 to -48 %    within ± 1.5 %
+cube, 1.31 to 1.33           -60 to -77 %    the same         as at -0.48
+===========================  ==============  ===============  ====================================
 
-What remains, by strategy (65536 samples against 262144-524288 of the differences; measured
-with 12 edge probes, the totals above with 8):
+At y = 0.2 the same kinds: the outer lit edges lost 10-76 % (sphere x = -0.33 to -0.29 and 1.07
+to 1.13, cube -0.47 to -0.37 and 1.19 to 1.25), now +2 to +14 %; the sphere at x = -0.34 went
+from -2.7 % to +89 % of a small derivative (0.14): the emitter strategy kept 0.005 of its
+0.153 ± 0.013 and the cosine strategy's excess (0.13 against -0.01) hid it; now 0.130. Not
+changed beyond the noise: sphere x = 0.29 to 0.41 and cube 0.30 to 0.35, where the derivative
+changes sign (-10 to -35 %, 0.1-0.4 in absolute terms), cube -0.26, -0.25, -0.14, 0.44 (-10,
+-10, +11, +34 %) and the cube's outermost lit points -0.49, -0.48 (-49, -72 %). Near the sign
+change it is the emitter strategy (sphere x = 0.36: -0.99 against -1.11 ± 0.05; cube x = 0.33:
+-1.32 against -1.71 ± 0.06; x = 0.44: -7.21 against -5.32 ± 0.08): there the shadow edge
+crosses the light on both of its sides and one rotation follows one crossing (inferred from the
+geometry, not isolated).
 
-- the **cosine strategy** loses 20-95 % of its share, always short: its rotation follows the
-  occluder where a kernel sees it in front of the light, and drags the light's edge, whose
-  term no Leibniz term restores in that strategy (sphere, x = 0.1: 0.02 against 0.29 ± 0.06
-  of a total 7.79; x = -0.2: 0.36 against 0.44; cube, x = 0.1: 0.005 against 0.22; x = 0.65:
-  -0.08 against -0.22): -1 to -3.5 % of the derivative, the sphere's penumbra deficit;
-- the **emitter strategy** within 2-3 % where one silhouette edge crosses the light (sphere,
-  x = 0.1: 7.53 ± 0.03 against 7.33 ± 0.05; x = -0.2: 8.87 against 9.03 ± 0.05; cube, x = 0.65:
-  -5.27 against -5.23 ± 0.07), too large where the cube's shadow edge is two edges at different
-  depths (x = -0.05: the whole +6.7 %, 8.12 ± 0.06 against 7.61): one rotation follows one of them.
+Where the emitter strategy is now within its noise, what remains is the **cosine strategy**:
+its rotation follows the occluder where a kernel sees it in front of the light and drags the
+light's edge, whose term no Leibniz term restores in that strategy; short by 20-100 % of its
+share in the penumbra (sphere, x = 0.57: -0.01 against -0.26 ± 0.07 of a total -8.03), too
+large at the outer lit edge (sphere, x = -0.34: 0.25 against 0.10 ± 0.04 of 1.57). Before, the
+emitter strategy's errors partly hid it. At the sphere's umbra edge on the right (x = 0.49 to
+0.51) the **emitter strategy** with the aimed probes is 4-6 % short (x = 0.50: -2.01 against
+-2.12 ± 0.05, before -2.26; x = 0.51: -2.73 against -2.89 ± 0.06, before -2.92, worse),
+likely because the followed silhouette point now lies next to the light's corner, at one end
+of the arc that bounds the lit part, where one rotation matches the arc least (inferred, not
+isolated; one far aimed point instead of two: -6.3 / -6.5 % in total at x = 0.50 / 0.51, and
+the cube's x = 0.49-0.51 worse, -10 to -15 %). At the cube's outer lit edge it is too large
+(x = -0.45: 1.56 against 1.45 ± 0.05, the cosine strategy 0.19 against 0.16 ± 0.05; not
+isolated further), and where the cube's shadow edge is two edges at different depths
+(x = -0.1: 8.04 against 7.62 ± 0.09; x = 0.01: 7.78 against 6.80 ± 0.08): one rotation follows
+one of them. At the cube's outermost lit point (x = -0.48) the hidden part, 0.07 long on the
+light's edge, lies 0.004 beside the nearest aimed point: 0.06 against 0.47 ± 0.03.
+
+Probe counts
+------------
+Measured with the aimed probes (2 seeds × 65536, against ``boundary``): :data:`PROBES` = 2
+leaves the penumbra's edges as they are and raises the cube corner (x = -0.05) from +6.6 % to
++11.6 %; :data:`BOUNDARY` = 4 (8 shadow rays instead of 12) is as good at the outer edges now
+(sphere x = -0.34, -0.33, -0.32: +11.4, +3.8, +1.9 % against +11.2, +3.7, +1.4 %; without the
+aimed probes it lost 66, 46, 37 %, and 21 % at x = -0.3), better at the cube corner (+0.6 %)
+and at sphere x = -0.2 (-0.1 % against -1.4 %), worse at cube x = 0.65 (-3.6 % against
+-2.0 %): it moves the followed point in every pair, so it stays at 8 until a full scan shows
+it does no harm. :data:`AIM` = 1 misses the cube's outer lit edge at x = 1.3 (-47 %, as with
+none) and is worse at cube x = 0.5 (-11.8 % against -4.2 %), but better at sphere x = 0.48
+(-6.6 % against -13 %, the far side's second aimed point changing the followed point).
+
+Cost: the aimed probes are traced only where no pair was found and, with none occluded, only
+where the light reaches into the moving occluders' bounding cone: :data:`AIM` shadow rays per
+such point plus the bisection where they find a pair. A render at 128 samples per pixel took
++2.5 % CPU (``hard_shadow``) and +6.8 % (``hard_shadow_cube``), medians of 6 interleaved runs;
+a single point on the outer lit edge (sphere x = -0.34), where 63 % of the points lack a pair,
++60 %.
 
 Tested in ``tests/sphere3d/test_emitter_probes.py``.
 """
@@ -77,7 +130,7 @@ from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points
 from sphere3d.vector import dot, norm, zeros
 
-__all__ = ["PROBES", "REFINE", "emitter_rotation"]
+__all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "emitter_rotation"]
 
 PROBES = 4
 """Shadow probes per shading point uniform on the emitters' area."""
@@ -85,6 +138,11 @@ BOUNDARY = 8
 """Shadow probes per shading point evenly spaced along the emitters' edges (random phase)."""
 REFINE = 6
 """Bisection rays between the occluded and the visible probe of a pair (to 1/64 of their gap)."""
+AIM = 2
+"""Aimed probes per shading point whose probes hold no pair of an occluded and a visible one: the
+emitter points nearest to (none occluded) or farthest from (all occluded) the moving occluders'
+centre in angle (:func:`_aimed_points`), where a thin hidden or lit part of the light appears
+first; 0: none."""
 
 
 def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
@@ -94,6 +152,107 @@ def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     if table is None or count == 0:
         return None
     return edge_points(table, u, count)[1]
+
+
+def _aimed_points(
+    state: Any, x: np.ndarray, far: np.ndarray, count: int = AIM
+) -> tuple[np.ndarray, np.ndarray] | None:
+    r"""Per point of ``x`` (plain, (m, 3)) ``count`` emitter points nearest in angle to the moving
+    occluders' centre, or farthest from it in the rows ``far``: (m, count, 3), and which rows are
+    worth their rays (m,): the rows ``far``, and the others whose nearest point lies in the
+    occluders' bounding cone (else nothing moving can hide the light); None without a moving
+    non-emitter triangle or emitter edges.
+
+    The centre c is that of the moving non-emitter triangles' bounding sphere
+    (:func:`_bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an edge
+    $p(t) = p_0 + t e$, $t \in [0, 1]$, the cosine $a \cdot v / |v|$ with $v = p(t) - x$ has one
+    critical point (its derivative's numerator is linear in t), so the extremes over the border lie
+    at its vertices (each edge's start, the loops being closed) or at those critical points; the
+    candidates are ranked by their cosine. Where the axis meets an emitter inside, that hit is the
+    nearest point. For a sphere in front of a convex light these are where its shadow first covers
+    the light (the penumbra's outer lit edge) and where the light is last covered (the umbra's
+    edge); for other occluders near them (a cube at its outermost lit point: 0.004 beside the
+    hidden part, module docstring, Bias).
+    """
+    table = edge_table(state)
+    moving = triangles_change(state)
+    moving[state.emitters] = False
+    if table is None or not moving.any():
+        return None
+    triangles = np.asarray(detach(state.triangles))
+    centre, radius = _bounding_sphere(triangles[moving])
+    to = centre - x
+    length = norm(to)
+    axis = to / np.where(length > 0.0, length, 1.0)[:, None]
+    p0, e = table.a, table.b - table.a  # (E, 3)
+    # with v = p0 - x (m, E): a = axis.v, b = axis.e, v2 = |v|^2, ve = v.e, e2 = |e|^2, by products of
+    # (m, 3) and (E, 3) arrays
+    ax = dot(axis, x)[:, None]
+    a, b = axis @ p0.T - ax, axis @ e.T
+    v2 = dot(p0, p0)[None] - 2.0 * (x @ p0.T) + dot(x, x)[:, None]
+    ve = dot(p0, e)[None] - x @ e.T
+    e2 = dot(e, e)[None]
+    # d/dt [(a + b t) / sqrt(v2 + 2 ve t + e2 t^2)] = 0  <=>  t (b ve - a e2) = a ve - b v2
+    den = b * ve - a * e2
+    t = np.divide(a * ve - b * v2, den, out=np.zeros_like(a), where=den != 0.0)
+    # candidates: each edge's start (each vertex of a loop once) and its critical point, if inside it
+    off = (t <= 0.0) | (t >= 1.0)
+    t = np.concatenate([np.zeros_like(a), t], axis=1)  # (m, 2E)
+    a, b, v2, ve = (np.concatenate([c, c], axis=1) for c in (a, b, v2, ve))
+    e2 = np.concatenate([e2, e2], axis=1)
+    cosine = (a + b * t) / np.sqrt(np.maximum(v2 + t * (2.0 * ve + t * e2), 1e-300))
+    k = min(count, len(e))
+    off = np.concatenate([np.zeros_like(off), off], axis=1)
+    # rows ``far``: the k candidates farthest from the axis in angle, else the k nearest (critical
+    # points off their edge excluded)
+    at = np.argsort(np.where(off, 2.0, np.where(far[:, None], cosine, -cosine)), axis=1)[:, :k]
+    nearest = np.max(np.where(off, -2.0, cosine), axis=1)
+    rows = np.arange(len(x))[:, None]
+    edge = np.concatenate([np.arange(len(e)), np.arange(len(e))])[at]
+    points = p0[edge] + t[rows, at][..., None] * e[edge]  # (m, k, 3)
+    # the axis through an emitter's inside: that hit is the nearest point (angle 0); Moller-Trumbore
+    # with plain products, c x d = c @ _skew(d)
+    s0 = np.empty_like(x)
+    for c0, c1, c2 in triangles[state.emitters]:  # a loop over the few emitter triangles
+        f1, f2 = c1 - c0, c2 - c0
+        np.subtract(x, c0, out=s0)
+        p, q = axis @ _skew(f2), s0 @ _skew(f1)  # axis x f2, s0 x f1
+        det = p @ f1
+        inv = 1.0 / np.where(np.abs(det) > 1e-300, det, 1.0)
+        b1, b2, depth = dot(s0, p) * inv, dot(axis, q) * inv, (q @ f2) * inv
+        hit = (b1 >= 0.0) & (b2 >= 0.0) & (b1 + b2 <= 1.0) & (depth > 0.0) & (np.abs(det) > 1e-300) & ~far
+        points[hit, 0] = x[hit] + depth[hit, None] * axis[hit]
+        nearest[hit] = 1.0
+    # a light that lies wholly outside the occluders' bounding cone (half-angle arcsin(r / |c - x|))
+    # cannot be hidden by them: no ray for those rows
+    with np.errstate(divide="ignore"):
+        cone = np.sqrt(np.maximum(1.0 - np.minimum(radius / length, 1.0) ** 2, 0.0))  # cos of the half-angle
+    return points, far | (nearest >= cone * (1.0 - 1e-9)) | (length <= radius)
+
+
+def _shadow_rays(
+    state: Any, x: np.ndarray, n: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit directions (m, p, 3) from the points ``x`` to the probe points ``y`` (m, p, 3), the shadow
+    rays' lengths, and which probes are light samples the strategy could use: above the surface
+    (normals ``n``), far enough."""
+    to = y - x[:, None]
+    dist = norm(to)
+    w = to / np.where(dist > 0.0, dist, 1.0)[..., None]
+    usable = (dot(w, n[:, None]) > 0.0) & (dist > 4.0 * state.epsilon)
+    return w, np.maximum(dist - 2.0 * state.epsilon, 0.0), usable
+
+
+def _rows(rows: np.ndarray, values: np.ndarray, shape: tuple, fill: Any) -> np.ndarray:
+    """An array of ``shape`` filled with ``fill``, ``values`` at ``rows``."""
+    out = np.full(shape, fill, dtype=values.dtype)
+    out[rows] = values
+    return out
+
+
+def _skew(d: np.ndarray) -> np.ndarray:
+    """The matrix S with c @ S = cross(c, d) for rows c."""
+    return np.array([[0.0, d[2], -d[1]], [-d[2], 0.0, d[0]], [d[1], -d[0], 0.0]])
 
 
 def _bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
@@ -128,7 +287,7 @@ def _may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
 
 
 def emitter_rotation(
-    shading: Any, probes: int = PROBES, boundary: int = BOUNDARY, refine: int = REFINE
+    shading: Any, probes: int = PROBES, boundary: int = BOUNDARY, refine: int = REFINE, aim: int = AIM
 ) -> Rotation:
     """One rotation per shading point for the emitter strategy (module docstring).
 
@@ -145,16 +304,18 @@ def emitter_rotation(
     x0 = detach(shading.x)
     need = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_change(state) | _may_see_motion(state, x0)
     if need.all():
-        return _probe_rotation(shading, probes, boundary, refine)
+        return _probe_rotation(shading, probes, boundary, refine, aim)
     rows = np.flatnonzero(need)
     target, found = zeros((m, 3), True), np.zeros(m, dtype=bool)
     if rows.size:
-        sub = _probe_rotation(shading.take(rows), probes, boundary, refine, targets=True)
+        sub = _probe_rotation(shading.take(rows), probes, boundary, refine, aim, targets=True)
         target[rows], found[rows] = sub
     return Rotation.following(target, found)
 
 
-def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targets: bool = False) -> Any:
+def _probe_rotation(
+    shading: Any, probes: int, boundary: int, refine: int, aim: int, targets: bool = False
+) -> Any:
     """The probes' rotation for every point of ``shading`` (its attached target and where it was
     found, if ``targets``)."""
     state = shading.state
@@ -166,14 +327,26 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
     inner = probes
     if border is not None:
         y = np.concatenate([y, border], axis=1)
-        probes = y.shape[1]
-    to = y - detach(shading.x)[:, None]
-    dist = norm(to)
-    w = to / np.where(dist > 0.0, dist, 1.0)[..., None]
-    tmax = np.maximum(dist - 2.0 * state.epsilon, 0.0)
-    # only probes that are light samples the strategy could use: above the surface, far enough
-    usable = (dot(w, detach(shading.n)[:, None]) > 0.0) & (dist > 4.0 * state.epsilon)
+    x0, n0 = detach(shading.x), detach(shading.n)
+    w, tmax, usable = _shadow_rays(state, x0, n0, y)
     occluded = state.tracer.occluded(shading.origin[:, None], w, tmax) & usable
+    lack = np.flatnonzero(~(occluded.any(axis=1) & (usable & ~occluded).any(axis=1)))
+    # no pair of an occluded and a visible probe: where all are occluded, ``aim`` more probes where the
+    # light is last covered, else where it is first covered
+    far = occluded[lack].any(axis=1)
+    aimed = _aimed_points(state, x0[lack], far, aim) if aim and lack.size else None
+    if aimed is not None:
+        aimed, worth = aimed
+        lack, aimed = lack[worth], aimed[worth]
+    if aimed is not None and lack.size:
+        w_a, tmax_a, usable_a = _shadow_rays(state, x0[lack], n0[lack], aimed)
+        occluded_a = state.tracer.occluded(shading.origin[lack, None], w_a, tmax_a) & usable_a
+        extra = (m, aimed.shape[1])
+        w = np.concatenate([w, _rows(lack, w_a, (*extra, 3), 0.0)], axis=1)
+        tmax = np.concatenate([tmax, _rows(lack, tmax_a, extra, 0.0)], axis=1)
+        usable = np.concatenate([usable, _rows(lack, usable_a, extra, False)], axis=1)
+        occluded = np.concatenate([occluded, _rows(lack, occluded_a, extra, False)], axis=1)
+    probes = w.shape[1]
     visible = usable & ~occluded
     some_occluded, some_visible = occluded.any(axis=1), visible.any(axis=1)
     target = zeros((m, 3), state.dual)
