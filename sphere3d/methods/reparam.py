@@ -286,7 +286,9 @@ def reparam(
       the emitters' area and 8 along their edges (:mod:`sphere3d.emitter_probes`): where some
       are occluded and some not, the occluder's silhouette point bisected between the
       closest such pair; where all are, the mean attached occluded hit (the authors'
-      implementation); else the mean attached probe point on the emitters. The
+      implementation); else the mean attached probe point on the emitters. Where the probes
+      hold no such pair, two more aimed at where the occluder's shadow first or last covers
+      the light look for it (:data:`~sphere3d.emitter_probes.AIM`). The
       emitters' sharp edges are held fixed: ``emitter_edges`` (default True) adds their
       boundary term (:mod:`sphere3d.emitter_edges`, theory/probes), so a 0.6 × 0.4 light
       moving sideways 1.5 above a point gets -0.3003 ± 0.0019 (exact -0.3007; 73 % lost
