@@ -233,11 +233,16 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     place = np.cumsum(need) - 1  # row of each needed point in the rotation
     rotation = transforms.emitter(shading if need.all() else shading.take(np.flatnonzero(need)))
     # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
-    live = rotation.active[place[vis]] | moving_rows(vis, shading.x, shading.n) | emitters_change(state)
+    points_move, lights_change = moving_rows(vis, shading.x, shading.n), emitters_change(state)
+    live = rotation.active[place[vis]] | points_move | lights_change
     plain, inv_area = state.detached(), 1.0 / float(detach(state.emitter_area))
+    # operands whose tangents are all 0 enter plain: the Dual rules give a constant the tangent 0, the same
+    # numbers (flatland.core.dual_ufuncs), and skip the products with it
+    lights, attached = (state if lights_change else plain), bool(points_move.any())
 
     def estimate(dual: bool, x: Any, n: Any, omega: np.ndarray, row: Any, t: Any, d: Any, c: Any) -> tuple:
-        st, rotated = (state, rotation.take(row).apply(omega)) if dual else (plain, omega)
+        st, rotated = (lights, rotation.take(row).apply(omega)) if dual else (plain, omega)
+        x, n = (x, n) if attached else (detach(x), detach(n))
         # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
         it = intersect_triangles(x, rotated, st.triangles[t])
         cos_x_d = np.maximum(dot(n, rotated), 0.0)
