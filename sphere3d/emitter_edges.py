@@ -46,6 +46,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.edges import mesh_edges
+from sphere3d.live import any_rows
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
 from sphere3d.tracing import intersect_triangles
@@ -308,7 +309,7 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
     numbers they would get among all points: draws are keyed on the samples) and traced
     by :meth:`EmitterEdgeSamples.term`.
     """
-    x_moves = np.any(tangent(shading.x) != 0.0, axis=1)
+    x_moves = any_rows(tangent(shading.x) != 0.0)
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
     rows = np.flatnonzero(rotation.active | x_moves | emitters_move)
     sub = shading if rows.size == len(shading) else shading.take(rows)

@@ -70,7 +70,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from sphere3d.emitter_edges import edge_points, edge_table
-from sphere3d.live import emitters_change, triangles_change
+from sphere3d.live import any_rows, emitters_change, triangles_change
 from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
@@ -143,7 +143,7 @@ def emitter_rotation(
     if not state.dual:
         return Rotation.identity((m,))
     x0 = detach(shading.x)
-    need = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_change(state) | _may_see_motion(state, x0)
+    need = any_rows(tangent(shading.x) != 0.0) | emitters_change(state) | _may_see_motion(state, x0)
     if need.all():
         return _probe_rotation(shading, probes, boundary, refine)
     rows = np.flatnonzero(need)
@@ -198,7 +198,7 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
         target[s], found[s] = direction_towards(point, shading.x[s], np.ones(s.size, dtype=bool))
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
-    moving = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_move
+    moving = any_rows(tangent(shading.x) != 0.0) | emitters_move
     f = np.flatnonzero(~some_occluded & usable.any(axis=1) & moving)
     if f.size:  # no shadow edge: the mean attached probe point on the emitters
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])

@@ -19,16 +19,25 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 
-__all__ = ["emitters_change", "moving_rows", "on_rows", "triangles_change"]
+__all__ = ["any_rows", "emitters_change", "moving_rows", "on_rows", "triangles_change"]
+
+
+def any_rows(mask: np.ndarray) -> np.ndarray:
+    """``np.any(mask, axis=1)`` of a boolean (n, k) array, as the OR of its k columns (np.any over a short
+    axis is about 6 times slower for k = 3)."""
+    out = mask[:, 0].copy()
+    for j in range(1, mask.shape[1]):
+        out |= mask[:, j]
+    return out
 
 
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
     """Where any of ``sources`` (Duals or plain arrays, one row per item) has a tangent at ``rows``."""
     out = np.zeros(len(rows), dtype=bool)
     for s in sources:
-        if isinstance(s, Dual):
+        if isinstance(s, Dual) and rows.size:
             t = s.tangent[rows]
-            out |= np.any(t != 0.0, axis=tuple(range(1, t.ndim)))
+            out |= any_rows(t.reshape(len(rows), -1) != 0.0)
     return out
 
 

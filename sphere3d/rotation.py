@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
+from sphere3d.live import any_rows
 from sphere3d.vector import cross, dot, norm
 
 __all__ = ["Rotation", "rotate", "rotation_matrix"]
@@ -123,7 +124,8 @@ class Rotation:
             active = np.ones(omega_p.shape[:-1], dtype=bool)
         length = norm(omega_p.value)
         active = np.asarray(active, dtype=bool) & (length > 0.0) & np.isfinite(length)
-        active = active & np.all(np.isfinite(omega_p.tangent), axis=-1)
+        not_finite = any_rows(~np.isfinite(omega_p.tangent).reshape(-1, 3)).reshape(active.shape)
+        active = active & ~not_finite
         if spin is not None:
             spin = spin if isinstance(spin, Dual) else Dual(spin)
             active = active & np.isfinite(spin.tangent)
