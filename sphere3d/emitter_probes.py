@@ -175,7 +175,7 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
     usable = (dot(w, detach(shading.n)[:, None]) > 0.0) & (dist > 4.0 * state.epsilon)
     occluded = state.tracer.occluded(shading.origin[:, None], w, tmax) & usable
     visible = usable & ~occluded
-    some_occluded, some_visible = occluded.any(axis=1), visible.any(axis=1)
+    some_occluded, some_visible = any_rows(occluded), any_rows(visible)
     target = zeros((m, 3), state.dual)
     found = np.zeros(m, dtype=bool)
     s = np.flatnonzero(some_occluded & ~some_visible)
@@ -199,7 +199,7 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
     moving = any_rows(tangent(shading.x) != 0.0) | emitters_move
-    f = np.flatnonzero(~some_occluded & usable.any(axis=1) & moving)
+    f = np.flatnonzero(~some_occluded & any_rows(usable) & moving)
     if f.size:  # no shadow edge: the mean attached probe point on the emitters
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])
         points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)

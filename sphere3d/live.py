@@ -19,15 +19,23 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 
-__all__ = ["any_rows", "emitters_change", "moving_rows", "on_rows", "triangles_change"]
+__all__ = ["all_rows", "any_rows", "emitters_change", "moving_rows", "on_rows", "triangles_change"]
 
 
 def any_rows(mask: np.ndarray) -> np.ndarray:
     """``np.any(mask, axis=1)`` of a boolean (n, k) array, as the OR of its k columns (np.any over a short
-    axis is about 6 times slower for k = 3)."""
+    axis is about 6 times slower for k = 3 to 12)."""
     out = mask[:, 0].copy()
     for j in range(1, mask.shape[1]):
         out |= mask[:, j]
+    return out
+
+
+def all_rows(mask: np.ndarray) -> np.ndarray:
+    """``np.all(mask, axis=1)`` of a boolean (n, k) array, as the AND of its k columns (:func:`any_rows`)."""
+    out = mask[:, 0].copy()
+    for j in range(1, mask.shape[1]):
+        out &= mask[:, j]
     return out
 
 
