@@ -70,7 +70,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from sphere3d.emitter_edges import edge_points, edge_table
-from sphere3d.live import any_rows, emitters_change, triangles_change
+from sphere3d.live import any_rows, emitters_change, take_rows, triangles_change
 from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
@@ -185,15 +185,15 @@ def _probe_rotation(shading: Any, probes: int, boundary: int, refine: int, targe
         target[s], found[s] = mean_point_direction(shading.x[s], points, occluded[s])
     s = np.flatnonzero(some_occluded & some_visible)
     if s.size:  # a shadow edge crosses the light: its silhouette point between the closest pair
-        ws = w[s]
+        ws, origin = take_rows(w, s), take_rows(shading.origin, s)
         cosine = np.matmul(ws, np.ascontiguousarray(ws.transpose(0, 2, 1)))  # (s, p, p): w_i . w_j
         np.putmask(cosine, ~(occluded[s][:, :, None] & visible[s][:, None, :]), -2.0)  # pairs only
         i, j = np.divmod(np.argmax(cosine.reshape(len(s), -1), axis=1), probes)
         rows = np.arange(s.size)
         inside, outside = ws[rows, i], ws[rows, j]
-        hits = state.tracer.intersect(shading.origin[s], inside)
-        normal = detach(shading.n)[s]
-        edge, _, _ = bisect_silhouette(state, shading.origin[s], inside, outside, hits, normal, refine)
+        hits = state.tracer.intersect(origin, inside)
+        normal = take_rows(detach(shading.n), s)
+        edge, _, _ = bisect_silhouette(state, origin, inside, outside, hits, normal, refine)
         point = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
         target[s], found[s] = direction_towards(point, shading.x[s], np.ones(s.size, dtype=bool))
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative

@@ -46,7 +46,7 @@ from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
 from sphere3d.emitter_edges import add_tangent, emitter_edge_term
 from sphere3d.film import FilmTransform
-from sphere3d.live import emitters_change, moving_rows, on_rows, triangles_change
+from sphere3d.live import emitters_change, moving_rows, on_rows, take_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -103,7 +103,8 @@ class Shading:
         return len(self.origin)
 
     def take(self, index: np.ndarray) -> Shading:
-        return Shading(self.state, self.x[index], self.n[index], self.origin[index], self.draws.take(index))
+        x, n, origin = self.x[index], self.n[index], take_rows(self.origin, index)
+        return Shading(self.state, x, n, origin, self.draws.take(index))
 
     def trace(self, mu: np.ndarray) -> Hits:
         """First hits along directions ``mu`` from the shading points (detached)."""
@@ -222,7 +223,8 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     cos_x = dot(detach(shading.n), w)
     valid = (cos_y > 1e-9) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
-    blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
+    origin, direction = take_rows(shading.origin, idx), take_rows(w, idx)
+    blocked = state.tracer.occluded(origin, direction, dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
     # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
     edges = state.dual and getattr(transforms, "emitter_edges", False)
