@@ -305,7 +305,7 @@ def pixel_samples(
         live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
         r_dot, w_dot = np.zeros(d.shape), np.zeros(np.shape(weight))
         for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
-            r = rotation.take(live).apply(d[live])
+            r = rotation.take(live).apply(take_rows(d, live))
             fx, fy = cam.film(r)
             # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
             # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)
