@@ -136,6 +136,7 @@ from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import FilmTransform
 from sphere3d.junctions import junction_rotation
+from sphere3d.live import all_rows, any_rows
 from sphere3d.probes import follow_probes, ring_offsets
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
@@ -243,7 +244,7 @@ def film_transform(
         d = cam.directions(ring[..., 0], ring[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
         if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
-            seen = np.any(moving[np.maximum(hits.triangle, 0)] & (hits.triangle >= 0), axis=1)
+            seen = any_rows(moving[np.maximum(hits.triangle, 0)] & (hits.triangle >= 0))
             rows, d, hits = rows[seen], d[seen], hits.take(seen)
             if plane:  # one plane in sight, nothing to follow: the identity (module docstring, Noise)
                 keep = ~one_plane(state, hits)
@@ -280,16 +281,16 @@ def one_plane(state: SceneState, hits: Hits) -> np.ndarray:
     never count: module docstring, Noise.
     """
     tri = np.maximum(hits.triangle, 0)
-    same = np.all(hits.hit, axis=1) & np.all(hits.shape == hits.shape[:, :1], axis=1)
-    out = same & ~np.any(state.smooth[tri], axis=1)
+    same = all_rows(hits.hit) & all_rows(hits.shape == hits.shape[:, :1])
+    out = same & ~any_rows(state.smooth[tri])
     rows = np.flatnonzero(out)  # the geometry below only where one flat shape is in sight
     v = np.asarray(detach(state.triangles))[tri[rows]]  # (m, P, 3, 3)
     n = face_normals(v)
     n0 = n[:, :1]
     extent = np.max(np.abs(v - v[:, :1, :1]), axis=(1, 2, 3), initial=0.0)
-    parallel = np.all(np.sum(n * n0, axis=-1) > 1.0 - COPLANAR, axis=1)
+    parallel = all_rows(np.sum(n * n0, axis=-1) > 1.0 - COPLANAR)
     offset = np.abs(np.sum((v[:, :, 0] - v[:, :1, 0]) * n0, axis=-1))  # n0 · (V_k - V_0): 0 on one plane
-    out[rows] = parallel & np.all(offset <= COPLANAR * (1.0 + extent)[:, None], axis=1)
+    out[rows] = parallel & all_rows(offset <= COPLANAR * (1.0 + extent)[:, None])
     return out
 
 

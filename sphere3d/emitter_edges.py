@@ -46,6 +46,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.edges import mesh_edges
+from sphere3d.live import any_rows, take_rows
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
 from sphere3d.tracing import intersect_triangles
@@ -115,7 +116,8 @@ class EmitterEdgeSamples:
 
     def take(self, rows: np.ndarray) -> EmitterEdgeSamples:
         """The edge points at ``rows``."""
-        fields = [getattr(self, f)[rows] for f in self.__dataclass_fields__ if f not in ("table", "weight")]
+        names = [f for f in self.__dataclass_fields__ if f not in ("table", "weight")]
+        fields = [take_rows(getattr(self, f), rows) for f in names]  # rows by np.take (live.take_rows)
         return EmitterEdgeSamples(*fields, self.table, self.weight)
 
     def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
@@ -126,7 +128,7 @@ class EmitterEdgeSamples:
         (:func:`emitter_edge_term`).
         """
         tmax = self.dist - 2.0 * state.epsilon
-        k = np.flatnonzero(~state.tracer.occluded(shading.origin[self.index], self.w, tmax))
+        k = np.flatnonzero(~state.tracer.occluded(take_rows(shading.origin, self.index), self.w, tmax))
         sub = self.take(k)
         return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index))
 
@@ -282,20 +284,20 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     e, y = edge_points(table, shading.draws.uniforms("emitter.edge"), POINTS)
     e, y = e.ravel(), y.reshape(-1, 3)
     point = np.repeat(np.arange(len(shading)), POINTS)
-    to = y - detach(shading.x)[point]
+    to = y - take_rows(detach(shading.x), point)
     dist = norm(to)
     w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
-    cos_x = dot(detach(shading.n)[point], w)
+    cos_x = dot(take_rows(detach(shading.n), point), w)
     front = np.zeros((len(e), 2), dtype=bool)
     for j in np.flatnonzero(np.any(table.faces >= 0, axis=0)):  # the edges' one or two faces
         # facing the point: the emitter strategy's own test, cos θ_y > 1e-9
         front[:, j] = (-dot(table.normals[e, j], w) > 1e-9) & (table.faces[e, j] >= 0)
-    valid = front.any(axis=1) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
+    valid = any_rows(front) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
     if idx.size == 0:
         return None
     return EmitterEdgeSamples(
-        point[idx], w[idx], e[idx], front[idx], dist[idx], cos_x[idx], table, perimeter / POINTS
+        point[idx], take_rows(w, idx), e[idx], front[idx], dist[idx], cos_x[idx], table, perimeter / POINTS
     )
 
 
@@ -308,7 +310,7 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
     numbers they would get among all points: draws are keyed on the samples) and traced
     by :meth:`EmitterEdgeSamples.term`.
     """
-    x_moves = np.any(tangent(shading.x) != 0.0, axis=1)
+    x_moves = any_rows(tangent(shading.x) != 0.0)
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
     rows = np.flatnonzero(rotation.active | x_moves | emitters_move)
     sub = shading if rows.size == len(shading) else shading.take(rows)

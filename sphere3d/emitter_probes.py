@@ -123,7 +123,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from sphere3d.emitter_edges import edge_points, edge_table
-from sphere3d.live import emitters_change, triangles_change
+from sphere3d.live import any_rows, emitters_change, take_rows, triangles_change
 from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
@@ -302,7 +302,7 @@ def emitter_rotation(
     if not state.dual:
         return Rotation.identity((m,))
     x0 = detach(shading.x)
-    need = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_change(state) | _may_see_motion(state, x0)
+    need = any_rows(tangent(shading.x) != 0.0) | emitters_change(state) | _may_see_motion(state, x0)
     if need.all():
         return _probe_rotation(shading, probes, boundary, refine, aim)
     rows = np.flatnonzero(need)
@@ -348,7 +348,7 @@ def _probe_rotation(
         occluded = np.concatenate([occluded, _rows(lack, occluded_a, extra, False)], axis=1)
     probes = w.shape[1]
     visible = usable & ~occluded
-    some_occluded, some_visible = occluded.any(axis=1), visible.any(axis=1)
+    some_occluded, some_visible = any_rows(occluded), any_rows(visible)
     target = zeros((m, 3), state.dual)
     found = np.zeros(m, dtype=bool)
     s = np.flatnonzero(some_occluded & ~some_visible)
@@ -358,21 +358,21 @@ def _probe_rotation(
         target[s], found[s] = mean_point_direction(shading.x[s], points, occluded[s])
     s = np.flatnonzero(some_occluded & some_visible)
     if s.size:  # a shadow edge crosses the light: its silhouette point between the closest pair
-        ws = w[s]
+        ws, origin = take_rows(w, s), take_rows(shading.origin, s)
         cosine = np.matmul(ws, np.ascontiguousarray(ws.transpose(0, 2, 1)))  # (s, p, p): w_i . w_j
         np.putmask(cosine, ~(occluded[s][:, :, None] & visible[s][:, None, :]), -2.0)  # pairs only
         i, j = np.divmod(np.argmax(cosine.reshape(len(s), -1), axis=1), probes)
         rows = np.arange(s.size)
         inside, outside = ws[rows, i], ws[rows, j]
-        hits = state.tracer.intersect(shading.origin[s], inside)
-        normal = detach(shading.n)[s]
-        edge, _, _ = bisect_silhouette(state, shading.origin[s], inside, outside, hits, normal, refine)
+        hits = state.tracer.intersect(origin, inside)
+        normal = take_rows(detach(shading.n), s)
+        edge, _, _ = bisect_silhouette(state, origin, inside, outside, hits, normal, refine)
         point = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
         target[s], found[s] = direction_towards(point, shading.x[s], np.ones(s.size, dtype=bool))
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
     emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
-    moving = np.any(tangent(shading.x) != 0.0, axis=1) | emitters_move
-    f = np.flatnonzero(~some_occluded & usable.any(axis=1) & moving)
+    moving = any_rows(tangent(shading.x) != 0.0) | emitters_move
+    f = np.flatnonzero(~some_occluded & any_rows(usable) & moving)
     if f.size:  # no shadow edge: the mean attached probe point on the emitters
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])
         points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)

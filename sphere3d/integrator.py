@@ -46,7 +46,7 @@ from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
 from sphere3d.emitter_edges import add_tangent, emitter_edge_term
 from sphere3d.film import FilmTransform
-from sphere3d.live import emitters_change, moving_rows, on_rows, triangles_change
+from sphere3d.live import emitters_change, moving_rows, on_rows, take_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -103,7 +103,8 @@ class Shading:
         return len(self.origin)
 
     def take(self, index: np.ndarray) -> Shading:
-        return Shading(self.state, self.x[index], self.n[index], self.origin[index], self.draws.take(index))
+        x, n, origin = self.x[index], self.n[index], take_rows(self.origin, index)
+        return Shading(self.state, x, n, origin, self.draws.take(index))
 
     def trace(self, mu: np.ndarray) -> Hits:
         """First hits along directions ``mu`` from the shading points (detached)."""
@@ -222,7 +223,8 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     cos_x = dot(detach(shading.n), w)
     valid = (cos_y > 1e-9) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
-    blocked = state.tracer.occluded(shading.origin[idx], w[idx], dist[idx] - 2.0 * state.epsilon)
+    origin, direction = take_rows(shading.origin, idx), take_rows(w, idx)
+    blocked = state.tracer.occluded(origin, direction, dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
     # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
     edges = state.dual and getattr(transforms, "emitter_edges", False)
@@ -233,11 +235,16 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     place = np.cumsum(need) - 1  # row of each needed point in the rotation
     rotation = transforms.emitter(shading if need.all() else shading.take(np.flatnonzero(need)))
     # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
-    live = rotation.active[place[vis]] | moving_rows(vis, shading.x, shading.n) | emitters_change(state)
+    points_move, lights_change = moving_rows(vis, shading.x, shading.n), emitters_change(state)
+    live = rotation.active[place[vis]] | points_move | lights_change
     plain, inv_area = state.detached(), 1.0 / float(detach(state.emitter_area))
+    # operands whose tangents are all 0 enter plain: the Dual rules give a constant the tangent 0, the same
+    # numbers (flatland.core.dual_ufuncs), and skip the products with it
+    lights, attached = (state if lights_change else plain), bool(points_move.any())
 
     def estimate(dual: bool, x: Any, n: Any, omega: np.ndarray, row: Any, t: Any, d: Any, c: Any) -> tuple:
-        st, rotated = (state, rotation.take(row).apply(omega)) if dual else (plain, omega)
+        st, rotated = (lights, rotation.take(row).apply(omega)) if dual else (plain, omega)
+        x, n = (x, n) if attached else (detach(x), detach(n))
         # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
         it = intersect_triangles(x, rotated, st.triangles[t])
         cos_x_d = np.maximum(dot(n, rotated), 0.0)
@@ -298,7 +305,7 @@ def pixel_samples(
         live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
         r_dot, w_dot = np.zeros(d.shape), np.zeros(np.shape(weight))
         for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
-            r = rotation.take(live).apply(d[live])
+            r = rotation.take(live).apply(take_rows(d, live))
             fx, fy = cam.film(r)
             # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
             # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)

@@ -19,16 +19,49 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 
-__all__ = ["emitters_change", "moving_rows", "on_rows", "triangles_change"]
+__all__ = [
+    "all_rows",
+    "any_rows",
+    "emitters_change",
+    "moving_rows",
+    "on_rows",
+    "take_rows",
+    "triangles_change",
+]
+
+
+def any_rows(mask: np.ndarray) -> np.ndarray:
+    """``np.any(mask, axis=1)`` of a boolean (n, k) array, as the OR of its k columns (np.any over a short
+    axis is about 6 times slower for k = 3 to 12)."""
+    out = mask[:, 0].copy()
+    for j in range(1, mask.shape[1]):
+        out |= mask[:, j]
+    return out
+
+
+def take_rows(a: np.ndarray, index: Any) -> np.ndarray:
+    """``a[index]``; rows by an integer array with ``np.take`` (the same elements, about 4 times faster than
+    fancy indexing for (n, 3) arrays)."""
+    if isinstance(index, np.ndarray) and index.dtype.kind in "iu" and np.ndim(a):
+        return np.take(a, index, axis=0)
+    return a[index]
+
+
+def all_rows(mask: np.ndarray) -> np.ndarray:
+    """``np.all(mask, axis=1)`` of a boolean (n, k) array, as the AND of its k columns (:func:`any_rows`)."""
+    out = mask[:, 0].copy()
+    for j in range(1, mask.shape[1]):
+        out &= mask[:, j]
+    return out
 
 
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
     """Where any of ``sources`` (Duals or plain arrays, one row per item) has a tangent at ``rows``."""
     out = np.zeros(len(rows), dtype=bool)
     for s in sources:
-        if isinstance(s, Dual):
+        if isinstance(s, Dual) and rows.size:
             t = s.tangent[rows]
-            out |= np.any(t != 0.0, axis=tuple(range(1, t.ndim)))
+            out |= any_rows(t.reshape(len(rows), -1) != 0.0)
     return out
 
 
@@ -56,7 +89,7 @@ def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sourc
     """
     on, off = np.flatnonzero(live), np.flatnonzero(~live)  # positions in rows, found once for every output
     li, di = rows[on], rows[off]
-    plain = func(False, *(detach(s)[di] for s in sources)) if di.size or not li.size else None
+    plain = func(False, *(take_rows(detach(s), di) for s in sources)) if di.size or not li.size else None
     dual = func(True, *(s[li] for s in sources)) if li.size else None
     outputs = []
     for j in range(len(plain if plain is not None else dual)):

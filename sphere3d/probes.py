@@ -112,8 +112,10 @@ def ring_directions(centre: np.ndarray, angle: float, count: int, u: np.ndarray)
 def ring_offsets(radius: float, count: int, u: np.ndarray) -> np.ndarray:
     """Film offsets (m, count, 2) in pixels: the pixel centre, then a ring of ``radius`` (phase $2π u$)."""
     phi = 2.0 * np.pi * (u[:, None] + np.arange(count - 1)[None, :] / max(count - 1, 1))
-    ring = radius * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-    return np.concatenate([np.zeros((len(u), 1, 2)), ring], axis=1)
+    out = np.zeros((len(u), count, 2))  # written in place: row 0 the centre, then radius (cos φ, sin φ)
+    np.multiply(np.cos(phi), radius, out=out[:, 1:, 0])
+    np.multiply(np.sin(phi), radius, out=out[:, 1:, 1])
+    return out
 
 
 def pair_index(shape: np.ndarray) -> np.ndarray:

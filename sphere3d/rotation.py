@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
+from sphere3d.live import any_rows, take_rows
 from sphere3d.vector import cross, dot, norm
 
 __all__ = ["Rotation", "rotate", "rotation_matrix"]
@@ -123,7 +124,8 @@ class Rotation:
             active = np.ones(omega_p.shape[:-1], dtype=bool)
         length = norm(omega_p.value)
         active = np.asarray(active, dtype=bool) & (length > 0.0) & np.isfinite(length)
-        active = active & np.all(np.isfinite(omega_p.tangent), axis=-1)
+        not_finite = any_rows(~np.isfinite(omega_p.tangent).reshape(-1, 3)).reshape(active.shape)
+        active = active & ~not_finite
         if spin is not None:
             spin = spin if isinstance(spin, Dual) else Dual(spin)
             active = active & np.isfinite(spin.tangent)
@@ -164,10 +166,11 @@ class Rotation:
             flat = omega.reshape(-1, 3)
             t = np.zeros(flat.shape)
             if rows.size:
-                a, b_dot = detach(b).reshape(-1, 3)[rows], tangent(b).reshape(-1, 3)[rows]
-                t[rows] = _identity_tangent(a, b_dot, flat[rows])
+                a, b_dot = (take_rows(f(b).reshape(-1, 3), rows) for f in (detach, tangent))
+                omega_rows = take_rows(flat, rows)
+                t[rows] = _identity_tangent(a, b_dot, omega_rows)
                 if self.spin is not None:  # the turn about a: ψ' (a × ω)
-                    t[rows] += tangent(self.spin).ravel()[rows, None] * cross(a, flat[rows])
+                    t[rows] += tangent(self.spin).ravel()[rows, None] * cross(a, omega_rows)
             return Dual(omega.copy(), t.reshape(omega.shape))
         t = _identity_tangent(detach(b), tangent(b), omega)
         if self.spin is not None:  # the turn about a: ψ' (a × ω)   (zero on the identity rows)

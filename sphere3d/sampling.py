@@ -208,8 +208,15 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
     areas = triangle_area(triangles[:, 0], triangles[:, 1], triangles[:, 2])
     cdf = np.cumsum(areas)
     index = np.minimum(np.searchsorted(cdf, u[..., 0] * cdf[-1], side="right"), len(areas) - 1)
-    v0, v1, v2 = (np.take(triangles[:, j], index, axis=0) for j in range(3))  # contiguous rows
-    return sample_triangle(u[..., 1:3], v0, v1, v2), index
+    # sample_triangle's (1 - b1 - b2) v0 + b1 v1 + b2 v2, one coordinate at a time (the same numbers,
+    # without broadcasting the barycentrics over the short last axis)
+    b1, b2 = triangle_barycentrics(u[..., 1:3])
+    b0 = 1.0 - b1 - b2
+    points = np.empty((*index.shape, 3))
+    for j in range(3):  # x, y, z
+        v0, v1, v2 = (np.take(triangles[:, i, j], index) for i in range(3))
+        points[..., j] = b0 * v0 + b1 * v1 + b2 * v2
+    return points, index
 
 
 def pdf_mesh(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -255,21 +255,54 @@ def make_tracer(
 
 
 # ----------------------------------------------------------------- re-attachment
+class _once:  # noqa: N801  (a decorator, named like property)
+    """A read-only attribute computed on first read and kept in the instance's ``__dict__``.
+
+    ``functools.cached_property`` without its lock, which Python 3.11 shares among all instances
+    and holds during the computation: it would serialize the renderer's threads.
+    """
+
+    def __init__(self, func: Any) -> None:
+        self.func, self.name = func, func.__name__
+
+    def __get__(self, obj: Any, owner: Any = None) -> Any:
+        if obj is None:
+            return self
+        value = obj.__dict__[self.name] = self.func(obj)  # a frozen dataclass's __dict__ is writable
+        return value
+
+
 @dataclass(frozen=True)
 class Intersection:
     """A ray–triangle intersection recomputed in float64, Dual where the inputs are.
 
     Attributes
     ----------
-    t : distance along the direction; ``b1``, ``b2``: barycentrics of vertices 1, 2;
+    b1, b2 : barycentrics of vertices 1, 2; t : distance along the direction;
     point : ``origin + t direction``; normal : unit face normal (winding order).
+    ``t``, ``point`` and ``normal`` are computed when first read (not every caller needs them).
     """
 
-    t: Any
     b1: Any
     b2: Any
-    point: Any
-    normal: Any
+    origin: Any
+    direction: Any
+    e1: Any  # v1 - v0
+    e2: Any  # v2 - v0
+    q: Any  # (origin - v0) × e1
+    inv: Any  # 1 / det
+
+    @_once
+    def t(self) -> Any:
+        return dot(self.e2, self.q) * self.inv
+
+    @_once
+    def point(self) -> Any:
+        return self.origin + self.t[..., None] * self.direction
+
+    @_once
+    def normal(self) -> Any:
+        return normalize(cross(self.e1, self.e2))
 
 
 def intersect_triangles(origin: Any, direction: Any, tri: Any) -> Intersection:
@@ -301,9 +334,7 @@ def intersect_triangles(origin: Any, direction: Any, tri: Any) -> Intersection:
     inv = 1.0 / det
     b1 = dot(s, p) * inv
     b2 = dot(direction, q) * inv
-    t = dot(e2, q) * inv
-    point = origin + t[..., None] * direction
-    return Intersection(t=t, b1=b1, b2=b2, point=point, normal=normalize(cross(e1, e2)))
+    return Intersection(b1, b2, origin, direction, e1, e2, q, inv)  # t = e2 · q / det (when read)
 
 
 def attached_points(tri: Any, u: np.ndarray, v: np.ndarray) -> Any:

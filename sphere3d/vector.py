@@ -3,7 +3,8 @@
 Each helper is written once with numpy functions that have forward-mode rules
 (:mod:`flatland.core.dual`), so the same line computes a plain value or a value
 with its θ-tangent. Norms use ``sqrt(einsum)`` in both cases, so a plain and a Dual
-evaluation of the same input give bit-identical values.
+evaluation of the same input give bit-identical values. :func:`cross` writes its tangent out (the
+same numbers as the rules, without a Dual per product).
 """
 
 from __future__ import annotations
@@ -23,10 +24,39 @@ def dot(a: Any, b: Any) -> Any:
 
 
 def cross(a: Any, b: Any) -> Any:
-    """Row-wise cross product over the last axis (by components: ``np.cross`` copies its inputs)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    """Row-wise cross product over the last axis (by components: ``np.cross`` copies its inputs).
+
+    With a Dual operand the tangent is written out: the numbers of the Dual rules for ``*`` and ``-``
+    (a plain operand's tangent a scalar 0, as there), without a Dual per product.
+    """
+    if not (isinstance(a, Dual) or isinstance(b, Dual)):
+        return _cross(a, b)
+    (a, a_dot), (b, b_dot) = _parts(a), _parts(b)
+    a0, a1, a2 = _columns(a)
+    b0, b1, b2 = _columns(b)
+    a0_dot, a1_dot, a2_dot = _columns(a_dot)
+    b0_dot, b1_dot, b2_dot = _columns(b_dot)
+    # (x y)' = x' y + x y' for each product, then (x y - z w)' = (x y)' - (z w)'
+    t0 = (a1_dot * b2 + a1 * b2_dot) - (a2_dot * b1 + a2 * b1_dot)
+    t1 = (a2_dot * b0 + a2 * b0_dot) - (a0_dot * b2 + a0 * b2_dot)
+    t2 = (a0_dot * b1 + a0 * b1_dot) - (a1_dot * b0 + a1 * b0_dot)
+    return Dual(_cross(a, b), np.stack(np.broadcast_arrays(t0, t1, t2), axis=-1))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    a0, a1, a2 = _columns(a)
+    b0, b1, b2 = _columns(b)
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _parts(x: Any) -> tuple[np.ndarray, Any]:
+    """(value, tangent) of a Dual; a plain array's tangent is the scalar 0, as in the Dual rules."""
+    return (x.value, x.tangent) if isinstance(x, Dual) else (np.asarray(x, dtype=np.float64), 0.0)
+
+
+def _columns(x: Any) -> tuple[Any, Any, Any]:
+    """The three components of vectors (..., 3); a scalar (a constant's tangent) three times."""
+    return (x, x, x) if np.ndim(x) == 0 else (x[..., 0], x[..., 1], x[..., 2])
 
 
 def norm(a: Any) -> Any:

@@ -108,6 +108,9 @@ class Dual(np.lib.mixins.NDArrayOperatorsMixin):
     def __getitem__(self, index: Any) -> Dual:
         if isinstance(index, Dual) or (isinstance(index, tuple) and any(isinstance(i, Dual) for i in index)):
             raise TypeError("a Dual cannot be used as an index; index with detach(x) instead")
+        if isinstance(index, np.ndarray) and index.dtype.kind in "iu" and self.value.ndim:
+            # rows by an integer array: the same elements as value[index], np.take is several times faster
+            return Dual(np.take(self.value, index, axis=0), np.take(self.tangent, index, axis=0))
         return Dual(self.value[index], self.tangent[index])
 
     def __setitem__(self, index: Any, item: Any) -> None:

@@ -74,6 +74,7 @@ UNARY = {
     "interp": (lambda x: np.interp(x, [0.0, 1.0, 3.0], [1.0, -2.0, 5.0]), 0.01, 2.99),
     "getitem_fancy": (lambda x: x[[0, 2, 2, 4]], -3, 3),
     "getitem_mask": (lambda x: x[np.array([True, False, True, True, False])], -3, 3),
+    "getitem_int_array": (lambda x: x[np.array([[0, -1], [2, 2]])], -3, 3),  # by np.take
     "reshape": (lambda x: np.reshape(x, (5, 1)) * x, -3, 3),
     "stack": (lambda x: np.stack([x, 2 * x, x * x]), -3, 3),
     "concatenate": (lambda x: np.concatenate([x, np.ones(2), x * x]), -3, 3),

@@ -23,7 +23,7 @@ from sphere3d.tracing import (
     intersect_triangles,
     make_tracer,
 )
-from sphere3d.vector import normalize
+from sphere3d.vector import cross, normalize
 
 
 def _scene():
@@ -138,3 +138,30 @@ def test06_hits_helpers_and_bad_backend():
     assert empty.hit.shape == (0,)
     with pytest.raises(ValueError, match="tracer"):
         make_tracer(tri, shape_of, "optix")
+
+
+def _cross_by_dual_rules(a, b):
+    """The cross product by components through the Dual rules of ``*`` and ``-`` (a Dual per product)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def test07_cross_of_duals_gives_the_dual_rules_numbers_bit_for_bit():
+    rng = stream(3, "test_tracing.cross")
+    n = 500
+    signed_zero = np.where(rng.uniform(size=(n, 3)) < 0.5, 0.0, -0.0)
+
+    def dual(tangent_zero_rows):
+        t = rng.normal(size=(n, 3))
+        t[tangent_zero_rows] = signed_zero[tangent_zero_rows]  # zero tangents, both signs of zero
+        return Dual(rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-3, 3, (n, 1)), t)
+
+    a, b, plain = dual(slice(0, n, 3)), dual(slice(1, n, 2)), rng.normal(size=(n, 3))
+    wide = Dual(rng.normal(size=(n, 4, 3)), rng.normal(size=(n, 4, 3)))
+    for x, y in ((a, b), (a, plain), (plain, b), (a[:, None], wide), (wide, plain[:, None]), (a, plain[0])):
+        got, want = cross(x, y), _cross_by_dual_rules(x, y)
+        for part in (detach, tangent):
+            g, w = part(got), part(want)
+            assert g.shape == w.shape
+            assert np.array_equal(g.view(np.int64), w.view(np.int64))  # the same bits, signs of 0 included
