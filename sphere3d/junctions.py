@@ -40,8 +40,9 @@ occluder's silhouette crosses the ground's far edge held 86 % (sphere) and 97 % 
 squared bias floor before, up to 2.0 (of -13.1) and 3.1 (of -15.8) per pixel; the bias floor
 (6 seeds at 256 spp) fell from 0.058 to 0.028 (sphere) and from 0.074 to 0.026 (cube; 0.025 with
 the aimed emitter probes, ``make bench``), the silhouette region's kept fraction (8 seeds × 128
-spp) from 0.970 ± 0.008 to 0.997 ± 0.005 and from 0.977 ± 0.005 to 0.994 ± 0.005. Junction rows are few (137 of 131 072 film kernels at 16 spp
-on ``hard_shadow``): +0.3 % CPU time (one thread, medians of 5, alternating).
+spp) from 0.970 ± 0.008 to 0.997 ± 0.005 and from 0.977 ± 0.005 to 0.994 ± 0.005. Junction rows are few
+(137 of 131 072 film kernels at 16 spp on ``hard_shadow``): +0.3 % CPU time (one thread, medians
+of 5, alternating).
 
 Still biased where the two edges cross outside ``radius`` of the kernel's centre (the single-edge
 rule applies), where a third discontinuity lies between the static probes (the row is abandoned),
