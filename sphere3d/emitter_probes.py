@@ -124,10 +124,10 @@ import numpy as np
 from flatland.core.dual import detach, tangent
 from sphere3d.emitter_edges import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, take_rows, triangles_change
-from sphere3d.probes import bisect_silhouette, direction_towards, mean_point_direction
+from sphere3d.probes import bisect_silhouette, closest_pair, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
-from sphere3d.tracing import attached_points
+from sphere3d.tracing import attached_points, intersect_triangles
 from sphere3d.vector import dot, norm, zeros
 
 __all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "emitter_rotation"]
@@ -210,18 +210,13 @@ def _aimed_points(
     rows = np.arange(len(x))[:, None]
     edge = np.concatenate([np.arange(len(e)), np.arange(len(e))])[at]
     points = p0[edge] + t[rows, at][..., None] * e[edge]  # (m, k, 3)
-    # the axis through an emitter's inside: that hit is the nearest point (angle 0); Moller-Trumbore
-    # with plain products, c x d = c @ _skew(d)
-    s0 = np.empty_like(x)
-    for c0, c1, c2 in triangles[state.emitters]:  # a loop over the few emitter triangles
-        f1, f2 = c1 - c0, c2 - c0
-        np.subtract(x, c0, out=s0)
-        p, q = axis @ _skew(f2), s0 @ _skew(f1)  # axis x f2, s0 x f1
-        det = p @ f1
-        inv = 1.0 / np.where(np.abs(det) > 1e-300, det, 1.0)
-        b1, b2, depth = dot(s0, p) * inv, dot(axis, q) * inv, (q @ f2) * inv
-        hit = (b1 >= 0.0) & (b2 >= 0.0) & (b1 + b2 <= 1.0) & (depth > 0.0) & (np.abs(det) > 1e-300) & ~far
-        points[hit, 0] = x[hit] + depth[hit, None] * axis[hit]
+    # the axis through an emitter's inside: that hit is the nearest point (angle 0)
+    for tri in triangles[state.emitters]:  # a loop over the few emitter triangles
+        it = intersect_triangles(x, axis, tri)  # plain: no tangents
+        crosses = np.abs(axis @ np.cross(tri[1] - tri[0], tri[2] - tri[0])) > 1e-300  # not parallel
+        inside = (it.b1 >= 0.0) & (it.b2 >= 0.0) & (it.b1 + it.b2 <= 1.0)
+        hit = inside & crosses & (it.t > 0.0) & ~far
+        points[hit, 0] = it.point[hit]
         nearest[hit] = 1.0
     # a light that lies wholly outside the occluders' bounding cone (half-angle arcsin(r / |c - x|))
     # cannot be hidden by them: no ray for those rows
@@ -248,11 +243,6 @@ def _rows(rows: np.ndarray, values: np.ndarray, shape: tuple, fill: Any) -> np.n
     out = np.full(shape, fill, dtype=values.dtype)
     out[rows] = values
     return out
-
-
-def _skew(d: np.ndarray) -> np.ndarray:
-    """The matrix S with c @ S = cross(c, d) for rows c."""
-    return np.array([[0.0, d[2], -d[1]], [-d[2], 0.0, d[0]], [d[1], -d[0], 0.0]])
 
 
 def _bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
@@ -313,27 +303,6 @@ def emitter_rotation(
     return Rotation.following(target, found)
 
 
-PAIR_ROWS = 1024
-"""Rows per slice of :func:`_closest_pair`: the (rows, p, p) cosines of 14 probes are 1.6 MB and stay
-in cache; a chunk's at once (up to 25 000 rows, 38 MB, above the mmap threshold of
-:func:`sphere3d.tasks._heap_for_temporaries`) was mapped and faulted in anew at every call: 24 ms
-per call against 4 ms of arithmetic; by slices of 4096 / 1024 rows 11 / 6 ms (two 64 spp
-``hard_shadow`` renders, one thread: 0.24 -> 0.06 s in all). The same numbers, row by row."""
-
-
-def _closest_pair(w: np.ndarray, first: np.ndarray, second: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per row of probe directions ``w`` (s, p, 3), the closest pair (i, j) of a probe in ``first`` and
-    one in ``second`` (masks (s, p)): the largest w_i . w_j, by slices of :data:`PAIR_ROWS` rows."""
-    n, p = w.shape[:2]
-    best = np.empty(n, dtype=np.intp)
-    for a in range(0, n, PAIR_ROWS):
-        b = min(n, a + PAIR_ROWS)
-        cosine = np.matmul(w[a:b], np.ascontiguousarray(w[a:b].transpose(0, 2, 1)))  # (rows, p, p)
-        np.putmask(cosine, ~(first[a:b, :, None] & second[a:b, None, :]), -2.0)  # pairs only
-        best[a:b] = np.argmax(cosine.reshape(b - a, -1), axis=1)
-    return np.divmod(best, p)
-
-
 def _probe_rotation(
     shading: Any, probes: int, boundary: int, refine: int, aim: int, targets: bool = False
 ) -> Any:
@@ -367,7 +336,6 @@ def _probe_rotation(
         tmax = np.concatenate([tmax, _rows(lack, tmax_a, extra, 0.0)], axis=1)
         usable = np.concatenate([usable, _rows(lack, usable_a, extra, False)], axis=1)
         occluded = np.concatenate([occluded, _rows(lack, occluded_a, extra, False)], axis=1)
-    probes = w.shape[1]
     visible = usable & ~occluded
     some_occluded, some_visible = any_rows(occluded), any_rows(visible)
     target = zeros((m, 3), state.dual)
@@ -380,7 +348,7 @@ def _probe_rotation(
     s = np.flatnonzero(some_occluded & some_visible)
     if s.size:  # a shadow edge crosses the light: its silhouette point between the closest pair
         ws, origin = take_rows(w, s), take_rows(shading.origin, s)
-        i, j = _closest_pair(ws, occluded[s], visible[s])
+        i, j, _ = closest_pair(ws, occluded[s][:, :, None] & visible[s][:, None, :])
         rows = np.arange(s.size)
         inside, outside = ws[rows, i], ws[rows, j]
         hits = state.tracer.intersect(origin, inside)

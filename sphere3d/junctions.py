@@ -57,7 +57,8 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach
-from sphere3d.probes import bisect_silhouette
+from sphere3d.live import any_rows
+from sphere3d.probes import bisect_silhouette, closest_pair
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
 from sphere3d.state import SceneState
@@ -74,16 +75,6 @@ def probe_classes(hits: Hits, moving: np.ndarray) -> np.ndarray:
     """Per probe what it sees: its shape where the triangle is static, -1 for a miss, :data:`MOVING`."""
     on_moving = hits.hit & moving[np.maximum(hits.triangle, 0)]
     return np.where(on_moving, MOVING, hits.shape)
-
-
-def _closest_pair(directions: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row the closest pair (i, j) among ``pairs`` (m, P, P), and whether there is one."""
-    m, p = directions.shape[:2]
-    cosine = np.matmul(directions, directions.transpose(0, 2, 1))  # (m, P, P): w_i . w_j
-    cosine = np.where(pairs, cosine, -2.0).reshape(m, -1)
-    best = np.argmax(cosine, axis=1)
-    i, j = np.divmod(best, p)
-    return i, j, cosine[np.arange(m), best] > -2.0
 
 
 def _bisect_between(
@@ -159,26 +150,28 @@ def junction_rotation(
         Their rotations, shape (len(rows),).
     """
     seen = probe_classes(hits, moving)
-    on_moving, static = seen == MOVING, seen != MOVING
-    # two static probes that see different things, and a moving one: a candidate junction
-    differ = static[:, :, None] & static[:, None, :] & (seen[:, :, None] != seen[:, None, :])
-    rows = np.flatnonzero(on_moving.any(axis=1) & differ.any(axis=(1, 2)))
+    # a moving probe, and two static probes that see different things (their classes' least and
+    # greatest differ): a candidate junction
+    low = np.where(seen == MOVING, np.iinfo(seen.dtype).max, seen).min(axis=1)
+    rows = np.flatnonzero(any_rows(seen == MOVING) & (low < seen.max(axis=1)))
     if rows.size == 0 or refine == 0:
         return rows[:0], Rotation.identity((0,))
     d, cls, h = directions[rows], seen[rows], hits.take(rows)
+    on_moving, static = cls == MOVING, cls != MOVING
+    differ = static[:, :, None] & static[:, None, :] & (cls[:, :, None] != cls[:, None, :])
     k = np.arange(rows.size)
     snap = edge_snap(state, lambda r, ends: np.full(ends.shape[:2], np.inf), 0.0)  # exit edges, no corner
     o = np.asarray(detach(origin), dtype=np.float64)
     trace = np.broadcast_to(o, (rows.size, 3))
     # the moving edge: between the closest pair of a moving probe and a static one
-    i, j, ok = _closest_pair(d, on_moving[rows][:, :, None] & static[rows][:, None, :])
+    i, j, ok = closest_pair(d, on_moving[:, :, None] & static[:, None, :])
     start = h.take((k, i))
     moved = bisect_silhouette(state, trace, d[k, i], d[k, j], start, None, refine)
     c_end, d_end, found_m = _edge_ends(state, snap, k, trace, moved)
     # the static edge: between the closest pair of static probes that see different things, the
     # inside one a hit in front of what the other sees (a miss is never in front)
     front = (cls[:, :, None] >= 0) & ((h.t[:, :, None] < h.t[:, None, :]) | (cls[:, None, :] < 0))
-    a, b, ok_s = _closest_pair(d, differ[rows] & front)
+    a, b, ok_s = closest_pair(d, differ & front)
     fixed, inside, outside, valid = _bisect_between(
         state, trace, d[k, a], d[k, b], h.take((k, a)), cls[k, a], cls[k, b], moving, refine
     )

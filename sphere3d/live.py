@@ -30,13 +30,23 @@ __all__ = [
 ]
 
 
-def any_rows(mask: np.ndarray) -> np.ndarray:
-    """``np.any(mask, axis=1)`` of a boolean (n, k) array, as the OR of its k columns (np.any over a short
-    axis is about 6 times slower for k = 3 to 12)."""
+def _fold_columns(mask: np.ndarray, op: np.ufunc) -> np.ndarray:
+    """``op`` (``np.logical_or``, ``np.logical_and``) over the k columns of a boolean (n, k) array, column by
+    column: a reduction over a short axis is about 6 times slower for k = 3 to 12."""
     out = mask[:, 0].copy()
     for j in range(1, mask.shape[1]):
-        out |= mask[:, j]
+        op(out, mask[:, j], out=out)
     return out
+
+
+def any_rows(mask: np.ndarray) -> np.ndarray:
+    """``np.any(mask, axis=1)`` of a boolean (n, k) array, as the OR of its columns."""
+    return _fold_columns(mask, np.logical_or)
+
+
+def all_rows(mask: np.ndarray) -> np.ndarray:
+    """``np.all(mask, axis=1)`` of a boolean (n, k) array, as the AND of its columns."""
+    return _fold_columns(mask, np.logical_and)
 
 
 def take_rows(a: np.ndarray, index: Any) -> np.ndarray:
@@ -45,14 +55,6 @@ def take_rows(a: np.ndarray, index: Any) -> np.ndarray:
     if isinstance(index, np.ndarray) and index.dtype.kind in "iu" and np.ndim(a):
         return np.take(a, index, axis=0)
     return a[index]
-
-
-def all_rows(mask: np.ndarray) -> np.ndarray:
-    """``np.all(mask, axis=1)`` of a boolean (n, k) array, as the AND of its k columns (:func:`any_rows`)."""
-    out = mask[:, 0].copy()
-    for j in range(1, mask.shape[1]):
-        out &= mask[:, j]
-    return out
 
 
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:

@@ -53,8 +53,10 @@ from sphere3d.tracing import Hits, attached_points, face_normals
 from sphere3d.vector import cross, dot, frame, norm
 
 __all__ = [
+    "PAIR_ROWS",
     "PARALLEL",
     "bisect_silhouette",
+    "closest_pair",
     "direction_towards",
     "follow_probes",
     "mean_point_direction",
@@ -116,6 +118,31 @@ def ring_offsets(radius: float, count: int, u: np.ndarray) -> np.ndarray:
     np.multiply(np.cos(phi), radius, out=out[:, 1:, 0])
     np.multiply(np.sin(phi), radius, out=out[:, 1:, 1])
     return out
+
+
+PAIR_ROWS = 1024
+"""Rows per slice of :func:`closest_pair`: the (rows, p, p) cosines of 14 probes are 1.6 MB and stay
+in cache; a chunk's at once (up to 25 000 rows, 38 MB, above the mmap threshold of
+:func:`sphere3d.tasks._heap_for_temporaries`) was mapped and faulted in anew at every call: 24 ms
+per call against 4 ms of arithmetic; by slices of 4096 / 1024 rows 11 / 6 ms (the emitter probes of
+two 64 spp ``hard_shadow`` renders, one thread: 0.24 -> 0.06 s in all). The same numbers, row by row."""
+
+
+def closest_pair(w: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of probe directions ``w`` (s, p, 3) the closest pair (i, j) allowed by ``pairs`` (s, p, p),
+    the largest w_i . w_j, and whether the row has one; by slices of :data:`PAIR_ROWS` rows."""
+    n, p = w.shape[:2]
+    best = np.empty(n, dtype=np.intp)
+    found = np.empty(n, dtype=bool)
+    for a in range(0, n, PAIR_ROWS):
+        b = min(n, a + PAIR_ROWS)
+        cosine = np.matmul(w[a:b], np.ascontiguousarray(w[a:b].transpose(0, 2, 1)))  # (rows, p, p)
+        np.putmask(cosine, ~pairs[a:b], -2.0)  # allowed pairs only
+        flat = cosine.reshape(b - a, -1)
+        best[a:b] = np.argmax(flat, axis=1)
+        found[a:b] = flat[np.arange(b - a), best[a:b]] > -2.0
+    i, j = np.divmod(best, p)
+    return i, j, found
 
 
 def pair_index(shape: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ import itertools
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent, variable
+from flatland.core.image import summarize_batches
 from flatland.core.rng import Draws
 from sphere3d import closed_form as cf
 from sphere3d.camera_kernel import KAPPA_FILM
@@ -51,8 +52,8 @@ def over_batches(per_batch):
     the statistic's value per batch is an i.i.d. sample and its mean has the standard error
     std(ddof=1) / sqrt(batches): compare with a Student-t quantile at batches - 1 degrees of freedom.
     """
-    x = np.asarray(per_batch, dtype=np.float64)
-    return float(x.mean()), float(x.std(ddof=1) / np.sqrt(len(x)))
+    s = summarize_batches(per_batch)  # the package's rule, its rounding policy included
+    return float(s.mean), float(s.stderr)
 
 
 def lambert(vertices, normal=(0.0, 0.0, 1.0)):

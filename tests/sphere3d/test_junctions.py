@@ -21,6 +21,7 @@ from scipy import stats
 
 import sphere3d as s3
 from flatland.core.dual import Dual, detach, tangent, variable
+from flatland.core.image import summarize_batches
 from flatland.core.stats import sidak
 from sphere3d import closed_form as cf
 from sphere3d.methods import GRADIENT_METHODS
@@ -85,7 +86,8 @@ def test03_reparam_matches_the_junction_closed_form_in_every_pixel(motion):
     # the exact derivative there below the filter's reach: beyond 1.5 px of every edge it is 0
     batches = _render(motion, True)
     exact = cf.junction_image(cf.junction_scene(), MOTIONS[motion]).derivative
-    mean, se = batches.mean(axis=0), batches.std(axis=0, ddof=1) / math.sqrt(BATCHES)
+    summary = summarize_batches(batches)
+    mean, se = summary.mean, summary.stderr
     live = se > 0.0
     q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, int(live.sum())), BATCHES - 1)
     z = (mean - exact)[live] / se[live]
