@@ -38,7 +38,6 @@ s and s + P/2 along their loops), one shadow ray each.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -49,6 +48,7 @@ from sphere3d.edges import mesh_edges
 from sphere3d.live import any_rows, take_rows
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
+from sphere3d.state import per_state
 from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import cross, dot, norm
 
@@ -187,10 +187,7 @@ def _faded_out(state: Any, edges: Any) -> np.ndarray:
     return (edges.other < 0) & (state.fade[face] > 0.0) & (kind != FADE_NONE) & zero
 
 
-_TABLES: dict[int, tuple[weakref.ref, EdgeTable | None]] = {}
-"""Edge tables by ``id(state)``, each with a weak reference to its state (dropped with it)."""
-
-
+@per_state
 def edge_table(state: Any) -> EdgeTable | None:
     """Boundary edges, edges between emitter shapes and creases of the emitter triangles.
 
@@ -199,16 +196,10 @@ def edge_table(state: Any) -> EdgeTable | None:
     are opposite points of a loop: on a parallelogram light, reflections through its
     centre (the antithetic pair of :func:`sample_emitter_edges`).
 
-    Built once per state (states are immutable; every chunk of a render asks for it) and
-    read-only. Two threads asking at once may both build it: the same table, either is kept.
+    Built once per state (:func:`~sphere3d.state.per_state`: every chunk of a render asks for
+    it) and read-only.
     """
-    key = id(state)
-    cached = _TABLES.get(key)
-    if cached is not None and cached[0]() is state:
-        return cached[1]
-    table = _build_edge_table(state)
-    _TABLES[key] = (weakref.ref(state, lambda _, key=key: _TABLES.pop(key, None)), table)
-    return table
+    return _build_edge_table(state)
 
 
 def _build_edge_table(state: Any) -> EdgeTable | None:

@@ -124,6 +124,7 @@ import numpy as np
 from flatland.core.dual import detach, tangent
 from sphere3d.emitter_edges import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, take_rows, triangles_change
+from sphere3d.penumbra import bounding_sphere, may_see_motion
 from sphere3d.probes import bisect_silhouette, closest_pair, direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
@@ -164,7 +165,7 @@ def _aimed_points(
     non-emitter triangle or emitter edges.
 
     The centre c is that of the moving non-emitter triangles' bounding sphere
-    (:func:`_bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an edge
+    (:func:`~sphere3d.penumbra.bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an edge
     $p(t) = p_0 + t e$, $t \in [0, 1]$, the cosine $a \cdot v / |v|$ with $v = p(t) - x$ has one
     critical point (its derivative's numerator is linear in t), so the extremes over the border lie
     at its vertices (each edge's start, the loops being closed) or at those critical points; the
@@ -180,7 +181,7 @@ def _aimed_points(
     if table is None or not moving.any():
         return None
     triangles = np.asarray(detach(state.triangles))
-    centre, radius = _bounding_sphere(triangles[moving])
+    centre, radius = bounding_sphere(triangles[moving])
     to = centre - x
     length = norm(to)
     axis = to / np.where(length > 0.0, length, 1.0)[:, None]
@@ -245,37 +246,6 @@ def _rows(rows: np.ndarray, values: np.ndarray, shape: tuple, fill: Any) -> np.n
     return out
 
 
-def _bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
-    """Centre and radius of a sphere holding every vertex (k, 3, 3): the box's centre, a safe radius."""
-    v = vertices.reshape(-1, 3)
-    centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    return centre, float(np.sqrt(np.max(np.sum((v - centre) ** 2, axis=1)))) * (1.0 + 1e-9)
-
-
-def _may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
-    r"""Rows of the points ``x`` (plain, (m, 3)) whose shadow rays to the emitters may meet a moving triangle.
-
-    Conservative, by bounding spheres: a ray from x to the emitters lies within the angle
-    $β_L = \arcsin(r_L / d_L)$ of the direction to their sphere's centre, one that meets the
-    moving triangles within $β_M$ of theirs, so the two cones must overlap, $α < β_L + β_M$,
-    and the moving sphere must begin before the emitters' sphere ends. A point inside either
-    sphere counts.
-    """
-    moving = triangles_change(state)
-    if not moving.any():
-        return np.zeros(len(x), dtype=bool)
-    triangles = np.asarray(detach(state.triangles))
-    (c_m, r_m), (c_l, r_l) = _bounding_sphere(triangles[moving]), _bounding_sphere(triangles[state.emitters])
-    to_m, to_l = c_m - x, c_l - x
-    d_m, d_l = norm(to_m), norm(to_l)
-    inside = (d_m <= r_m) | (d_l <= r_l)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos_a = np.clip(dot(to_m, to_l) / (d_m * d_l), -1.0, 1.0)
-        reach = np.arcsin(np.minimum(1.0, r_l / d_l)) + np.arcsin(np.minimum(1.0, r_m / d_m))
-    overlap = np.arccos(cos_a) < reach * (1.0 + 1e-9) + 1e-9
-    return inside | (overlap & (d_m - r_m < d_l + r_l))
-
-
 def emitter_rotation(
     shading: Any, probes: int = PROBES, boundary: int = BOUNDARY, refine: int = REFINE, aim: int = AIM
 ) -> Rotation:
@@ -284,7 +254,7 @@ def emitter_rotation(
     ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
     (stream ``"probes.emitter"``, keyed on each point's sample), so the primary samples are
     untouched. Points that are static, under static emitters, and whose shadow rays cannot
-    meet a moving triangle (:func:`_may_see_motion`) get the identity without probes: any
+    meet a moving triangle (:func:`~sphere3d.penumbra.may_see_motion`) get the identity without probes: any
     rotation the probes chose there would follow a static point, with a zero derivative.
     """
     state = shading.state
@@ -292,7 +262,7 @@ def emitter_rotation(
     if not state.dual:
         return Rotation.identity((m,))
     x0 = detach(shading.x)
-    need = any_rows(tangent(shading.x) != 0.0) | emitters_change(state) | _may_see_motion(state, x0)
+    need = any_rows(tangent(shading.x) != 0.0) | emitters_change(state) | may_see_motion(state, x0)
     if need.all():
         return _probe_rotation(shading, probes, boundary, refine, aim)
     rows = np.flatnonzero(need)

@@ -11,8 +11,11 @@ the detached triangles: rays are traced at θ0 and re-attached to these Duals.
 
 from __future__ import annotations
 
+import functools
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -190,6 +193,28 @@ class SceneState:
         out = geometric * 1.0  # a copy, Dual or plain like the geometric normals
         out[s] = np.where(ok[:, None], unit, geometric[s])
         return out
+
+
+T = TypeVar("T")
+
+
+def per_state(build: Callable[[SceneState], T]) -> Callable[[SceneState], T]:
+    """``build(state)`` computed once per state and kept while the state lives (states are immutable;
+    every chunk of a render asks for the same tables). Keyed by ``id(state)`` with a weak reference
+    that drops the entry with its state. Two threads asking at once may both build it: the same
+    value, either is kept. The value must be treated as read-only."""
+    cache: dict[int, tuple[weakref.ref, Any]] = {}
+
+    def cached(state: SceneState) -> T:
+        key = id(state)
+        hit = cache.get(key)
+        if hit is not None and hit[0]() is state:
+            return hit[1]
+        value = build(state)
+        cache[key] = (weakref.ref(state, lambda _, key=key: cache.pop(key, None)), value)
+        return value
+
+    return functools.update_wrapper(cached, build)
 
 
 def _offset(values: tuple[float, ...], index: int, theta: Any) -> Any:

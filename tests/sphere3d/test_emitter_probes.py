@@ -26,7 +26,8 @@ import pytest
 import sphere3d as s3
 from flatland.core.dual import detach, variable
 from flatland.core.stats import normal_quantile, sidak
-from sphere3d.emitter_probes import _aimed_points, _may_see_motion
+from sphere3d.emitter_probes import _aimed_points
+from sphere3d.penumbra import may_see_motion
 from sphere3d.sampling import sample_mesh
 
 PARAM = "occluder.translate.x"
@@ -118,7 +119,7 @@ def test03_the_remaining_biases_keep_their_documented_size(scene, x, lo, hi):
 
 @pytest.mark.parametrize("scene", ["hard_shadow", "hard_shadow_cube"])
 def test04_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the_light(scene):
-    """The cull of :func:`sphere3d.emitter_probes._may_see_motion` is conservative: every ground or
+    """The cull of :func:`sphere3d.penumbra.may_see_motion` is conservative: every ground or
     occluder point from which one of 64 rays to the light meets the moving occluder is kept,
     and the cull skips a good share of the ground (else it would be pointless)."""
     loaded = s3.load_scene(scene)
@@ -134,7 +135,7 @@ def test04_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the
     hits = state.tracer.intersect(np.broadcast_to(x[:, None], to.shape), to / dist[..., None])
     moving = np.any(np.asarray(state.triangles.tangent) != 0.0, axis=(1, 2))
     sees = np.any(hits.hit & moving[np.maximum(hits.triangle, 0)] & (hits.t < dist), axis=1)
-    kept = _may_see_motion(state, x)
+    kept = may_see_motion(state, x)
     assert sees.sum() > 100 and np.all(kept[sees])
     assert 0.2 < np.mean(~kept[:4000]) < 1.0
 

@@ -1,0 +1,102 @@
+"""The emitter probes' cull (:mod:`sphere3d.penumbra`): the umbra and penumbra volume, exactly.
+
+A unit square light at z = 1 and a moving square occluder [-a, a]² at z = 0.5, both parallel:
+the segment from (x, y, z) to a light point (u, v, 1) crosses z = 0.5 at
+``(x, y) (1 - t) + (u, v) t`` with ``t = (0.5 - z) / (1 - z)``, inside the occluder for some
+|u|, |v| <= 1/2 exactly when ``|x|, |y| <= (a + t / 2) / (1 - t)`` (z < 0.5). So the points that can
+see the occluder in front of the light are that square prism's cross-section at every height
+below the occluder (2a + 1/2 at z = 0), and none above it. Points within 0.01 of that boundary
+are not judged (the cull keeps a margin of a few ray offsets).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import sphere3d as s3
+from flatland.core.dual import variable
+from sphere3d.penumbra import may_see_motion, separating_planes
+
+A = 0.15
+BAND = 0.01
+"""Points this close to the volume's boundary are not judged (the margin is 4e-4 here)."""
+
+
+def _scene(occluder: dict | None = None) -> dict:
+    return {
+        "name": "parallel_squares",
+        "camera": {"position": [0.0, -3.0, 1.0], "look_at": [0.0, 0.0, 0.5], "fov": 0.8,
+                   "width": 8, "height": 8},
+        "sky": 0.0,
+        "shapes": [
+            {"name": "light", "type": "rectangle", "size": [1.0, 1.0], "translate": [0.0, 0.0, 1.0],
+             "rotate": [np.pi, 0.0, 0.0], "emission": 1.0, "fade": 0.0, "albedo": 0.0},
+            occluder or {"name": "occluder", "type": "rectangle", "size": [2 * A, 2 * A],
+                         "translate": [0.0, 0.0, 0.5], "albedo": 0.5},
+        ],
+    }  # fmt: skip
+
+
+def _state(occluder: dict | None = None):
+    return s3.load_scene(_scene(occluder)).state("occluder.translate.x", variable(0.0))
+
+
+def _half_width(z: np.ndarray) -> np.ndarray:
+    """Half-width of the volume's square cross-section at height z < 0.5 (module docstring)."""
+    t = (0.5 - z) / (1.0 - z)
+    return (A + t / 2.0) / (1.0 - t)
+
+
+def test01_the_cull_keeps_exactly_the_penumbra_volume():
+    """On a grid of heights below the occluder, every point inside the prism is kept and every point
+    outside it ruled out; every point above the occluder, between it and the light, is ruled out.
+    The bounding spheres alone keep points outside (else the planes would add nothing)."""
+    state = _state()
+    rng = np.random.default_rng(1)
+    z = rng.choice([-1.0, -0.2, 0.0, 0.25, 0.45], size=20000)
+    x = np.column_stack([rng.uniform(-2.5, 2.5, z.size), rng.uniform(-2.5, 2.5, z.size), z])
+    reach = np.max(np.abs(x[:, :2]), axis=1) - _half_width(z)
+    judged = np.abs(reach) > BAND
+    kept = may_see_motion(state, x)
+    assert np.all(kept[judged & (reach < 0.0)])
+    assert not np.any(kept[judged & (reach > 0.0)])
+    assert (reach < -BAND).sum() > 1000 and (reach > BAND).sum() > 1000
+    above = np.column_stack(
+        [rng.uniform(-0.6, 0.6, 2000), rng.uniform(-0.6, 0.6, 2000), rng.uniform(0.51, 0.99, 2000)]
+    )
+    assert not np.any(may_see_motion(state, above))
+    # the spheres alone (the planes' rule undone) keep much of what the planes rule out
+    planes = separating_planes(state)
+    spheres = may_see_motion(state, x) | planes.rule_out(x)
+    assert np.mean(spheres[judged & (reach > 0.0)]) > 0.2
+
+
+def test02_planes_separate_the_hulls_and_are_kept_per_state():
+    """Every plane has the light's four corners on its positive side and the occluder's on its negative
+    side (to rounding), the same object is returned for the same state, and a new one for another."""
+    state = _state()
+    planes = separating_planes(state)
+    light = np.array([[u, v, 1.0] for u in (-0.5, 0.5) for v in (-0.5, 0.5)])
+    occluder = np.array([[u, v, 0.5] for u in (-A, A) for v in (-A, A)])
+    assert len(planes.normals) >= 4
+    assert np.allclose(np.linalg.norm(planes.normals, axis=1), 1.0)
+    assert np.all(light @ planes.normals.T - planes.offsets >= -1e-12)
+    assert np.all(occluder @ planes.normals.T - planes.offsets <= 1e-12)
+    assert separating_planes(state) is planes
+    assert separating_planes(_state()) is not planes
+
+
+def test03_no_plane_when_the_occluder_pierces_the_light():
+    """A box through the light's plane (z 0.8 to 1.2) leaves no separating plane: the cull falls back
+    to the bounding spheres, which keep the points below whose rays to the light pass through it."""
+    box = {
+        "name": "occluder",
+        "type": "box",
+        "size": [2 * A, 2 * A, 0.4],
+        "translate": [0.0, 0.0, 1.0],
+        "albedo": 0.5,
+    }
+    state = _state(box)
+    assert separating_planes(state) is None
+    x = np.array([[0.0, 0.0, 0.0], [1.5, 0.0, 0.0], [0.3, -0.2, 0.5]])
+    assert may_see_motion(state, x).tolist() == [True, True, True]
