@@ -15,10 +15,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any
 
 from flatland.app.table import format_table, method_label
+from flatland.core.image import Options
 from flatland.core.stats import normal_quantile
 from flatland.core.validate import check_int, check_seed
 from flatland.integrals import INTEGRALS
@@ -55,7 +55,7 @@ class TextbookRow:
     n: int = 0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+        object.__setattr__(self, "options", Options(self.options))
 
     @property
     def label(self) -> str:

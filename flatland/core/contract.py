@@ -31,12 +31,11 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from flatland.core.image import check_finite_result, summarize_batches
+from flatland.core.image import Options, check_finite_result, summarize_batches
 from flatland.core.stats import Interval, normal_quantile, z_score
 from flatland.core.validate import ValidationError, check_choice
 
@@ -70,7 +69,7 @@ class Estimate:
     options: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+        object.__setattr__(self, "options", Options(self.options))
 
     @classmethod
     def from_batches(

@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -32,6 +31,7 @@ __all__ = [
     "FilmSum",
     "GradientImage",
     "Image",
+    "Options",
     "check_finite_result",
     "film_sum_stderr",
     "relative_error",
@@ -149,8 +149,32 @@ def relative_error(g: np.ndarray, g_ref: np.ndarray) -> float:
     return float(np.mean(np.abs(g - g_ref)) / scale)
 
 
-def _frozen(mapping: Mapping[str, Any]) -> Mapping[str, Any]:
-    return MappingProxyType(dict(mapping))
+class Options(Mapping[str, Any]):
+    """A result's options, read-only: a copy of the mapping it was given.
+
+    Unlike ``types.MappingProxyType`` it pickles, so results cross process boundaries (a study's
+    workers send theirs back pickled). Equal to any mapping with the same items.
+    """
+
+    __slots__ = ("_items",)
+
+    def __init__(self, mapping: Mapping[str, Any] | None = None) -> None:
+        self._items = dict(mapping or {})
+
+    def __getitem__(self, key: str) -> Any:
+        return self._items[key]
+
+    def __iter__(self) -> Any:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"Options({self._items!r})"
+
+    def __reduce__(self) -> tuple[type, tuple[dict[str, Any]]]:
+        return Options, (self._items,)
 
 
 @dataclass(frozen=True)
@@ -239,7 +263,7 @@ class GradientImage:
     derivative_sum_stderr: float | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "options", _frozen(self.options))
+        object.__setattr__(self, "options", Options(self.options))
 
     @property
     def shape(self) -> tuple[int, ...]:

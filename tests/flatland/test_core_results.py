@@ -153,3 +153,30 @@ def test09_a_film_sum_without_batches_is_the_quadrature_flagged_never_nan():
     flat = GradientImage.from_batches(ulps, ulps, param="a.scale", method="naive", spp=8, seed=0)
     assert np.all(flat.derivative_stderr == 0.0) and flat.film_sum().stderr == 0.0
     assert pickle.loads(pickle.dumps(s)) == s
+
+
+def test10_results_pickle_with_their_read_only_options():
+    """An image and an estimate cross process boundaries (pickled) with their options intact; the
+    options stay read-only and equal any mapping with the same items."""
+    import pickle
+
+    d = np.array([[1.0, -2.0], [4.0, 0.5]])
+    g = GradientImage.from_batches(
+        np.stack([d, d + 1.0]),
+        np.stack([d, -d]),
+        param="a.scale",
+        method="reparam",
+        spp=8,
+        seed=3,
+        options={"kappa": 100.0},
+    )
+    back = pickle.loads(pickle.dumps(g))
+    assert back.options == {"kappa": 100.0} and type(back.options) is type(g.options)
+    for f in ("value", "derivative", "value_stderr", "derivative_stderr"):
+        assert np.array_equal(getattr(back, f), getattr(g, f))
+    assert (back.param, back.method, back.spp, back.seed, back.batches) == ("a.scale", "reparam", 8, 3, 2)
+    e = Estimate.from_batches([1.0, 2.0], [0.5, 0.7], n=2, method="naive", options={"h": 1e-3})
+    assert pickle.loads(pickle.dumps(e)) == e
+    with pytest.raises(TypeError):
+        g.options["kappa"] = 1.0  # type: ignore[index]
+    assert repr(g.options) == "Options({'kappa': 100.0})"
