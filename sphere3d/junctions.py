@@ -58,12 +58,12 @@ import numpy as np
 
 from flatland.core.dual import detach
 from sphere3d.live import any_rows
-from sphere3d.probes import bisect_silhouette, closest_pair
+from sphere3d.probes import bisect, bisect_silhouette, closest_pair
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
-from sphere3d.vector import cross, dot, norm
+from sphere3d.vector import cross, dot
 
 __all__ = ["MOVING", "junction_rotation", "probe_classes"]
 
@@ -75,33 +75,6 @@ def probe_classes(hits: Hits, moving: np.ndarray) -> np.ndarray:
     """Per probe what it sees: its shape where the triangle is static, -1 for a miss, :data:`MOVING`."""
     on_moving = hits.hit & moving[np.maximum(hits.triangle, 0)]
     return np.where(on_moving, MOVING, hits.shape)
-
-
-def _bisect_between(
-    state: SceneState,
-    trace_origin: np.ndarray,
-    inside: np.ndarray,
-    outside: np.ndarray,
-    start: Hits,
-    inside_class: np.ndarray,
-    outside_class: np.ndarray,
-    moving: np.ndarray,
-    refine: int,
-) -> tuple[Hits, np.ndarray, np.ndarray, np.ndarray]:
-    """``refine`` bisections between two static probes that see different things; a row stays valid
-    while every bisection ray sees one of the two (anything else: a third discontinuity between)."""
-    valid = np.ones(len(inside), dtype=bool)
-    for _ in range(refine):
-        mid = inside + outside
-        mid = mid / norm(mid)[:, None]
-        h = state.tracer.intersect(trace_origin, mid)
-        seen = probe_classes(h, moving)
-        on, off = seen == inside_class, seen == outside_class
-        valid &= on | off
-        inside = np.where(on[:, None], mid, inside)
-        outside = np.where(off[:, None], mid, outside)
-        start = h.where(on, start)
-    return start, inside, outside, valid
 
 
 def _edge_ends(state: SceneState, snap: Snap, rows: np.ndarray, origin: np.ndarray, pair: tuple) -> tuple:
@@ -172,9 +145,15 @@ def junction_rotation(
     # inside one a hit in front of what the other sees (a miss is never in front)
     front = (cls[:, :, None] >= 0) & ((h.t[:, :, None] < h.t[:, None, :]) | (cls[:, None, :] < 0))
     a, b, ok_s = closest_pair(d, differ & front)
-    fixed, inside, outside, valid = _bisect_between(
-        state, trace, d[k, a], d[k, b], h.take((k, a)), cls[k, a], cls[k, b], moving, refine
-    )
+    # a row stays valid while every bisection ray sees one of the two (else a third discontinuity lies
+    # between them)
+    inside_class, outside_class = cls[k, a], cls[k, b]
+
+    def side(seen: Hits, _: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = probe_classes(seen, moving)
+        return c == inside_class, c == outside_class
+
+    fixed, inside, outside, valid = bisect(state, trace, d[k, a], d[k, b], h.take((k, a)), side, refine)
     a_end, b_end, found_s = _edge_ends(state, snap, k, trace, (fixed, inside, outside))
     # the junction's direction: the line shared by the planes through o holding each edge
     n_static, n_moving = cross(a_end - origin, b_end - origin), cross(c_end - origin, d_end - origin)

@@ -41,6 +41,7 @@ is instead the mean of the attached hits of the occluded shadow probes
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -55,6 +56,7 @@ from sphere3d.vector import cross, dot, frame, norm
 __all__ = [
     "PAIR_ROWS",
     "PARALLEL",
+    "bisect",
     "bisect_silhouette",
     "closest_pair",
     "direction_towards",
@@ -167,6 +169,35 @@ def direction_towards(point: Any, origin: Any, found: np.ndarray) -> tuple[Any, 
     return to, found & (length > 0.0) & np.isfinite(length)
 
 
+def bisect(
+    state: SceneState,
+    trace_origin: np.ndarray,
+    inside: np.ndarray,
+    outside: np.ndarray,
+    hits: Hits,
+    side: Callable[[Hits, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    refine: int,
+) -> tuple[Hits, np.ndarray, np.ndarray, np.ndarray]:
+    """``refine`` bisections between directions ``inside`` (with ``hits``) and ``outside`` (m, 3).
+
+    ``side(h, mid) -> (on, off)`` says which bisection rays (directions ``mid``, hits ``h``) replace
+    the inside direction (and its hit) and which the outside one. Returns the moved hits, the
+    final pair of directions, and which rows stayed valid: every bisection ray on one side or the
+    other (a row whose ray is on neither keeps its pair from then on)."""
+    valid = np.ones(len(inside), dtype=bool)
+    for _ in range(refine):
+        mid = inside + outside
+        mid = mid / norm(mid)[:, None]
+        h = state.tracer.intersect(trace_origin, mid)
+        on, off = side(h, mid)
+        valid &= on | off
+        # contiguous (m, 3) masks: np.where is several times faster than with a broadcast (m, 1) one
+        inside = np.where(np.repeat(on[:, None], 3, axis=1), mid, inside)
+        outside = np.where(np.repeat(off[:, None], 3, axis=1), mid, outside)
+        hits = h.where(on, hits)
+    return hits, inside, outside, valid
+
+
 def bisect_silhouette(
     state: SceneState,
     trace_origin: np.ndarray,
@@ -178,18 +209,17 @@ def bisect_silhouette(
 ) -> tuple[Hits, np.ndarray, np.ndarray]:
     """Move ``hits`` towards their shape's silhouette: ``refine`` bisections between a direction
     that hits the shape (``inside``, with ``hits``) and one that does not (``outside``); returns
-    the moved hits and the final pair of directions."""
-    for _ in range(refine):
-        mid = inside + outside
-        mid = mid / norm(mid)[:, None]
-        h = state.tracer.intersect(trace_origin, mid)
-        on = h.shape == hits.shape  # the shape never changes: hits are only replaced where it matches
+    the moved hits and the final pair of directions. A bisection ray is inside where it hits the
+    same shape (above the horizon of ``normal``, if given), else outside."""
+
+    def side(h: Hits, mid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        on = h.shape == shape  # the shape never changes: hits are only replaced where it matches
         if normal is not None:
             on = on & (dot(mid, normal) > 0.0)
-        side = np.repeat(on[:, None], 3, axis=1)  # a contiguous mask: np.where is several times faster
-        inside = np.where(side, mid, inside)
-        outside = np.where(side, outside, mid)
-        hits = h.where(on, hits)
+        return on, ~on
+
+    shape = hits.shape
+    hits, inside, outside, _ = bisect(state, trace_origin, inside, outside, hits, side, refine)
     return hits, inside, outside
 
 
