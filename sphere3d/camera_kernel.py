@@ -244,7 +244,7 @@ def film_transform(
         d = cam.directions(ring[..., 0], ring[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
         if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
-            seen = any_rows(moving[np.maximum(hits.triangle, 0)] & (hits.triangle >= 0))
+            seen = any_rows(hits.on(moving))
             rows, d, hits = rows[seen], d[seen], hits.take(seen)
             if plane:  # one plane in sight, nothing to follow: the identity (module docstring, Noise)
                 keep = ~one_plane(state, hits)

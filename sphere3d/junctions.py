@@ -73,8 +73,7 @@ MOVING = -2
 
 def probe_classes(hits: Hits, moving: np.ndarray) -> np.ndarray:
     """Per probe what it sees: its shape where the triangle is static, -1 for a miss, :data:`MOVING`."""
-    on_moving = hits.hit & moving[np.maximum(hits.triangle, 0)]
-    return np.where(on_moving, MOVING, hits.shape)
+    return np.where(hits.on(moving), MOVING, hits.shape)
 
 
 def _edge_ends(state: SceneState, snap: Snap, rows: np.ndarray, origin: np.ndarray, pair: tuple) -> tuple:

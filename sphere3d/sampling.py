@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from scipy import special
@@ -173,8 +175,18 @@ def triangle_barycentrics(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def sample_triangle(u: np.ndarray, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
     """Uniform point on the triangle (v0, v1, v2) (:func:`triangle_barycentrics` of ``u``)."""
     b1, b2 = triangle_barycentrics(u)
-    b1, b2 = b1[..., None], b2[..., None]
-    return (1.0 - b1 - b2) * v0 + b1 * v1 + b2 * v2
+    corners = (np.asarray(v0), np.asarray(v1), np.asarray(v2))
+    return _barycentric_point(b1, b2, lambda i, j: corners[i][..., j])
+
+
+def _barycentric_point(b1: np.ndarray, b2: np.ndarray, corner: Callable[[int, int], Any]) -> np.ndarray:
+    """$(1 - b_1 - b_2) v_0 + b_1 v_1 + b_2 v_2$ one coordinate at a time (``corner(i, j)``: coordinate j of
+    corner i, broadcastable against the barycentrics), without broadcasting them over the short last axis."""
+    b0 = 1.0 - b1 - b2
+    points = np.empty((*np.broadcast_shapes(b0.shape, np.shape(corner(0, 0))), 3))
+    for j in range(3):  # x, y, z
+        points[..., j] = b0 * corner(0, j) + b1 * corner(1, j) + b2 * corner(2, j)
+    return points
 
 
 def triangle_area(v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
@@ -208,15 +220,8 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
     areas = triangle_area(triangles[:, 0], triangles[:, 1], triangles[:, 2])
     cdf = np.cumsum(areas)
     index = np.minimum(np.searchsorted(cdf, u[..., 0] * cdf[-1], side="right"), len(areas) - 1)
-    # sample_triangle's (1 - b1 - b2) v0 + b1 v1 + b2 v2, one coordinate at a time (the same numbers,
-    # without broadcasting the barycentrics over the short last axis)
     b1, b2 = triangle_barycentrics(u[..., 1:3])
-    b0 = 1.0 - b1 - b2
-    points = np.empty((*index.shape, 3))
-    for j in range(3):  # x, y, z
-        v0, v1, v2 = (np.take(triangles[:, i, j], index) for i in range(3))
-        points[..., j] = b0 * v0 + b1 * v1 + b2 * v2
-    return points, index
+    return _barycentric_point(b1, b2, lambda i, j: np.take(triangles[:, i, j], index)), index
 
 
 def pdf_mesh(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:

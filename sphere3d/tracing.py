@@ -73,6 +73,10 @@ class Hits:
         """True where the ray hit something."""
         return self.shape >= 0
 
+    def on(self, flags: np.ndarray) -> np.ndarray:
+        """True where the ray hit a triangle whose flag is set (``flags``: one per triangle)."""
+        return self.hit & flags[np.maximum(self.triangle, 0)]
+
     def where(self, mask: np.ndarray, other: Hits) -> Hits:
         """These hits where ``mask`` is True, ``other``'s elsewhere (ray by ray)."""
         return Hits(*(np.where(mask, getattr(self, f), getattr(other, f)) for f in FIELDS))
