@@ -140,7 +140,7 @@ from sphere3d.live import all_rows, any_rows
 from sphere3d.probes import follow_probes, ring_offsets
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
-from sphere3d.state import SceneState
+from sphere3d.state import SceneState, per_state
 from sphere3d.tracing import Hits, face_normals
 
 __all__ = [
@@ -284,14 +284,26 @@ def one_plane(state: SceneState, hits: Hits) -> np.ndarray:
     same = all_rows(hits.hit) & all_rows(hits.shape == hits.shape[:, :1])
     out = same & ~any_rows(state.smooth[tri])
     rows = np.flatnonzero(out)  # the geometry below only where one flat shape is in sight
-    v = np.asarray(detach(state.triangles))[tri[rows]]  # (m, P, 3, 3)
-    n = face_normals(v)
+    t = tri[rows]
+    normals, first, low, high = _plane_table(state)
+    n = normals[t]  # (m, P, 3)
     n0 = n[:, :1]
-    extent = np.max(np.abs(v - v[:, :1, :1]), axis=(1, 2, 3), initial=0.0)
+    corner = first[t[:, :1]]  # (m, 1, 3): the first vertex of probe 0's triangle
+    # the largest |V - corner| over the probes' vertices and coordinates, from each triangle's box
+    reach = np.maximum(high[t] - corner, corner - low[t]).reshape(len(t), t.shape[1] * 3)
+    extent = np.max(reach, axis=1, initial=0.0)
     parallel = all_rows(np.sum(n * n0, axis=-1) > 1.0 - COPLANAR)
-    offset = np.abs(np.sum((v[:, :, 0] - v[:, :1, 0]) * n0, axis=-1))  # n0 · (V_k - V_0): 0 on one plane
+    offset = np.abs(np.sum((first[t] - corner) * n0, axis=-1))  # n0 · (V_k - V_0): 0 on one plane
     out[rows] = parallel & all_rows(offset <= COPLANAR * (1.0 + extent)[:, None])
     return out
+
+
+@per_state
+def _plane_table(state: SceneState) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per triangle (detached): its unit face normal, first vertex, and the low and high corners of its
+    box, (T, 3) each, for :func:`one_plane` (gathered per probe instead of the probes' vertices)."""
+    v = np.asarray(detach(state.triangles))
+    return face_normals(v), v[:, 0], v.min(axis=1), v.max(axis=1)
 
 
 def _reaching_motion(state: SceneState, moving: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
