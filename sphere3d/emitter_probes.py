@@ -22,7 +22,7 @@ Near either side of a penumbra the shadow edge cuts a thin part off the light, h
 visible, which reaches the light's border: the probes along the edges find it where area
 probes alone mostly miss it (a hidden fraction q escapes 4 of them with probability
 $(1 - q)^4$). Closer still to the penumbra's outer lit edge, or to the umbra's, the part is
-shorter along the border than the edge probes' spacing (perimeter / 8). Where the probes
+shorter along the border than the edge probes' spacing (perimeter / :data:`BOUNDARY`). Where the probes
 found no pair, :data:`AIM` more probes join them (:func:`_aimed_points`): with none occluded,
 the emitter points nearest in angle to the moving occluders' centre, where their shadow
 first covers the light; with all occluded, the farthest, where the light is last covered. A
@@ -38,37 +38,44 @@ Measured at single ground points (x, y, 0) of the ``hard_shadow`` scenes (d/d
 samples (± 0.3-0.5 % where the derivative is large), ``boundary`` seed 1 × 32768 (± < 0.1 %);
 a point counts as biased beyond 3 standard errors. Per strategy against central differences
 (h = 0.002) of the naive strategy's value at fixed samples (emitter strategy alone, 2 × 262144
-samples; the cosine strategy as the rest), reparam 2 × 65536. Of the 270 points at y = -0.1,
-29 were off by more than 10 % before the aimed probes and 10 are now; at y = 0.2 55 and 29.
-Relative bias of the total ("before": without the aimed probes):
+samples; the cosine strategy as the rest), reparam 2 × 65536. Of the 331 points at y = -0.1,
+29 were off by more than 10 % before the aimed probes, 10 with them and 8 edge probes, and 8
+now (4 edge probes, :data:`BOUNDARY`); at y = 0.2 (b ≠ 0) 55, 29 and 28. Relative bias of the
+total ("before": without the aimed probes; "8 edge": with them and 8 edge probes):
 
-===========================  ==============  ===============  ====================================
-points (y = -0.1)            before          now              cause of what remains
-===========================  ==============  ===============  ====================================
-sphere, x = -0.34            -46 %           +13 %            cosine strategy (0.25 against 0.10)
-sphere, 0.12 to 0.16         +9 to +39 %     -2 to -6 %       not split (emitter 0.44 vs 0.48)
-sphere, 0.48 to 0.51         +13 to -2 %     -10 to -8 %      both strategies short (below)
-sphere, 0.52 to 1.03         -3 to -5.5 %    the same         cosine 0.00 against -0.26; emitter -2.5 %
-sphere, 1.10 to 1.13         -3 to -62 %     within ± 2 %
-cube, -0.47 to -0.42         -57 to -11 %    +16 to +3 %      emitter (x = -0.45: 1.56 against 1.45)
-cube, -0.48                  -55 %           the same         aimed probe 0.004 beside the part
-cube, -0.41 to -0.27         +2 to +4 %      the same         two silhouette edges
-cube, -0.17 to 0.02          +1 to +26 %     the same         two silhouette edges (emitter)
-cube, 0.03 to 0.14           -2 to -8 %      the same         cosine strategy, emitter -3 %
-cube, 0.48 to 0.52           -7 to -13 %     -4 to -6 %       emitter strategy
-cube, 0.53 to 0.61           -4 to -7, +7 %  the same         two silhouette edges
-cube, 0.64 to 1.14           -2 to -7.6 %    the same         cosine strategy, emitter -3 %
-cube, 1.27 to 1.30           -13 to -48 %    within ± 1.5 %
-cube, 1.31 to 1.33           -60 to -77 %    the same         as at -0.48
-===========================  ==============  ===============  ====================================
+===========================  ==============  ===============  ==============  =========================
+points (y = -0.1)            before          8 edge           now             cause of what remains
+===========================  ==============  ===============  ==============  =========================
+sphere, x = -0.34            -46 %           +13 %            +13 %           cosine (0.25 against 0.10)
+sphere, 0.12 to 0.16         +9 to +39 %     -2 to -6 %       -1 to -6 %      not split
+sphere, 0.48 to 0.51         +13 to -2 %     -10 to -8 %      -10 to -8 %     both strategies (below)
+sphere, 0.52 to 1.03         -3 to -5.5 %    -3 to -5.5 %     -2 to -5 %      cosine 0.00 against -0.26
+sphere, 1.10 to 1.13         -3 to -62 %     within ± 2 %     within ± 1.5 %
+cube, -0.47 to -0.42         -57 to -11 %    +16 to +3 %      +16 to +3 %     emitter (1.56 against 1.45)
+cube, -0.48                  -55 %           -55 %            -63 %           aimed probe beside the part
+cube, -0.41 to -0.27         +2 to +4 %      +1 to +4 %       -2.5 to +1 %
+cube, -0.17 to 0.01          +1 to +10 %     +1 to +10 %      +0.5 to +5 %    two silhouette edges
+cube, 0.02                   +26 %           +26 %            +27 %           two silhouette edges
+cube, 0.03 to 0.14           -2 to -8 %      -3 to -7.6 %     -3 to -5 %      cosine strategy
+cube, 0.48 to 0.52           -7 to -13 %     -4 to -6 %       -4 to -6 %      emitter strategy
+cube, 0.53 to 0.61           -4 to -7, +7 %  -4 to -7, +7 %   -2 to -6, +9 %  two silhouette edges
+cube, 0.64 to 0.71           -2 to -4 %      -2 to -4 %       -3 to -5.5 %    cosine strategy, emitter
+cube, 0.72 to 1.14           -2 to -7.6 %    -2 to -7.6 %     -1 to -5 %      cosine strategy, emitter
+cube, 1.27 to 1.30           -13 to -48 %    within ± 1.5 %   within ± 1.2 %
+cube, 1.31 to 1.33           -60 to -77 %    -60 to -77 %     -77 to -83 %    as at -0.48
+===========================  ==============  ===============  ==============  =========================
 
 At y = 0.2 the same kinds: the outer lit edges lost 10-76 % (sphere x = -0.33 to -0.29 and 1.07
 to 1.13, cube -0.47 to -0.37 and 1.19 to 1.25), now +2 to +14 %; the sphere at x = -0.34 went
 from -2.7 % to +89 % of a small derivative (0.14): the emitter strategy kept 0.005 of its
-0.153 ± 0.013 and the cosine strategy's excess (0.13 against -0.01) hid it; now 0.130. Not
-changed beyond the noise: sphere x = 0.29 to 0.41 and cube 0.30 to 0.35, where the derivative
-changes sign (-10 to -35 %, 0.1-0.4 in absolute terms), cube -0.26, -0.25, -0.14, 0.44 (-10,
--10, +11, +34 %) and the cube's outermost lit points -0.49, -0.48 (-49, -72 %). Near the sign
+0.153 ± 0.013 and the cosine strategy's excess (0.13 against -0.01) hid it; now 0.130. Still
+off by more than 10 %: sphere x = 0.29 to 0.39 and cube 0.30 to 0.38, where the derivative
+changes sign (-94 to +54 % of 0.08-0.4 in absolute terms near the sign, -10 to -16 % beyond; with
+8 edge probes sphere 0.29 to 0.41 and cube 0.30 to 0.35, the cube's 0.35 to 0.37 3-4 points
+better), cube -0.14 and 0.44 (+12, +37 %; with 8 edge probes also -0.26 and -0.25, -10 %) and
+the cube's outermost lit points -0.49, -0.48 (-50, -77 %). Beyond the penumbra's end at cube
+x = 1.27 to 1.33, where ``boundary`` gives 0 (no probe direction meets the cube), reparam gives
+-0.009 to -0.019, beyond 3 standard errors, with 8 or 4 edge probes (not isolated). Near the sign
 change it is the emitter strategy (sphere x = 0.36: -0.99 against -1.11 ± 0.05; cube x = 0.33:
 -1.32 against -1.71 ± 0.06; x = 0.44: -7.21 against -5.32 ± 0.08): there the shadow edge
 crosses the light on both of its sides and one rotation follows one crossing (inferred from the
@@ -96,12 +103,16 @@ Probe counts
 ------------
 Measured with the aimed probes (2 seeds × 65536, against ``boundary``): :data:`PROBES` = 2
 leaves the penumbra's edges as they are and raises the cube corner (x = -0.05) from +6.6 % to
-+11.6 %; :data:`BOUNDARY` = 4 (8 shadow rays instead of 12) is as good at the outer edges now
-(sphere x = -0.34, -0.33, -0.32: +11.4, +3.8, +1.9 % against +11.2, +3.7, +1.4 %; without the
-aimed probes it lost 66, 46, 37 %, and 21 % at x = -0.3), better at the cube corner (+0.6 %)
-and at sphere x = -0.2 (-0.1 % against -1.4 %), worse at cube x = 0.65 (-3.6 % against
--2.0 %): it moves the followed point in every pair, so it stays at 8 until a full scan shows
-it does no harm. :data:`AIM` = 1 misses the cube's outer lit edge at x = 1.3 (-47 %, as with
++11.6 % (with 8 edge probes). :data:`BOUNDARY` = 4 (8 shadow rays per point instead of 12) in
+the full scan above against 8: the rms over each scan's points of the per-point bias (noise
+subtracted) fell from 0.165 to 0.135 (sphere, y = -0.1), 0.186 to 0.151 (sphere, y = 0.2), 0.296 to
+0.205 (cube, y = -0.1) and 0.265 to 0.224 (cube, y = 0.2); 87 points moved closer to ``boundary``
+(beyond 3 standard errors of the difference and 3 % of the derivative: the cube corner, x = -0.14
+to 0.01, from +3.6 to +8 % to +0.5 to +2.3 %, and x = 0.80 to 1.10, from -7 % to -3 %), 13 farther
+(cube x = 0.65 to 0.71, -2.4 to -3.6 % to -4 to -5.5 %; its outermost lit points at y = -0.1,
+-60 / -71 % to -77 / -82 %; at y = 0.2 x = 0.35 to 0.37 and 0.44 by 3-4 points). The edge probes
+choose which pair of probes is closest, hence which silhouette point is followed; why fewer do
+better on average is not isolated. :data:`AIM` = 1 misses the cube's outer lit edge at x = 1.3 (-47 %, as with
 none) and is worse at cube x = 0.5 (-11.8 % against -4.2 %), but better at sphere x = 0.48
 (-6.6 % against -13 %, the far side's second aimed point changing the followed point).
 
@@ -111,6 +122,9 @@ such point plus the bisection where they find a pair. A render at 128 samples pe
 +2.5 % CPU (``hard_shadow``) and +6.8 % (``hard_shadow_cube``), medians of 6 interleaved runs;
 a single point on the outer lit edge (sphere x = -0.34), where 63 % of the points lack a pair,
 +60 %.
+4 edge probes instead of 8: -8 % wall time for a 64 spp ``hard_shadow_cube`` image (0.477 to
+0.440 s, best of 6 interleaved, 2 cores), -2 % for ``hard_shadow``. Points that cannot see a moving
+occluder in front of the lights are not probed at all (:mod:`sphere3d.penumbra`).
 
 Tested in ``tests/sphere3d/test_emitter_probes.py``.
 """
@@ -135,8 +149,9 @@ __all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "emitter_rotation"]
 
 PROBES = 4
 """Shadow probes per shading point uniform on the emitters' area."""
-BOUNDARY = 8
-"""Shadow probes per shading point evenly spaced along the emitters' edges (random phase)."""
+BOUNDARY = 4
+"""Shadow probes per shading point evenly spaced along the emitters' edges (random phase; 8 before,
+module docstring, Probe counts)."""
 REFINE = 6
 """Bisection rays between the occluded and the visible probe of a pair (to 1/64 of their gap)."""
 AIM = 2

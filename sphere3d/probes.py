@@ -123,11 +123,12 @@ def ring_offsets(radius: float, count: int, u: np.ndarray) -> np.ndarray:
 
 
 PAIR_ROWS = 1024
-"""Rows per slice of :func:`closest_pair`: the (rows, p, p) cosines of 14 probes are 1.6 MB and stay
-in cache; a chunk's at once (up to 25 000 rows, 38 MB, above the mmap threshold of
-:func:`sphere3d.tasks._heap_for_temporaries`) was mapped and faulted in anew at every call: 24 ms
-per call against 4 ms of arithmetic; by slices of 4096 / 1024 rows 11 / 6 ms (the emitter probes of
-two 64 spp ``hard_shadow`` renders, one thread: 0.24 -> 0.06 s in all). The same numbers, row by row."""
+"""Rows per slice of :func:`closest_pair`: the (rows, p, p) cosines of 14 probes (8 of them on the
+emitters' edges then) are 1.6 MB and stay in cache; a chunk's at once (up to 25 000 rows, 38 MB,
+above the mmap threshold of :func:`sphere3d.tasks._heap_for_temporaries`) was mapped and faulted
+in anew at every call: 24 ms per call against 4 ms of arithmetic; by slices of 4096 / 1024 rows
+11 / 6 ms (the emitter probes of two 64 spp ``hard_shadow`` renders, one thread: 0.24 -> 0.06 s
+in all). The same numbers, row by row."""
 
 
 def closest_pair(w: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

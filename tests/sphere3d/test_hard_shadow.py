@@ -222,9 +222,10 @@ REPARAM = {
     # sphere3d.emitter_probes; with the per-pixel film the penumbra 0.990 ± 0.003 / 0.998 ± 0.003,
     # the silhouette 0.981 ± 0.014 / 0.993 ± 0.010; the silhouette 0.970 ± 0.008 / 0.977 ± 0.005 before
     # the film kernels followed the junctions of the silhouette and the ground's far edge,
-    # sphere3d.junctions; the penumbra 0.989 / 0.998 before the aimed emitter probes)
-    "hard_shadow": {"penumbra": (0.991, 0.003), "silhouette": (0.996, 0.005)},
-    "hard_shadow_cube": {"penumbra": (1.000, 0.003), "silhouette": (0.994, 0.005)},
+    # sphere3d.junctions; the penumbra 0.989 / 0.998 before the aimed emitter probes, 0.991 / 1.000
+    # with 8 probes on the light's edges instead of 4, sphere3d.emitter_probes.BOUNDARY)
+    "hard_shadow": {"penumbra": (0.997, 0.003), "silhouette": (0.996, 0.005)},
+    "hard_shadow_cube": {"penumbra": (0.997, 0.003), "silhouette": (0.994, 0.005)},
 }
 """reparam's per-region bias as documented in :func:`sphere3d.methods.reparam.reparam`."""
 REPARAM_SPP = 128
