@@ -75,16 +75,17 @@ class SeparatingPlanes:
 
     def rule_out(self, x: np.ndarray) -> np.ndarray:
         """Points ``x`` (m, 3) on the lights' side of some plane, beyond the margin."""
-        return np.max(_sides(x, self.normals, self.offsets), axis=1) > self.margin
+        return np.max(_sides(x, self.normals, self.offsets), axis=0) > self.margin
 
 
 def _sides(x: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Signed distances (m, k) of points ``x`` (m, 3) to the planes (unit ``normals`` (k, 3), ``offsets``).
+    """Signed distances (k, m) of points ``x`` (m, 3) to the planes (unit ``normals`` (k, 3), ``offsets``).
 
-    By columns, not ``x @ normals.T``: BLAS hands a product this size to its own threads, which then
-    spin beside the renderer's (measured on 2 cores: +50 % CPU, +15 % wall for a render)."""
-    n = normals.T
-    return x[:, 0:1] * n[0] + x[:, 1:2] * n[1] + x[:, 2:3] * n[2] - offsets
+    By coordinates, not ``normals @ x.T``: BLAS hands a product this size to its own threads, which
+    then spin beside the renderer's (measured on 2 cores: +50 % CPU, +15 % wall for a render). Planes
+    first: a reduction over them is elementwise across the points (over a short last axis, 2 x slower)."""
+    n = normals[:, :, None]
+    return n[:, 0] * x[:, 0] + n[:, 1] * x[:, 1] + n[:, 2] * x[:, 2] - offsets[:, None]
 
 
 def _hull(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -136,9 +137,9 @@ def separating_planes(state: Any) -> SeparatingPlanes | None:
     (n1, d1), (n2, d2) = _candidates(lights, movers, scale), _candidates(movers, lights, scale)
     n, d = np.concatenate([n1, n2]), np.concatenate([d1, d2])
     tol = 1e-9 * scale  # a plane may touch both hulls
-    side_l, side_m = _sides(lights[0], n, d), _sides(movers[0], n, d)  # (vertices, planes)
-    up = (side_l.min(axis=0) >= -tol) & (side_m.max(axis=0) <= tol)
-    down = (side_l.max(axis=0) <= tol) & (side_m.min(axis=0) >= -tol)
+    side_l, side_m = _sides(lights[0], n, d), _sides(movers[0], n, d)  # (planes, vertices)
+    up = (side_l.min(axis=1) >= -tol) & (side_m.max(axis=1) <= tol)
+    down = (side_l.max(axis=1) <= tol) & (side_m.min(axis=1) >= -tol)
     if not (up.any() or down.any()):
         return None  # the hulls overlap: no point is ruled out
     normals = np.concatenate([n[up], -n[down]])
