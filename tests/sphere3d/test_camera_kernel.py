@@ -14,7 +14,16 @@ from flatland.core.dual import detach, tangent, variable
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form as cf
-from sphere3d.camera_kernel import KAPPA_FILM, check_kappa_film, film_probes, film_transform, silhouette_snap
+from sphere3d.camera_kernel import (
+    KAPPA_FILM,
+    _film_hull,
+    _reaching_motion,
+    check_kappa_film,
+    film_probes,
+    film_transform,
+    silhouette_snap,
+)
+from sphere3d.probes import ring_offsets
 from sphere3d.scene import load_scene
 from sphere3d.tracing import attached_points
 from sphere3d.vector import normalize
@@ -70,3 +79,26 @@ def test03_probe_counts_and_the_options_checks():
         with pytest.raises(ValidationError, match=message) as info:
             check_kappa_film("kappa_film", bad)
         assert str(info.value).startswith("kappa_film")
+
+
+@pytest.mark.parametrize("scene", ["hard_shadow", "hard_shadow_cube"])
+def test04_rings_skipped_by_the_film_hull_cannot_see_the_moving_occluder(scene):
+    """:func:`sphere3d.camera_kernel._reaching_motion` is conservative: of 20000 film centres, every one
+    whose centre or any of 64 points on its ring (radius 1.5 px) sees a moving triangle is kept; and
+    the hull rules out a share of what its box keeps (else it would be pointless)."""
+    state = load_scene(scene).state("occluder.translate.x", variable(0.0))
+    cam = state.camera
+    moving = np.any(np.asarray(tangent(state.triangles)) != 0.0, axis=(1, 2))
+    rng = np.random.default_rng(4)
+    centre = rng.uniform(0.0, 64.0, size=(20000, 2))
+    reach = 1.5
+    ring = centre[:, None] + ring_offsets(reach, 65, rng.uniform(size=len(centre)))
+    hits = state.tracer.intersect(detach(cam.origin), cam.directions(ring[..., 0], ring[..., 1]))
+    sees = np.any(hits.on(moving), axis=1)
+    kept = np.zeros(len(centre), dtype=bool)
+    kept[_reaching_motion(state, moving, centre, reach)] = True
+    assert sees.sum() > 500 and np.all(kept[sees])
+    (x0, x1, y0, y1), _ = _film_hull(state)
+    box = (centre[:, 0] + reach >= x0) & (centre[:, 0] - reach <= x1)
+    box &= (centre[:, 1] + reach >= y0) & (centre[:, 1] - reach <= y1)
+    assert kept.sum() < 0.9 * box.sum()
