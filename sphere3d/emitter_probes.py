@@ -249,7 +249,7 @@ def _shadow_rays(
     (normals ``n``), far enough."""
     to = y - x[:, None]
     dist = norm(to)
-    w = to / np.where(dist > 0.0, dist, 1.0)[..., None]
+    w = np.divide(to, np.where(dist > 0.0, dist, 1.0)[..., None], out=to)  # in place: ``to`` not used again
     usable = (dot(w, n[:, None]) > 0.0) & (dist > 4.0 * state.epsilon)
     return w, np.maximum(dist - 2.0 * state.epsilon, 0.0), usable
 

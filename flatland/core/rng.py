@@ -65,9 +65,12 @@ def mix64(z: np.ndarray) -> np.ndarray:
     k = 1, 2, ... is the SplitMix64 sequence of seed 0 (a test checks its first words).
     """
     with np.errstate(over="ignore"):
-        z = (z ^ (z >> _S30)) * _C1
-        z = (z ^ (z >> _S27)) * _C2
-        return z ^ (z >> _S31)
+        z = z ^ (z >> _S30)  # a new array: the input is left alone; the steps below work in place
+        z *= _C1
+        z ^= z >> _S27
+        z *= _C2
+        z ^= z >> _S31
+        return z
 
 
 def _key(seed: int, name: str) -> np.uint64:
