@@ -68,7 +68,7 @@ the junctions of the occluder's silhouette and the ground's far edge (:mod:`sphe
 the aimed emitter probes (:mod:`sphere3d.emitter_probes`) and the splatted film (:mod:`sphere3d.film`,
 the default); bias floors from 6 seeds at 256 spp; seconds the best of the seeds' runs (two runs
 gave 0.478 / 0.445 s and 0.520 / 0.510 s for ``reparam``, the second after its probe pairs were
-chosen by slices, :data:`sphere3d.probes.PAIR_ROWS`; the numbers are the second run's):
+chosen by slices, :data:`sphere3d.bisection.PAIR_ROWS`; the numbers are the second run's):
 
 ========================  ==========  =====================  ===========
 method (sphere / cube)    bias floor  RMSE 16 / 64 / 256     s / 64 spp

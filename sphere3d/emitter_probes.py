@@ -136,10 +136,11 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach, tangent
+from sphere3d.bisection import bisect_silhouette, closest_pair
 from sphere3d.emitter_edges import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, take_rows, triangles_change
 from sphere3d.penumbra import bounding_sphere, may_see_motion
-from sphere3d.probes import bisect_silhouette, closest_pair, direction_towards, mean_point_direction
+from sphere3d.probes import direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points, intersect_triangles

@@ -15,7 +15,7 @@ their ends attached to their shapes (Duals: the tangent of j is J's motion, the 
 included). The film kernel follows j instead of the point the
 probe pair chose (:func:`junction_rotation`).
 
-Each edge is found as the silhouette is (:func:`~sphere3d.probes.bisect_silhouette`, then
+Each edge is found as the silhouette is (:func:`~sphere3d.bisection.bisect_silhouette`, then
 :func:`~sphere3d.snaps.edge_snap` onto the exit edge of the bisected hit's triangle): the moving
 one between the closest pair of a probe on a moving triangle and one that is not; the static
 one between the closest pair of static probes that see different things (a miss counts as a
@@ -57,8 +57,8 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach
+from sphere3d.bisection import bisect, bisect_silhouette, closest_pair
 from sphere3d.live import any_rows
-from sphere3d.probes import bisect, bisect_silhouette, closest_pair
 from sphere3d.rotation import Rotation
 from sphere3d.snaps import Snap, edge_snap
 from sphere3d.state import SceneState

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach, tangent
+from flatland.core.dual import Dual, detach, take_rows, tangent
 
 __all__ = [
     "all_rows",
@@ -47,14 +47,6 @@ def any_rows(mask: np.ndarray) -> np.ndarray:
 def all_rows(mask: np.ndarray) -> np.ndarray:
     """``np.all(mask, axis=1)`` of a boolean (n, k) array, as the AND of its columns."""
     return _fold_columns(mask, np.logical_and)
-
-
-def take_rows(a: np.ndarray, index: Any) -> np.ndarray:
-    """``a[index]``; rows by an integer array with ``np.take`` (the same elements, about 4 times faster than
-    fancy indexing for (n, 3) arrays)."""
-    if isinstance(index, np.ndarray) and index.dtype.kind in "iu" and np.ndim(a):
-        return np.take(a, index, axis=0)
-    return a[index]
 
 
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Dual", "as_dual", "detach", "is_dual", "tangent", "variable"]
+__all__ = ["Dual", "as_dual", "detach", "is_dual", "take_rows", "tangent", "variable"]
 
 _UNARY: dict[np.ufunc, Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]] = {}
 _BINARY: dict[np.ufunc, Callable[..., tuple[np.ndarray, np.ndarray]]] = {}
@@ -38,6 +38,13 @@ _VALUE_ONLY = {
     np.rint, np.trunc,
 }  # fmt: skip
 
+
+def take_rows(a: np.ndarray, index: Any) -> np.ndarray:
+    """``a[index]``; rows by an integer array with ``np.take`` (the same elements, about 4 times faster than
+    fancy indexing for (n, 3) arrays)."""
+    if isinstance(index, np.ndarray) and index.dtype.kind in "iu" and np.ndim(a):
+        return np.take(a, index, axis=0)
+    return a[index]
 
 class Dual(np.lib.mixins.NDArrayOperatorsMixin):
     """A float64 array with a forward-mode tangent.
@@ -108,10 +115,7 @@ class Dual(np.lib.mixins.NDArrayOperatorsMixin):
     def __getitem__(self, index: Any) -> Dual:
         if isinstance(index, Dual) or (isinstance(index, tuple) and any(isinstance(i, Dual) for i in index)):
             raise TypeError("a Dual cannot be used as an index; index with detach(x) instead")
-        if isinstance(index, np.ndarray) and index.dtype.kind in "iu" and self.value.ndim:
-            # rows by an integer array: the same elements as value[index], np.take is several times faster
-            return Dual(np.take(self.value, index, axis=0), np.take(self.tangent, index, axis=0))
-        return Dual(self.value[index], self.tangent[index])
+        return Dual(take_rows(self.value, index), take_rows(self.tangent, index))
 
     def __setitem__(self, index: Any, item: Any) -> None:
         self.value[index] = detach(item)
