@@ -65,22 +65,22 @@ wall clock on that machine (load about 5): ``reparam`` 0.95 s and 0.78 s.
 
 Measured by this benchmark on an idle 2-core machine (2026-11-25), with the film kernels following
 the junctions of the occluder's silhouette and the ground's far edge (:mod:`sphere3d.junctions`),
-the aimed emitter probes (:mod:`sphere3d.emitter_probes`) and the splatted film (:mod:`sphere3d.film`,
-the default); bias floors from 6 seeds at 256 spp; seconds the best of the seeds' runs (two runs
-gave 0.478 / 0.445 s and 0.520 / 0.510 s for ``reparam``, the second after its probe pairs were
-chosen by slices, :data:`sphere3d.bisection.PAIR_ROWS`; the numbers are the second run's):
+the aimed emitter probes and 4 probes on the light's edges (:mod:`sphere3d.emitter_probes`), the
+penumbra cull (:mod:`sphere3d.penumbra`), the film hull cull
+(:func:`sphere3d.camera_kernel._reaching_motion`) and the splatted film (:mod:`sphere3d.film`, the
+default); bias floors from 6 seeds at 256 spp; seconds the best of the seeds' runs:
 
 ========================  ==========  =====================  ===========
 method (sphere / cube)    bias floor  RMSE 16 / 64 / 256     s / 64 spp
 ========================  ==========  =====================  ===========
-reparam, sphere           0.028       0.412 / 0.208 / 0.104  0.445
-reparam, cube             0.025       0.487 / 0.245 / 0.132  0.510
-reparam (pixel film)      0.045       0.972 / 0.488 / 0.253  0.376
-  cube                    0.046       1.217 / 0.594 / 0.291  0.456
-boundary, sphere          0.0072      0.079 / 0.044 / 0.029  0.801
-boundary, cube            0.0064      0.093 / 0.051 / 0.032  0.501
-finite_difference         0.027       0.341 / 0.175 / 0.088  0.384
-  cube                    0.057       0.482 / 0.251 / 0.135  0.385
+reparam, sphere           0.027       0.412 / 0.208 / 0.104  0.401
+reparam, cube             0.024       0.487 / 0.245 / 0.131  0.421
+reparam (pixel film)      0.044       0.972 / 0.488 / 0.253  0.353
+  cube                    0.045       1.217 / 0.594 / 0.291  0.366
+boundary, sphere          0.0072      0.079 / 0.044 / 0.029  0.716
+boundary, cube            0.0064      0.093 / 0.051 / 0.032  0.448
+finite_difference         0.027       0.341 / 0.175 / 0.088  0.360
+  cube                    0.057       0.482 / 0.251 / 0.135  0.372
 Mitsuba (sphere/cube)     0.21/0.25   0.73/0.43/0.27,
                                       0.83/0.48/0.32
 ========================  ==========  =====================  ===========
@@ -90,10 +90,18 @@ Mitsuba's at every spp; before the junctions it was 0.058 / 0.074 (the ten pixel
 silhouette crosses the ground's far edge held 86 % / 97 % of its square), before the emitter
 rotation followed the shadow edge 0.086 / 0.092 with the per-pixel film. ``boundary`` is unbiased
 (its floors are below the references' noise, rms 0.020 / 0.024) and has the lowest RMSE at every spp;
-``finite_difference``'s floor is its step's truncation error. A 64 spp ``reparam`` image takes 0.445 s
-(sphere, within the issue's 0.45 s) and 0.51 s (cube): about a third of a thread's CPU time is the
-emitter strategy's probes (12 shadow rays per probed shading point, 6 bisection rays, the aimed
-probes), about 30 % Embree.
+``finite_difference``'s floor is its step's truncation error.
+
+Seconds per 64 spp ``reparam`` image: within the issue's 0.45 s on both scenes. The machine's
+speed drifts by several percent from minute to minute: the same code's best of 4 seeds, measured
+again in the same half hour, was 0.415-0.440 s (cube, 5 runs) and 0.386-0.450 s (sphere, 3 runs).
+Before this round (the same benchmark, the same machine, earlier that day) 0.445 / 0.51 s; the
+cube's 17 % went to fewer probed shading points (the penumbra cull: -17 % of the emitter probes'
+rows, bit for bit the same image), fewer film rings (the film hull: -27 %, the same image), the
+cheaper one-plane test (the same image), and 4 instead of 8 probes on the light's edges (-8 %
+wall; a different image, measured above and in :mod:`sphere3d.emitter_probes`). About a third of
+a thread's CPU time is the emitter strategy's probes (8 shadow rays per probed shading point, 6
+bisection rays where they find a shadow edge, the aimed probes), a quarter Embree.
 """
 
 from __future__ import annotations
