@@ -46,6 +46,7 @@ def take_rows(a: np.ndarray, index: Any) -> np.ndarray:
         return np.take(a, index, axis=0)
     return a[index]
 
+
 class Dual(np.lib.mixins.NDArrayOperatorsMixin):
     """A float64 array with a forward-mode tangent.
 
