@@ -236,10 +236,10 @@ def film_transform(
     centre = np.concatenate([s + z, s - z])  # rows: the n first members, then the n second
     phase = draws.uniforms("probes.film", 2).T.ravel()
     rotation = Rotation.identity((2 * n,))
-    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+    moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)
-    rows = _reaching_motion(state, moving, centre, spread * sigma)
+    rows = _reaching_motion(state, centre, spread * sigma)
     if rows.size:
         ring = centre[rows, None] + ring_offsets(spread * sigma, film_probes(probes), phase[rows])
         d = cam.directions(ring[..., 0], ring[..., 1])
@@ -307,10 +307,10 @@ def _plane_table(state: SceneState) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return face_normals(v), v[:, 0], v.min(axis=1), v.max(axis=1)
 
 
-def _reaching_motion(state: SceneState, moving: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
-    """Rows whose probes (within ``reach`` px of ``centre``) may see a moving triangle, or all rows
-    when the camera moves or a moving triangle (``moving``: one flag per triangle) reaches behind
-    the camera plane.
+def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.ndarray:
+    """Rows whose probes (within ``reach`` px of ``centre``) may see a moving triangle
+    (:func:`_moving_vertices`), or all rows when the camera moves or a moving triangle reaches
+    behind the camera plane.
 
     Conservative: the film image of the moving triangles (all in front of the camera) lies in the
     convex hull of their vertices' images (a triangle projects to the triangle of its vertices'
@@ -322,7 +322,7 @@ def _reaching_motion(state: SceneState, moving: np.ndarray, centre: np.ndarray, 
     cam = state.camera
     if np.any(tangent(cam.origin) != 0.0):
         return np.arange(len(centre))
-    if not moving.any():
+    if not _moving_vertices(state).any():
         return np.arange(0)
     hull = _film_hull(state)
     if hull is None:  # a moving vertex at or behind the camera plane
@@ -344,14 +344,21 @@ float32 rays and of Qhull's joggle, 1e-11 relative)."""
 
 
 @per_state
-def _film_hull(state: SceneState) -> tuple | None:
-    r"""The film box (x0, x1, y0, y1) of the moving triangles' vertices (those whose vertices carry a
-    tangent, as in :func:`film_transform`) and their convex hull's edges (k, 3): unit normal and
-    offset, $n \cdot p + d \le 0$ inside (None where Qhull finds no 2D hull: the box alone); None if
-    a vertex lies at or behind the camera plane. Once per state."""
-    cam = state.camera
+def _moving_vertices(state: SceneState) -> np.ndarray:
+    """Per triangle: True where its vertices carry a tangent (read-only, once per state)."""
     moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
-    v = np.asarray(detach(state.triangles))[moving].reshape(-1, 3) - detach(cam.origin)
+    moving.flags.writeable = False  # shared by every chunk of the render
+    return moving
+
+
+@per_state
+def _film_hull(state: SceneState) -> tuple | None:
+    r"""The film box (x0, x1, y0, y1) of the moving triangles' vertices (:func:`_moving_vertices`, at
+    least one) and their convex hull's edges (k, 3): unit normal and offset, $n \cdot p + d \le 0$
+    inside (None where Qhull finds no 2D hull: the box alone); None if a vertex lies at or behind
+    the camera plane. Once per state."""
+    cam = state.camera
+    v = np.asarray(detach(state.triangles))[_moving_vertices(state)].reshape(-1, 3) - detach(cam.origin)
     if np.any(np.sum(v * np.asarray(detach(cam.forward)), axis=1) <= 0.0):
         return None
     fx, fy = (np.asarray(detach(f)) for f in cam.film(v))

@@ -197,13 +197,8 @@ def edge_table(state: Any) -> EdgeTable | None:
     centre (the antithetic pair of :func:`sample_emitter_edges`).
 
     Built once per state (:func:`~sphere3d.state.per_state`: every chunk of a render asks for
-    it) and read-only.
+    it; ``edge_table.__wrapped__`` builds it anew) and read-only.
     """
-    return _build_edge_table(state)
-
-
-def _build_edge_table(state: Any) -> EdgeTable | None:
-    """:func:`edge_table`, computed."""
     emitters = np.asarray(detach(state.triangles))[state.emitters]
     edges = mesh_edges(emitters, state.shape_of[state.emitters])
     keep = np.flatnonzero((edges.always | edges.crease) & ~_faded_out(state, edges))

@@ -138,8 +138,8 @@ import numpy as np
 from flatland.core.dual import detach, tangent
 from sphere3d.bisection import bisect_silhouette, closest_pair
 from sphere3d.emitter_edges import edge_points, edge_table
-from sphere3d.live import any_rows, emitters_change, take_rows, triangles_change
-from sphere3d.penumbra import bounding_sphere, may_see_motion
+from sphere3d.live import any_rows, emitters_change, take_rows
+from sphere3d.penumbra import bounding_sphere, may_see_motion, moving_occluders
 from sphere3d.probes import direction_towards, mean_point_direction
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
@@ -192,8 +192,7 @@ def _aimed_points(
     hidden part, module docstring, Bias).
     """
     table = edge_table(state)
-    moving = triangles_change(state)
-    moving[state.emitters] = False
+    moving = moving_occluders(state)
     if table is None or not moving.any():
         return None
     triangles = np.asarray(detach(state.triangles))
@@ -277,8 +276,9 @@ def emitter_rotation(
     m = len(shading)
     if not state.dual:
         return Rotation.identity((m,))
-    x0 = detach(shading.x)
-    need = any_rows(tangent(shading.x) != 0.0) | emitters_change(state) | may_see_motion(state, x0)
+    need = np.full(m, emitters_change(state)) | any_rows(tangent(shading.x) != 0.0)
+    rest = np.flatnonzero(~need)  # the cull only where nothing else asks for probes
+    need[rest] = may_see_motion(state, take_rows(detach(shading.x), rest))
     if need.all():
         return _probe_rotation(shading, probes, boundary, refine, aim)
     rows = np.flatnonzero(need)

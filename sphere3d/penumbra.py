@@ -47,7 +47,16 @@ from sphere3d.live import triangles_change
 from sphere3d.state import per_state
 from sphere3d.vector import dot, norm
 
-__all__ = ["MARGIN", "SeparatingPlanes", "bounding_sphere", "may_see_motion", "separating_planes"]
+__all__ = [
+    "MARGIN",
+    "PLANES",
+    "SeparatingPlanes",
+    "bounding_sphere",
+    "cones_overlap",
+    "may_see_motion",
+    "moving_occluders",
+    "separating_planes",
+]
 
 MARGIN = 4.0
 """A point is ruled out by a plane only beyond this many ray offsets ε of the scene."""
@@ -127,8 +136,7 @@ def _candidates(a: tuple, b: tuple, scale: float) -> tuple[np.ndarray, np.ndarra
 def separating_planes(state: Any) -> SeparatingPlanes | None:
     """The planes separating the emitters' convex hull from the moving non-emitter triangles' (module
     docstring), oriented lights-positive; None without emitters, moving triangles or such a plane."""
-    moving = triangles_change(state)
-    moving[state.emitters] = False
+    moving = moving_occluders(state)
     if not moving.any() or len(state.emitters) == 0:
         return None
     triangles = np.asarray(detach(state.triangles))
@@ -161,21 +169,29 @@ def _spread(normals: np.ndarray, count: int) -> np.ndarray:
     return np.array(chosen)
 
 
-def may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
-    r"""Rows of the points ``x`` (plain, (m, 3)) whose shadow rays to the emitters may meet a moving triangle.
-
-    Conservative. First by bounding spheres: a ray from x to the emitters lies within the angle
-    $β_L = \arcsin(r_L / d_L)$ of the direction to their sphere's centre, one that meets the
-    moving triangles within $β_M$ of theirs, so the two cones must overlap, $α < β_L + β_M$,
-    and the moving sphere must begin before the emitters' sphere ends; a point inside either
-    sphere counts. Then, of those, the points a separating plane rules out are dropped
-    (:func:`separating_planes`).
-    """
+@per_state
+def moving_occluders(state: Any) -> np.ndarray:
+    """Per triangle: True for the non-emitter triangles that change with θ (read-only, once per state)."""
     moving = triangles_change(state)
-    if not moving.any():
-        return np.zeros(len(x), dtype=bool)
+    moving[state.emitters] = False
+    moving.flags.writeable = False  # shared by every caller of this state
+    return moving
+
+
+def cones_overlap(state: Any, x: np.ndarray) -> np.ndarray:
+    r"""Rows of the points ``x`` (plain, (m, 3)) from which the cone around the emitters' bounding
+    sphere and the one around the changing triangles' overlap (or that lie inside either sphere).
+
+    A ray from x to the emitters lies within the angle $β_L = \arcsin(r_L / d_L)$ of the direction
+    to their sphere's centre, one that meets the changing triangles (:func:`triangles_change`:
+    emitters too, if they move) within $β_M$ of theirs, so the two cones must overlap,
+    $α < β_L + β_M$, and the moving sphere must begin before the emitters' sphere ends.
+    """
     triangles = np.asarray(detach(state.triangles))
-    (c_m, r_m), (c_l, r_l) = bounding_sphere(triangles[moving]), bounding_sphere(triangles[state.emitters])
+    (c_m, r_m), (c_l, r_l) = (
+        bounding_sphere(triangles[triangles_change(state)]),
+        bounding_sphere(triangles[state.emitters]),
+    )
     to_m, to_l = c_m - x, c_l - x
     d_m, d_l = norm(to_m), norm(to_l)
     inside = (d_m <= r_m) | (d_l <= r_l)
@@ -183,7 +199,18 @@ def may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
         cos_a = np.clip(dot(to_m, to_l) / (d_m * d_l), -1.0, 1.0)
         reach = np.arcsin(np.minimum(1.0, r_l / d_l)) + np.arcsin(np.minimum(1.0, r_m / d_m))
     overlap = np.arccos(cos_a) < reach * (1.0 + 1e-9) + 1e-9
-    kept = inside | (overlap & (d_m - r_m < d_l + r_l))
+    return inside | (overlap & (d_m - r_m < d_l + r_l))
+
+
+def may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
+    """Rows of the points ``x`` (plain, (m, 3)) whose shadow rays to the emitters may meet a moving triangle.
+
+    Conservative: first by bounding spheres (:func:`cones_overlap`), then, of those, the points a
+    separating plane rules out are dropped (:func:`separating_planes`).
+    """
+    if not triangles_change(state).any():
+        return np.zeros(len(x), dtype=bool)
+    kept = cones_overlap(state, x)
     planes = separating_planes(state)
     if planes is not None:
         rows = np.flatnonzero(kept)

@@ -126,7 +126,8 @@ def test02_triangle_sampler_matches_pdf_chi_square():
 def test03_mesh_sampler_picks_triangles_by_area_chi_square():
     u = _uniforms("mesh", 3)
     x, index = s.sample_mesh(u, MESH_TRI)
-    # the point is sample_triangle's on the picked triangle, bit for bit (also with two sample axes)
+    # the point is sample_triangle's on the picked triangle, bit for bit (also with two sample axes): both
+    # share one barycentric combination, so this checks sample_mesh's per-coordinate gather of the corners
     tri = MESH_TRI[index]
     assert np.array_equal(x, s.sample_triangle(u[:, 1:3], tri[:, 0], tri[:, 1], tri[:, 2]))
     assert np.array_equal(s.sample_mesh(u.reshape(-1, 4, 3), MESH_TRI)[0], x.reshape(-1, 4, 3))
