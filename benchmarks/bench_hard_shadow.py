@@ -14,7 +14,7 @@ never to be ranked above an unbiased one by its RMSE alone):
   (m - ref)² - s²/S - r²))`` estimates the rms per-pixel bias b (s² is unbiased for σ²;
   at 64 spp the per-pixel variances are too heavy-tailed for this: pairs of seeds gave
   0.28-0.39 for ``reparam`` on the sphere, at 256 spp 0.306-0.310; with the emitter rotation of
-  :mod:`sphere3d.emitter_probes`, seeds 1-2 gave 0.035 / 0.018 (sphere / cube) and seeds 3-6
+  :mod:`sphere3d.reparam.emitter_probes`, seeds 1-2 gave 0.035 / 0.018 (sphere / cube) and seeds 3-6
   0.098 / 0.101 without splatting, 0.055 / 0.068 and 0.058 / 0.075 with it: the estimate is
   unbiased for b² but heavy-tailed, hence 6 seeds, and the splatted film's, whose noise is a
   fifth, is the steadier measure of reparam's bias);
@@ -51,7 +51,7 @@ per-pixel film numbers; with the splatted film (the default since) this benchmar
 2-core machine (``make bench``) a 64 spp image takes 1.43 s (sphere) and 0.83 s (cube) of wall
 time, at RMSE 0.069 and 0.052. Before the
 secondary edges were clipped to the light's image and the fixed ones culled
-(:mod:`sphere3d.shading_edges`), with rate 1 and one edge sample: 0.169 at 32 spp for 2.7 CPU s
+(:mod:`sphere3d.boundary.shading`), with rate 1 and one edge sample: 0.169 at 32 spp for 2.7 CPU s
 on ``hard_shadow`` (RMSE ≈ 0.9 / sqrt(spp)); now 0.069 at 64 spp for 2.9 CPU s, within the
 0.075 in 3 s on 2 cores issue 12 asks (a process's CPU seconds on two threads bound its
 wall-clock time on an idle 2-core machine from above).
@@ -64,10 +64,10 @@ every image bit-identical. One thread's CPU seconds per 64 spp image, before →
 wall clock on that machine (load about 5): ``reparam`` 0.95 s and 0.78 s.
 
 Measured by this benchmark on an idle 2-core machine (2026-11-25), with the film kernels following
-the junctions of the occluder's silhouette and the ground's far edge (:mod:`sphere3d.junctions`),
-the aimed emitter probes and 4 probes on the light's edges (:mod:`sphere3d.emitter_probes`), the
-penumbra cull (:mod:`sphere3d.penumbra`), the film hull cull
-(:func:`sphere3d.camera_kernel._reaching_motion`) and the splatted film (:mod:`sphere3d.film`, the
+the junctions of the occluder's silhouette and the ground's far edge (:mod:`sphere3d.reparam.junctions`),
+the aimed emitter probes and 4 probes on the light's edges (:mod:`sphere3d.reparam.emitter_probes`), the
+penumbra cull (:mod:`sphere3d.reparam.penumbra`), the film hull cull
+(:func:`sphere3d.reparam.film_kernel._reaching_motion`) and the splatted film (:mod:`sphere3d.film`, the
 default); bias floors from 6 seeds at 256 spp; seconds the best of the seeds' runs:
 
 ========================  ==========  =====================  ===========
@@ -99,7 +99,7 @@ Before this round (the same benchmark, the same machine, earlier that day) 0.445
 cube's 17 % went to fewer probed shading points (the penumbra cull: -17 % of the emitter probes'
 rows, bit for bit the same image), fewer film rings (the film hull: -27 %, the same image), the
 cheaper one-plane test (the same image), and 4 instead of 8 probes on the light's edges (-8 %
-wall; a different image, measured above and in :mod:`sphere3d.emitter_probes`). About a third of
+wall; a different image, measured above and in :mod:`sphere3d.reparam.emitter_probes`). About a third of
 a thread's CPU time is the emitter strategy's probes (8 shadow rays per probed shading point, 6
 bisection rays where they find a shadow edge, the aimed probes), a quarter Embree.
 """

@@ -20,6 +20,7 @@ import numpy as np
 from benchmarks import Row, best_seconds
 from flatland.core.rng import stream
 from sphere3d import load_scene, render, render_gradient
+from sphere3d.state import build_state
 from sphere3d.vector import normalize
 
 SCENE = "shadow"
@@ -29,7 +30,7 @@ TARGET = "target <= 1 s at 64 spp on 2 cores"
 
 
 def _rays_per_second() -> list[Row]:
-    state = load_scene(SCENE).state()
+    state = build_state(load_scene(SCENE))
     rng = stream(0, "bench_sphere3d")
     origins = rng.uniform(-2.0, 2.0, (RAYS, 3)) + np.array([0.0, 0.0, 1.5])
     targets = rng.uniform(-1.0, 1.0, (RAYS, 3)) * [2.0, 2.0, 0.5] + [0.0, 0.0, 0.5]
@@ -49,7 +50,7 @@ def _image_seconds() -> list[Row]:
     render_gradient(scene, PARAM, method="reparam", spp=1)  # warm-up: imports, Embree, tables
     for spp in (16, 64, 256):
         seconds = best_seconds(
-            lambda s=spp: render_gradient(scene, PARAM, method="reparam", spp=s, probes=4),
+            lambda s=spp: render_gradient(scene, PARAM, method="reparam", spp=s),
             1 if spp == 256 else 2,
         )
         rows.append(
@@ -71,7 +72,7 @@ def _image_seconds() -> list[Row]:
 def _memory() -> list[Row]:
     scene = load_scene(SCENE)
     tracemalloc.start()
-    render_gradient(scene, PARAM, method="reparam", spp=64, probes=4)
+    render_gradient(scene, PARAM, method="reparam", spp=64)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     # ru_maxrss is in kilobytes on Linux, bytes on macOS

@@ -47,7 +47,7 @@ and ``--resume`` adds passes to a stored file.
 Stored: ``hard_shadow`` 43 passes (44 032 spp; on one core of a shared machine a pass
 took 25-110 s and the time budget ended the run before 64), rms standard error 0.020;
 ``hard_shadow_cube`` 64 passes (65 536 spp), rms standard error 0.024; 44 and 32
-minutes of wall time on one core (``tasks.WORKERS = 1``).
+minutes of wall time on one core (``execution.WORKERS = 1``).
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sphere3d import tasks
+from sphere3d import execution
 from sphere3d.scene import load_scene
 from sphere3d.tasks import ImageTask
 
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--budget", type=float, default=float("inf"), help="seconds per scene (this run)")
     parser.add_argument("--resume", action="store_true", help="add passes to the stored ones")
     args = parser.parse_args(argv)
-    tasks.WORKERS = 1  # one core: the reference runs beside other work
+    execution.WORKERS = 1  # one core: the reference runs beside other work
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     for name in args.scenes:
         stored = generate(name, args.passes, args.budget, args.resume)

@@ -15,15 +15,15 @@ pixel samplers with the balance heuristic (Veach 1997; Loubet et al. 2019, Sec. 
 kernel weights below). Unbiased: with N samples per pixel and the mean taken over N,
 $E = Σ_{p'} ∫ p(s - p') k(s - p) L(s) / q(s) ds = ∫ k(s - p) L(s) ds$. The filter's
 weight derivative (the dominant noise of ``reparam`` on ``hard_shadow``,
-:mod:`sphere3d.camera_kernel`, Noise) is shared among up to nine samplers' samples instead
+:mod:`sphere3d.reparam.film_kernel`, Noise) is shared among up to nine samplers' samples instead
 of one pixel's.
 
 Under a camera rotation (:func:`~sphere3d.integrator.pixel_samples`, the film kernel of
-:mod:`sphere3d.camera_kernel`): sample s, kernel centre $c \sim g(· - s)$, rotation $R_c$
+:mod:`sphere3d.reparam.film_kernel`): sample s, kernel centre $c \sim g(· - s)$, rotation $R_c$
 (a function of c and the sample's own streams only, not of any pixel). For pixel p the
 weight is $k(\mathrm{film}(Rω) - p) J(Rω) g(\mathrm{film}(Rω) - c) / \mathrm{detach}(q(s) J g)$,
 value $k(s - p) / q(s)$: the per-pixel weight with the pixel centre replaced by p and the
-density p by q. The reverse-order argument of :mod:`sphere3d.camera_kernel` holds with q in
+density p by q. The reverse-order argument of :mod:`sphere3d.reparam.film_kernel` holds with q in
 place of p: the pair (s, c) has the θ-free joint density $q(s) g(c - s)$ pooled over the
 samplers, and for a fixed c, $T_c$ the film map of $R_c$, the expectation of the estimate
 $|T_c'| g(T_c s - c) k(T_c s - p) L(T_c s) / (q(s) g(c - s))$ summed over the samplers is
@@ -66,10 +66,11 @@ predicted about 6 for the filter-weight term, 88-91 % of the unsplatted variance
 (256 spp, 6 seeds; 2 seeds as the benchmark: heavy-tailed without splatting): 0.104 (0.103)
 against 0.121 (0.088) on the sphere, 0.131 (0.128) against 0.142 (0.108) on the cube: no sign of
 added bias; at 256 spp it is now about half the squared error. (Both measured before the emitter
-rotation followed the shadow edge, :mod:`sphere3d.emitter_probes`; since then ``make bench``
+rotation followed the shadow edge, :mod:`sphere3d.reparam.emitter_probes`; since then ``make bench``
 gives bias floors (6 seeds) 0.086 / 0.058 per-pixel / splatted on the sphere, 0.092 / 0.074 on
 the cube, and splatted RMSE 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15; with the film kernels
-following junctions, :mod:`sphere3d.junctions`, splatted bias floors 0.028 / 0.026.) The value's standard
+following junctions, :mod:`sphere3d.reparam.junctions`, splatted bias floors 0.028 / 0.026.) The value's
+standard
 error halves (0.0135 → 0.0075 at 64 spp). Cost per 64 spp image, the two films alternating in
 one run (best of seeds 1-3, a loaded 2-core machine): one thread's CPU time (process time) 0.85
 → 1.02 s (sphere) and 0.94 → 1.19 s (cube), +19 % and +26 %; wall clock on two threads 0.55 →

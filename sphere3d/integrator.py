@@ -19,7 +19,7 @@ Three nested integrals per pixel (direct illumination only):
      the solid-angle density $p_L = d^2 / (A \cos θ_y)$; a method may rotate ω;
      the emitter hit is re-attached to the triangle the sample lies on (without its
      edges: a method that sets ``emitter_edges`` gets their boundary term added,
-     :mod:`sphere3d.emitter_edges`);
+     :mod:`sphere3d.boundary.emitters`);
    - *cosine sampling*: $ω \sim \cos θ / π$; the method owns this estimator (it may add a
      convolution kernel, Sec. 4.2) and calls back :meth:`Shading.evaluate_bsdf`
      for the integrand at rotated directions.
@@ -43,8 +43,7 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
-from flatland.core.translation import unit_weight
-from sphere3d.emitter_edges import add_tangent, emitter_edge_term
+from flatland.core.translation import paired_combine, unit_weight
 from sphere3d.film import FilmTransform
 from sphere3d.live import emitters_change, moving_rows, on_rows, take_rows, triangles_change
 from sphere3d.rotation import Rotation
@@ -64,10 +63,13 @@ from sphere3d.vector import dot, norm, scatter
 
 __all__ = [
     "PRIMARY_UNIFORMS",
+    "EmitterChange",
     "Identity",
+    "Members",
     "PixelSamples",
     "Shading",
     "Transforms",
+    "add_tangent",
     "camera_radiance",
     "irradiance_samples",
     "pixel_samples",
@@ -119,7 +121,7 @@ class Shading:
         """
         state = self.state
         up = dot(detach(self.n), mu) > 0.0
-        sky = (float(detach(state.sky)) != 0.0) or state.param == "sky.emission"
+        sky = (float(detach(state.sky)) != 0.0) or state.sky_varies
         emitting = hits.hit & np.isin(hits.triangle, state.emitters)
         tri = np.asarray(detach(state.triangles))[np.where(emitting, hits.triangle, 0)]
         front = dot(face_normals(tri), mu) < 0.0
@@ -175,23 +177,90 @@ class PixelSamples:
         return self.radiance * self.weight
 
 
+@dataclass(frozen=True)
+class EmitterChange:
+    """A method's change of variables of the emitter-sampling strategy at a set of shading points.
+
+    Attributes
+    ----------
+    rotation : Rotation
+        One rotation per row of ``rows``, applied to the emitter samples' directions.
+    rows : ndarray of int
+        The shading points the rotations are for; every point with an unoccluded emitter sample
+        must be among them (the others' samples contribute 0).
+    extra : tuple of (ndarray of int, ndarray), optional
+        A derivative-only term of E the method adds beside its change of variables: the points
+        and their tangents (``reparam``'s emitter edges, :mod:`sphere3d.boundary.emitters`).
+    """
+
+    rotation: Rotation
+    rows: np.ndarray
+    extra: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class Members:
+    r"""Where a method evaluates the cosine-sampled integrand: per sample, one or two members.
+
+    Member j of sample i is estimated as $f(R d_j)\, w_j / (p(μ_i)\, s_j)$; two members are
+    combined as a pair (theory/kernels) when ``paired``.
+
+    Attributes
+    ----------
+    rotated : Dual or ndarray, shape (r, 3), or a tuple of them, one per member
+        $R·d$: the evaluation directions (values ``d``, tangents the rotation's).
+    rows : ndarray of int, optional
+        The samples evaluated; the others contribute 0 (their integrand is 0 with zero
+        derivative, :meth:`Shading.contributes`). None: every sample.
+    directions : tuple of ndarray, shape (r, 3) each, optional
+        θ-free member directions d to trace, one array per member; None: one member, the
+        samples μ themselves (their hits reused).
+    weights : Dual, shape (r,), or a tuple of them, optional
+        Kernel weights of value 1 (Loubet et al. 2019, Sec. 4.2); None: none.
+    scale : tuple of Dual, shape (r,) each, optional
+        With ``directions``: divides each member's estimate (a kernel mass restored).
+    paired : bool
+        Two members combined with the paired-sample control variate
+        (:func:`~flatland.core.translation.paired_combine`).
+    """
+
+    rotated: Any
+    rows: np.ndarray | None = None
+    directions: np.ndarray | None = None
+    weights: Any = None
+    scale: Any = None
+    paired: bool = False
+
+
 class Transforms(Protocol):
-    """How a method changes variables in the renderer's integrals (see the module docstring)."""
+    """How a method changes variables in the renderer's integrals, and the terms it adds (module docstring).
+
+    The same seam as flatland's (:class:`flatland.integrator.Transforms`): one change of variables
+    per integral, and derivative-only terms through ``shading_extra`` and ``pixel_extra``.
+    :class:`Identity` implements all five; a method subclasses it and overrides what it changes.
+    """
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """One rotation (and film kernel) per camera sample at film point (x, y), pixels; one row of
         ``draws`` per sample."""
         ...
 
-    def emitter(self, shading: Shading) -> Rotation:
-        """One rotation per shading point for the emitter-sampling strategy (draws: ``shading.draws``)."""
+    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+        """Rotations for the emitter-sampling strategy at least where ``visible`` (bool, one per shading
+        point: its emitter sample is unoccluded); draws: ``shading.draws``."""
         ...
 
-    def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        r"""The per-sample estimate of the cosine-sampled integral (samples $μ \sim \cos$, density ``pdf``),
-        using :meth:`Shading.trace` and :meth:`Shading.evaluate_bsdf` for the integrand (a method
-        that evaluates it elsewhere than along μ need not trace μ). Random numbers come from
-        ``shading.draws``, keyed on each point's camera sample."""
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
+        r"""Where to evaluate the cosine-sampled integrand for samples $μ \sim \cos$ (``hits``: their
+        first hits, :meth:`Shading.trace`); random numbers from ``shading.draws``."""
+        ...
+
+    def shading_extra(self, shading: Shading) -> np.ndarray | None:
+        """A derivative-only term added to E at each shading point (None: nothing)."""
+        ...
+
+    def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
+        """A derivative-only term per batch and pixel, shape (batches, height, width) (None: nothing)."""
         ...
 
 
@@ -201,12 +270,18 @@ class Identity:
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         return FilmTransform.identity(x.shape)
 
-    def emitter(self, shading: Shading) -> Rotation:
-        return Rotation.identity((len(shading),))
+    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+        rows = np.flatnonzero(visible)
+        return EmitterChange(Rotation.identity((len(rows),)), rows)
 
-    def bsdf(self, shading, mu, pdf):
-        rotated = mu if not shading.state.dual else Dual(mu)
-        return shading.evaluate_bsdf(mu, rotated, shading.trace(mu)) / pdf
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
+        return Members(mu if not shading.state.dual else Dual(mu))
+
+    def shading_extra(self, shading: Shading) -> np.ndarray | None:
+        return None
+
+    def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
+        return None
 
 
 def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
@@ -226,14 +301,14 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     origin, direction = take_rows(shading.origin, idx), take_rows(w, idx)
     blocked = state.tracer.occluded(origin, direction, dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
-    # the light's own edges, held fixed under the rotation (sphere3d.emitter_edges); a method opts in
-    edges = state.dual and getattr(transforms, "emitter_edges", False)
-    if vis.size == 0 and not edges:
+    visible = np.zeros(m, dtype=bool)
+    visible[vis] = True
+    change = transforms.emitter(shading, visible)
+    if vis.size == 0 and change.extra is None:
         return scatter(m, vis, 0.0, state.dual)
-    need = np.full(m, edges)  # one rotation per point, for both terms (any point may have edge samples)
-    need[vis] = True
-    place = np.cumsum(need) - 1  # row of each needed point in the rotation
-    rotation = transforms.emitter(shading if need.all() else shading.take(np.flatnonzero(need)))
+    rotation = change.rotation
+    place = np.empty(m, dtype=np.intp)  # row of each point's rotation in the change
+    place[change.rows] = np.arange(len(change.rows))
     # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
     points_move, lights_change = moving_rows(vis, shading.x, shading.n), emitters_change(state)
     live = rotation.active[place[vis]] | points_move | lights_change
@@ -257,7 +332,38 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
 
     (f,) = on_rows(estimate, vis, live, shading.x, shading.n, w, place, tri, dist, cos_y)
     out = scatter(m, vis, f, state.dual)
-    return add_tangent(out, *emitter_edge_term(state, shading, rotation)) if edges else out
+    return out if change.extra is None else add_tangent(out, *change.extra)
+
+
+def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:
+    """``estimate`` with ``term`` added to the tangents at ``index``: the value, bit for bit, unchanged."""
+    t = estimate.tangent.copy()
+    np.add.at(t, index, term)
+    return Dual(estimate.value, t)
+
+
+def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Transforms) -> Any:
+    """Cosine-sampling estimate of E per shading point, at the method's :class:`Members`."""
+    hits = shading.trace(mu)
+    members = transforms.bsdf(shading, mu, hits)
+    rows = members.rows
+    sub, p = (shading, pdf) if rows is None else (shading.take(rows), pdf[rows])
+    if members.directions is None:  # the samples μ themselves
+        mu_r, hits_r = (mu, hits) if rows is None else (mu[rows], hits.take(rows))
+        f = sub.evaluate_bsdf(mu_r, members.rotated, hits_r)
+        est = f / p if members.weights is None else f * members.weights / p
+    else:  # one or two members per sample, traced here
+        e = []
+        for d, rotated, w, scale in zip(
+            members.directions, members.rotated, members.weights, members.scale, strict=True
+        ):  # a loop over the members, not over samples
+            e.append(sub.evaluate_bsdf(d, rotated, sub.trace(d)) * w / (p * scale))
+        # each weight's derivative has zero mean given the kernel centre and is independent of the other
+        # member: a control variate scaled by the other member's estimate   (paired samples, theory/kernels)
+        est = paired_combine(*e, *members.weights) if members.paired else e[0]
+    if rows is None:
+        return est
+    return scatter(len(mu), rows, est, shading.state.dual)
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
@@ -270,7 +376,11 @@ def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) 
     n0 = detach(shading.n)
     mu = sample_cosine_hemisphere(u[:, 3:5], n0)
     pdf = pdf_cosine_hemisphere(mu, n0)
-    return total + transforms.bsdf(shading, mu, pdf)
+    bsdf = _bsdf_term(shading, mu, pdf, transforms)
+    extra = transforms.shading_extra(shading)
+    if extra is not None:
+        bsdf = bsdf + Dual(np.zeros(len(shading)), extra)  # the value is untouched (+ 0.0)
+    return total + bsdf
 
 
 def pixel_samples(
@@ -376,7 +486,7 @@ def camera_radiance(
             point, geometric, shade_n, value = attach(False, rotated[hit], tri)
         shape = state.shape_of[tri]
         albedo = state.albedo[shape]
-        diffuse = (detach(albedo) > 0.0) | (state.param is not None and state.param.endswith(".albedo"))
+        diffuse = (detach(albedo) > 0.0) | state.albedo_varies[shape]
         s = np.flatnonzero(diffuse)
         if s.size:
             s = slice(None) if s.size == hit.size else s  # all diffuse: views, not copies

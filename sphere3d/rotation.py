@@ -20,7 +20,7 @@ drawn θ-independently, and only the rotation carries the tangent.
 A rotation has one more degree of freedom than the point it follows: a turn about $ω_p$
 itself. :meth:`Rotation.following` takes its rate as ``spin`` (an angle of value 0, a Dual);
 $\dot R ω$ gains $\dot ψ\, (a × ω)$, the angular velocity being $Ω = a × \dot b + \dot ψ a$.
-:mod:`sphere3d.probes` sets it so that the great circle of a followed edge turns with it.
+:mod:`sphere3d.reparam.probes` sets it so that the great circle of a followed edge turns with it.
 
 Floating point: $a × a$ is exactly 0 but $a · a$ is 1 only to rounding, so
 :meth:`Rotation.apply` returns $ω + (Rω - \mathrm{detach}(Rω))$: value exactly ω (the

@@ -336,15 +336,6 @@ class Scene:
         """Index of the shape called ``name``."""
         return [s.name for s in self.shapes].index(name)
 
-    def state(self, param: str | None = None, theta: Any = 0.0, tracer: str = "embree"):
-        """The scene's geometry and materials with ``param`` offset by ``theta`` (a float or a Dual).
-
-        See :class:`sphere3d.state.SceneState`.
-        """
-        from sphere3d.state import build_state
-
-        return build_state(self, param, theta, tracer)
-
 
 def parameter_names(scene: Scene) -> tuple[str, ...]:
     """Every parameter name of ``scene``: ``scene.parameters`` (the name flatland shares)."""

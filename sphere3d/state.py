@@ -119,6 +119,11 @@ class SceneState:
         Triangles of smooth shapes, shaded with the interpolated ``normals``.
     albedo, emission : Dual or ndarray, shape (S,)
         Per shape. ``sky``: the environment radiance.
+    albedo_varies : ndarray of bool, shape (S,)
+        The shapes whose albedo is the parameter: a method must not skip them where their
+        albedo is 0 at θ0 (its derivative need not be).
+    sky_varies : bool
+        The sky's radiance is the parameter (likewise where it is 0 at θ0).
     emitters : ndarray of int
         Triangles that emit (emission > 0, or the emission is the parameter).
     emitter_area : Dual or float
@@ -142,6 +147,8 @@ class SceneState:
     albedo: Any
     emission: Any
     sky: Any
+    albedo_varies: np.ndarray
+    sky_varies: bool
     emitters: np.ndarray
     emitter_area: Any
     camera: CameraState
@@ -279,7 +286,9 @@ def check_world(
         )
 
 
-def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embree") -> SceneState:
+def build_state(
+    scene: Scene, param: str | None = None, theta: Any = 0.0, tracer: str = "embree"
+) -> SceneState:
     """The :class:`SceneState` of ``scene`` with ``param`` offset by ``theta`` (see module docstring)."""
     if param is not None:
         param = scene.check_param(param)
@@ -357,6 +366,8 @@ def build_state(scene: Scene, param: str | None, theta: Any, tracer: str = "embr
         albedo=albedo,
         emission=emission,
         sky=sky,
+        albedo_varies=np.array([owner == s.name and kind == "albedo" for s in scene.shapes]),
+        sky_varies=owner == "sky",
         emitters=emitters,
         emitter_area=emitter_area,
         camera=camera,

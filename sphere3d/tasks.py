@@ -10,18 +10,11 @@ sample: sample j of pixel p has the global index ``p * spp + j`` (batch
 whatever the method, and anything a method draws in addition is keyed on the same
 index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.emitter"``,
 ...; see :class:`flatland.core.rng.Draws`). Results therefore do not depend on
-:data:`CHUNK` or on the number of threads.
+:data:`CHUNK` or on the number of threads (:mod:`sphere3d.execution`).
 """
 
 from __future__ import annotations
 
-import contextvars
-import ctypes
-import functools
-import os
-import threading
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +24,7 @@ from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import control_variate
 from flatland.core.validate import check_choice
+from sphere3d import execution
 from sphere3d.film import FILMS, gather, reach, splat_weights, stencil
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
@@ -42,6 +36,7 @@ from sphere3d.integrator import (
     pixel_samples,
 )
 from sphere3d.scene import Scene
+from sphere3d.state import build_state
 
 __all__ = ["CHUNK", "ImageTask", "PointTask", "Tally"]
 
@@ -50,10 +45,6 @@ CHUNK = 1 << 15
 depend on it (every draw is keyed on the sample's index)."""
 CV_SCOPES = ("pixel", "batch", "off")
 """Whose radiance scales a sample's filter-weight control variate (:meth:`ImageTask._control_variate`)."""
-TRIM_DELAY = 1.0
-"""Seconds without a task after which the chunks' memory goes back to the system (:func:`_map`)."""
-WORKERS = min(2, os.cpu_count() or 1)
-"""Threads over memory chunks (2: the machines this is written for have two cores)."""
 
 
 @dataclass(frozen=True)
@@ -62,84 +53,6 @@ class Tally:
 
     value: np.ndarray
     derivative: np.ndarray
-
-
-@functools.cache
-def _heap_for_temporaries() -> Any:
-    """Let glibc's malloc serve a chunk's temporaries (up to 32 MiB each) from its heap and keep them.
-
-    By default glibc maps large arrays with ``mmap`` and unmaps them when freed (and trims
-    the heap's free top), so the temporaries of every chunk (hundreds of arrays of 0.1 to
-    10 MB) are page-faulted in again: on ``hard_shadow`` (reparam, 64 spp, one thread)
-    75 000 page faults and 0.18 s of system time per image, against 16 000 and 0.05 s
-    with this (the trim after each task included).
-    Raising the mmap and trim thresholds (``mallopt``) reuses the freed memory instead;
-    :func:`_map` hands it back with ``malloc_trim`` once no task has run for :data:`TRIM_DELAY`
-    seconds. Process-wide, set once, on glibc only (elsewhere a no-op); the arithmetic, hence
-    every result, is unchanged. Returns the C library where the thresholds were set, else None.
-    """
-    try:
-        libc = ctypes.CDLL(None)
-        mallopt, _ = libc.mallopt, libc.malloc_trim  # both must exist (glibc)
-    except (OSError, AttributeError, TypeError):  # no C library by that name, or not glibc
-        return None
-    m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
-    done = bool(mallopt(m_mmap_threshold, 32 << 20)) and bool(mallopt(m_trim_threshold, 512 << 20))
-    return libc if done else None
-
-
-def _map(func: Callable[[int], Any], items: range) -> list[Any]:
-    """``[func(i) for i in items]``, on up to :data:`WORKERS` threads (numpy and Embree release the GIL).
-
-    Each chunk draws from its own named streams, so the result does not depend on
-    the number of threads or the order they finish in. The chunks' memory is handed back
-    :data:`TRIM_DELAY` seconds after the last task, not after each, and the threads are kept
-    (:func:`_pool`): trimmed after each, every task page-faulted its temporaries in again, in every
-    thread's heap. ``hard_shadow`` (reparam, 64 spp, splat, images back to back, medians of 6): two
-    threads 29 000 to 32 000 page faults and 0.19 s of system time per image, against 1 600 to 2 200
-    and 0.02 to 0.03 s; one thread 20 000 and 0.06 to 0.10 s, against 200 to 2 600 and 0.015 s.
-    """
-    libc = _heap_for_temporaries()
-    if libc is None:
-        return _map_threads(func, items)
-    _trim_later(libc, None)
-    try:
-        return _map_threads(func, items)
-    finally:
-        _trim_later(libc, TRIM_DELAY)
-
-
-_TRIM: list[threading.Timer] = []
-_TRIM_LOCK = threading.Lock()
-
-
-def _trim_later(libc: Any, delay: float | None) -> None:
-    """Cancel the pending ``malloc_trim`` (a task starts), and with a ``delay``, schedule one."""
-    with _TRIM_LOCK:
-        while _TRIM:
-            _TRIM.pop().cancel()
-        if delay is not None:
-            timer = threading.Timer(delay, libc.malloc_trim, (0,))  # give the chunks' memory back
-            timer.daemon = True  # never keeps the interpreter alive
-            _TRIM.append(timer)
-            timer.start()
-
-
-@functools.cache
-def _pool(workers: int, pid: int) -> ThreadPoolExecutor:
-    """One pool per thread count (and process: a forked child has none of its parent's threads), kept:
-    its threads keep their malloc heaps (and the memory freed there) from task to task, where new
-    threads got whichever heaps and faulted memory in again."""
-    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"sphere3d-{pid}")
-
-
-def _map_threads(func: Callable[[int], Any], items: range) -> list[Any]:
-    """Each task runs in a copy of the caller's context (one copy per task: a context is entered by one
-    thread at a time), so the caller's ``np.errstate``, a context variable, holds in the threads too."""
-    if WORKERS <= 1 or len(items) <= 1:
-        return [func(i) for i in items]
-    caller = contextvars.copy_context()
-    return list(_pool(WORKERS, os.getpid()).map(lambda i: caller.copy().run(func, i), items))
 
 
 def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
@@ -244,7 +157,7 @@ class ImageTask:
         image does not depend on how pixels are grouped into chunks.
         """
         transforms = transforms or Identity()
-        state = self.scene.state(self.param, theta, self.tracer)
+        state = build_state(self.scene, self.param, theta, self.tracer)
         height, width = self.shape
         batches, per_batch = self.batches, self.spp // self.batches
         pixels = np.arange(height * width)
@@ -269,10 +182,13 @@ class ImageTask:
             est = pixel_samples(state, transforms, rows, cols, u, draws)
             return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
-        parts = _map(chunk, range(-(-pixels.size // chunk_pixels)))
+        parts = execution.map_chunks(chunk, range(-(-pixels.size // chunk_pixels)))
         if splat is not None:
-            return self._splat_image(splat, batches, per_batch)
-        return _tally(list(np.concatenate(parts, axis=1)), self.shape)
+            tally = self._splat_image(splat, batches, per_batch)
+        else:
+            tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
+        extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
+        return tally if extra is None else Tally(tally.value, tally.derivative + extra)
 
     def _splat_buffers(self, batches: int, per_batch: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The chunks' outputs for :meth:`_splat_chunk`: stencils (quantities, batches, slots, pixels),
@@ -336,7 +252,7 @@ class ImageTask:
         height, width = self.shape
         _, h = reach(self.scene.camera.filter)
         stencils, totals = out
-        step = -(-height // (2 * WORKERS))
+        step = -(-height // (2 * execution.workers()))
 
         def band(i: int) -> np.ndarray:
             rows = range(i * step, min(height, (i + 1) * step))
@@ -348,7 +264,7 @@ class ImageTask:
                 value, deriv = value - mean[0] * sums[2], deriv - mean[0] * sums[3] - mean[1] * sums[2]
             return np.stack([value, deriv]).reshape(2, batches, len(rows), width)
 
-        image = np.concatenate(_map(band, range(-(-height // step))), axis=2)
+        image = np.concatenate(execution.map_chunks(band, range(-(-height // step))), axis=2)
         return Tally(value=image[0], derivative=image[1])
 
 
@@ -372,7 +288,7 @@ class PointTask:
     def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
         """Estimate E at the point with the parameter offset by ``theta`` under ``transforms``."""
         transforms = transforms or Identity()
-        state = self.scene.state(self.param, theta, self.tracer)
+        state = build_state(self.scene, self.param, theta, self.tracer)
         per_batch = self.n // self.batches
         starts = range(0, per_batch, CHUNK)  # memory chunks of one batch
         k = len(starts)
@@ -389,6 +305,6 @@ class PointTask:
             u = draws.uniforms("samples", 5)
             return np.sum(irradiance_samples(Shading.at(state, x, nrm, draws), u, transforms))
 
-        sums = _map(job, range(self.batches * k))  # batch-major
+        sums = execution.map_chunks(job, range(self.batches * k))  # batch-major
         means = [sum(sums[b * k : (b + 1) * k]) / per_batch for b in range(self.batches)]
         return _tally(means, ())

@@ -22,7 +22,7 @@
 # its sample. A renderer knows neither where the silhouettes in a pixel are nor how they move.
 # Loubet et al. (2019, Sec. 4.3) find out by tracing a few *probe rays* inside the kernel's
 # support and choosing, with a short heuristic, one point $p$ whose motion the transform follows
-# (`docs/theory/probes.md`; in flatland `flatland.probes.select_points`):
+# (`docs/theory/probes.md`; in flatland `flatland.reparam.probes.select_points`):
 #
 # 1. pair probe 0 with the *last* probe that hits a different shape (a miss is "no shape");
 # 2. if only one of the pair hits, use the hit;
@@ -65,10 +65,10 @@ from flatland.core.dual import detach, tangent, variable
 from flatland.core.rng import stream
 from flatland.core.stats import ROUNDING, normal_quantile, sidak
 from flatland.core.translation import translation_offset, unit_weight
-from flatland.methods.reparam import default_kappa_film
 from flatland.plotting.probe_rays import plot_probes
 from flatland.plotting.tutorials import plot_grid
-from flatland.probes import PARALLEL, select_points
+from flatland.reparam.default import default_kappa_film
+from flatland.reparam.probes import PARALLEL, select_points
 from flatland.sampling import filter_value, sample_filter
 from flatland.scene import load_scene
 from flatland.state import build_state
@@ -96,7 +96,7 @@ WALL = segment("wall", [-1.0, 2.0], [1.0, 2.0])  # a background at y = 2
 # (`near.translate.x`). Its right end, at film coordinate $t = 0$, is the discontinuity.
 #
 # The function `probe` below does what the library's reparameterization does for one film sample
-# (`flatland.methods.reparam.ReparamTransforms.camera`): it casts the probes *detached* (plain
+# (`flatland.reparam.default.ReparamTransforms.camera`): it casts the probes *detached* (plain
 # floats, like every ray), in film order, and hands their hits — the primitive and the
 # barycentric coordinate along it — to `select_points`, together with the θ-dependent scene, a
 # direction inside the kernel (its centre, to reject corners behind the camera) and, for

@@ -42,8 +42,8 @@ from scipy import stats
 import flatland as fl
 from flatland import detach, tangent, variable
 from flatland.core.stats import sidak
-from flatland.methods.reparam import ReparamTransforms, default_kappa_film
 from flatland.plotting import tutorials as ptu
+from flatland.reparam.default import ReparamTransforms, default_kappa_film
 from flatland.sampling import filter_value
 from flatland.state import parse_parameter
 from flatland.tasks import ImageTask

@@ -50,6 +50,7 @@ from flatland.plotting import tutorials as ptu
 from flatland.sampling import sample_von_mises
 from sphere3d.rotation import Rotation, rotation_matrix
 from sphere3d.sampling import sample_vmf
+from sphere3d.state import build_state
 from sphere3d.tracing import BruteForceTracer, attached_points
 
 SEED = 20191117
@@ -224,7 +225,7 @@ pt.plot_histogram(
 # re-attach the hits on the occluder to the scene bound with a `Dual` θ.
 
 # %%
-state = s3.load_scene(sphere_scene).state()  # the scene at θ0: triangles, camera, Embree tracer
+state = build_state(s3.load_scene(sphere_scene))  # the scene at θ0: triangles, camera, Embree tracer
 cam = state.camera
 cols, rows = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
 directions = cam.directions(cols.ravel(), rows.ravel())
@@ -236,7 +237,7 @@ brute = BruteForceTracer(detach(state.triangles), state.shape_of)
 start = time.perf_counter()
 brute_hits = brute.intersect(origin, directions)
 brute_seconds = time.perf_counter() - start
-moving = s3.load_scene(sphere_scene).state(PARAM, variable(0.0))  # the same scene, triangles as Duals
+moving = build_state(s3.load_scene(sphere_scene), PARAM, variable(0.0))  # the same scene, triangles as Duals
 on_occluder = np.flatnonzero(embree_hits.shape == 0)
 tri = moving.triangles[embree_hits.triangle[on_occluder]]
 points = attached_points(tri, embree_hits.u[on_occluder], embree_hits.v[on_occluder])

@@ -30,7 +30,8 @@
 #
 # For each it measures the error against time, and then *where* the error of `reparam` comes
 # from: the penumbra of a sharp emitter edge (which the paper's estimator loses and `sphere3d`
-# recovers with an extra boundary term on the light's own edges, the option `emitter_edges`), and
+# recovers with an extra boundary term on the light's own edges, an extension the published
+# estimator, `variant="paper"`, does not have), and
 # silhouettes narrower than the film kernel's probes. Every number below is measured in this
 # notebook with its standard error; `reparam`'s docstring keeps a table of the same measurements
 # at many more samples.
@@ -51,6 +52,7 @@ from flatland.plotting.convergence import plot_error_time
 from sphere3d import closed_form as cf
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.sampling import filter_radius
+from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 
 SEED = 20191117
@@ -178,7 +180,7 @@ assert np.all(np.isfinite(REF)) and np.all(REF_SE >= 0.0)
 # The rest (lit ground, umbra, the background) has no derivative.
 
 # %%
-state = SCENE.state()
+state = build_state(SCENE)
 camera = state.camera
 reach = filter_radius(SCENE.camera.filter) + 0.5  # the gaussian filter: 3σ = 1.5 px
 grid = np.arange(-reach, reach + 1e-9, 0.5)
@@ -288,25 +290,26 @@ print(f"reparam: rms bias along the reference {shadow_floor:.3f} per pixel")
 # their penumbra fractions is taken per batch (paired; the common reference adds nothing to a
 # difference whose expectation is 0)
 spp = SPP["reparam"][-1]
-dragged, _, _ = run(SCENE, PARAM, "reparam", spp, SEED + spp, emitter_edges=False)
+dragged, _, _ = run(SCENE, PARAM, "reparam", spp, SEED + spp, variant="paper")
 k_dragged, se_dragged = kept(dragged, REF, REF_SE, REGIONS["penumbra"])
 gain, se_gain = over_batches(
     fractions(last["reparam"], REF, REF_SE, REGIONS["penumbra"])
     - fractions(dragged, REF, REF_SE, REGIONS["penumbra"])
 )
-print(f"reparam, emitter_edges=False: penumbra kept {k_dragged:6.1%} ± {se_dragged:.1%}")
+print(f"reparam, variant='paper': penumbra kept {k_dragged:6.1%} ± {se_dragged:.1%}")
 print(f"the edge term keeps {gain:+.1%} ± {se_gain:.1%} more of it (paired over the batches)")
 
 # %%
 # check: boundary and finite differences keep all of the reference in every region: |k - 1| within
 # t standard errors (Student t, 15 degrees of freedom; Šidák over 2 methods x 3 regions + 3 checks of
-# reparam). Without its emitters' edge term, reparam keeps significantly less than all of the
-# penumbra's derivative (1 - k above the same quantile in standard errors); with it (the default), it
+# reparam). As published (`variant="paper"`, without the emitters' edge term), reparam keeps
+# significantly less than all of the penumbra's derivative (1 - k above the same quantile in standard
+# errors); with it (the default), it
 # keeps significantly more than without (the mean of the paired per-batch differences above the
 # quantile in its standard error),
 # and its fraction is consistent with the 98.9 % its docstring documents at many more samples (the
 # residual: mostly the cosine strategy's loss near the light's edge, whose rotation follows the
-# occluder; sphere3d.emitter_probes, Bias). At this notebook's precision (about ± 1.2 %) that last
+# occluder; sphere3d.reparam.emitter_probes, Bias). At this notebook's precision (about ± 1.2 %) that last
 # check cannot tell 99 % from 100 %: it rules out a loss of a few % or more, not the documented 1 %.
 # reparam's mean squared bias of section 2 is only checked not to fall below the regions' lower
 # bound (a statement of consistency; at these sample counts its noise hides the bias, section 2)
@@ -349,7 +352,8 @@ ptu.plot_gradient_panel(
 
 # %% [markdown]
 # The penumbra alone, every other pixel set to 0, on its own scale: `reparam` with the light's edges
-# dragged (`emitter_edges=False`) is nearly empty; the default holds them fixed and keeps the soft
+# dragged (`variant="paper"`, the estimator as published) is nearly empty; the default holds them fixed and
+# keeps the soft
 # shadow.
 
 # %%
@@ -387,7 +391,7 @@ plot_error_time(
 # whose radiance fades to 0 at its border (`fade` > 0) has no such jump; `boundary` samples the
 # border's edges explicitly and finite differences do not care. `sphere3d`'s `reparam` adds, by
 # default, the Leibniz boundary term of the light's own edges under the rotation it chose
-# (`sphere3d.emitter_edges`, `docs/theory/probes.md`): the border is held fixed instead of
+# (`sphere3d.boundary.emitters`, `docs/theory/probes.md`): the border is held fixed instead of
 # dragged, and what is left in the penumbra is the part of the occluder's shadow edge that one
 # rotation per ground point does not follow exactly.
 #
@@ -526,5 +530,5 @@ plot_error_time(
 # boundary term of the light's own edges, which `sphere3d` adds by default. A third case sits in
 # the silhouette of section 2: where the sphere's silhouette crosses the ground's far edge, a film
 # kernel that follows the silhouette drags that static edge. There one rotation can still do both,
-# following the point where the two edges cross (`sphere3d.junctions`, on by default): it moves
+# following the point where the two edges cross (`sphere3d.reparam.junctions`, on by default): it moves
 # along the static edge at the speed that keeps the moving one.

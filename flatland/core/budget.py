@@ -91,7 +91,10 @@ def rays_per_sample(options: dict) -> int:
     """An upper estimate of the rays one camera sample traces under a method's resolved ``options``.
 
     A camera ray and two shading rays (MIS), and for a reparameterization each of them
-    with its probes, twice over for paired samples; finite differences render twice.
+    with its probes, twice over for paired samples; finite differences render twice. A ``probes``
+    of None (the method's own default, a few) counts as 8.
     """
-    rays = 3 * (1 + int(options.get("probes", 0) or 0)) * (2 if options.get("paired") else 1)
+    probes = options.get("probes", 0)
+    probes = 8 if probes is None and "probes" in options else int(probes or 0)
+    rays = 3 * (1 + probes) * (2 if options.get("paired") or options.get("variant") == "paper" else 1)
     return rays * (2 if "h" in options else 1)

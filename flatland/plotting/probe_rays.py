@@ -1,7 +1,7 @@
 """The probe-ray figure of tutorial 8: a flatland scene, the probes around one sample, the point chosen.
 
 Loubet et al. 2019, Sec. 4.3 (theory/probes): a few probe rays are traced from the
-integral's origin inside the kernel's support, and :func:`flatland.probes.select_points`
+integral's origin inside the kernel's support, and :func:`flatland.reparam.probes.select_points`
 picks from their hits the point whose motion the transform follows.
 :func:`plot_probes` draws one such choice from data computed elsewhere (matplotlib only,
 no numerics; the figure is made without pyplot):

@@ -24,7 +24,7 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
 A third scene adds a static black triangle behind the moving one (:func:`junction_scene`): its
 camera image (:func:`junction_image`) is the filter integrated over the union of the two, whose
 derivative carries the two T-junctions where the moving edges cross the static one
-(:mod:`sphere3d.junctions`), by clipping on Duals (:func:`clip_convex`).
+(:mod:`sphere3d.reparam.junctions`), by clipping on Duals (:func:`clip_convex`).
 
 All are written from the scene's definition (camera frame, pixel mapping, filter
 profiles, shape transform), not from the estimators' code. The scenes the tests and

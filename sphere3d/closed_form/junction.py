@@ -2,7 +2,7 @@ r"""The camera image of a moving black triangle across the edge of a static one:
 
 A black triangle M (albedo 0, emission 0) moves in front of a static black triangle S under a
 constant sky L; on the film M's slanted edges cross S's top edge, so each of those crossings
-is a junction of a moving and a static discontinuity (:mod:`sphere3d.junctions`). A camera ray
+is a junction of a moving and a static discontinuity (:mod:`sphere3d.reparam.junctions`). A camera ray
 sees radiance 0 on either triangle and L elsewhere, so the pixel integral is
 
     $I(p) = L (1 - ∫_{M ∪ S} k(x - c_p) dx) = L (1 - ∫_M k - ∫_S k + ∫_{M ∩ S} k)$,

@@ -18,8 +18,8 @@ module's docstring says which of these it changes; the guide
                           ``refine``, ``paired``
 ``boundary``              edge sampling (Li et al. 2018): naive plus the
                           boundary terms of the pixel integrals
-                          (:mod:`sphere3d.camera_edges`) and of the shading
-                          integrals (:mod:`sphere3d.shading_edges`); option
+                          (:mod:`sphere3d.boundary.camera`) and of the shading
+                          integrals (:mod:`sphere3d.boundary.shading`); option
                           ``rate``
 ========================  =====================================================
 """

@@ -1,58 +1,23 @@
 """The boundary method: the naive interior term plus the boundary terms of edge sampling.
 
 Where the integrator calls it: one ``task.evaluate(variable(0.0), BoundaryTransforms(...))``
-for the interior term; ``camera`` and ``emitter`` stay the identity, ``bsdf`` is the
-identity's cosine-sampled estimate plus the boundary term of the shading integral
-(:mod:`sphere3d.shading_edges`), added as a zero value with a tangent. After the
-evaluation, an :class:`~sphere3d.tasks.ImageTask` adds the boundary term of the pixel
-integrals per batch (:mod:`sphere3d.camera_edges`).
+(:mod:`sphere3d.boundary.transforms`): no change of variables; the shading integrals' boundary
+term (:mod:`sphere3d.boundary.shading`) through ``shading_extra``, the pixel integrals' per batch
+(:mod:`sphere3d.boundary.camera`) through ``pixel_extra``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any
-
-import numpy as np
-
 from flatland.core.contract import Option
-from flatland.core.dual import Dual, variable
+from flatland.core.dual import variable
 from flatland.core.validate import check_int, check_positive
-from sphere3d.camera_edges import camera_edge_term
-from sphere3d.edges import Edges, mesh_edges
-from sphere3d.integrator import Identity, Shading
+from sphere3d.boundary.edges import mesh_edges
+from sphere3d.boundary.transforms import BoundaryTransforms
 from sphere3d.methods._common import GRADIENT_METHODS
-from sphere3d.shading_edges import shading_edge_term
+from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
-__all__ = ["RATE", "SECONDARY", "BoundaryTransforms", "boundary"]
-
-
-@dataclass(frozen=True)
-class BoundaryTransforms(Identity):
-    """Identity rotations; the cosine-sampled estimate gains the shading integral's boundary term.
-
-    Attributes
-    ----------
-    edges : Edges
-        The scene's edges at θ0 (:func:`~sphere3d.edges.mesh_edges`).
-    per_point : int
-        Edge samples per shading point (the method's ``secondary`` option).
-    """
-
-    edges: Edges
-    per_point: int = 1
-
-    def bsdf(self, shading: Shading, mu: np.ndarray, pdf: np.ndarray) -> Any:
-        """The identity's estimate plus, as a tangent on a zero value, the mean of ``per_point`` edge
-        samples of the boundary term of E (:func:`~sphere3d.shading_edges.shading_edge_term`;
-        uniforms ``"boundary.edge"``)."""
-        estimate = super().bsdf(shading, mu, pdf)
-        if not shading.state.dual:
-            return estimate
-        u = shading.draws.uniforms("boundary.edge", 2, self.per_point)
-        term = shading_edge_term(shading, self.edges, u)
-        return estimate + Dual(np.zeros(len(shading)), term)  # the value is untouched (+ 0.0)
+__all__ = ["RATE", "SECONDARY", "boundary"]
 
 
 RATE = 2.0
@@ -81,28 +46,20 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     Li et al. 2018, Sec. 3-4, estimate it by sampling the edges). Both boundary terms
     are included:
 
-    - **pixel integrals** (:mod:`sphere3d.camera_edges`): the film images of silhouette,
+    - **pixel integrals** (:mod:`sphere3d.boundary.camera`): the film images of silhouette,
       boundary and crease edges (of flat-shaded shapes), ``rate · spp/batches`` points per pixel of projected
       edge length per batch, each splatted to the pixels whose filter covers it;
-    - **shading integrals** (:mod:`sphere3d.shading_edges`): at every shading point
+    - **shading integrals** (:mod:`sphere3d.boundary.shading`): at every shading point
       ``secondary`` draws among the moving silhouette edges seen from it (occluders'
       outlines, emitters' borders), each a part of an edge's arc inside an emitter's image
       (under a black sky) drawn ∝ its angle, and one point on it.
 
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
-    only discontinuities (see :mod:`sphere3d.edges` for what is not handled: partly
+    only discontinuities (see :mod:`sphere3d.boundary.edges` for what is not handled: partly
     overlapping edges, surfaces cutting through each other), up to the $O(δ)$ offsets
     of the rays traced beside the edges. Cost: two rays per edge point on the film,
     and per shading point ``2 secondary`` rays plus a silhouette test against every edge.
     """
-    plain = task.scene.state(task.param, 0.0, task.tracer)
+    plain = build_state(task.scene, task.param, 0.0, task.tracer)
     edges = mesh_edges(plain.triangles, plain.shape_of)
-    tally = task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary))
-    if not isinstance(task, ImageTask):
-        return tally
-    state = task.scene.state(task.param, variable(0.0), task.tracer)
-    per_batch = task.spp // task.batches
-    extra = np.stack(
-        [camera_edge_term(state, plain, edges, task.seed, b, rate * per_batch) for b in range(task.batches)]
-    )
-    return replace(tally, derivative=tally.derivative + extra)
+    return task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary, rate))

@@ -37,8 +37,8 @@ import flatland.methods.boundary as boundary
 import flatland.tasks as tasks
 from flatland.core.dual import detach, tangent, variable
 from flatland.core.stats import normal_quantile, sidak
-from flatland.probes import select_points
 from flatland.render import render_gradient
+from flatland.reparam.probes import select_points
 from flatland.scene import list_scenes, load_scene
 from flatland.state import build_state
 
@@ -189,7 +189,7 @@ def test02b_reparam_bias_is_seen_per_pixel_and_bounded(name, param, record_prope
     The penumbra scene is the worst: its emitter is unfaded, and where a blocker's
     tangent line happens to separate the emitter from the floor point the heuristic
     follows the blocker while the emitter's edge stays put (see
-    :mod:`flatland.probes`). In the others a probe pair straddles two
+    :mod:`flatland.reparam.probes`). In the others a probe pair straddles two
     edges that move differently (two occluders, a polygon's corner, the ball behind
     the occluder), and one translation follows only one of them. The bound on the
     relative error is a regression bound on a biased estimator (about 1.3x the
@@ -294,7 +294,7 @@ def test05_a_chosen_point_on_the_shading_point_keeps_the_identity(monkeypatch):
     samples must fall back to the identity: the image is then the naive one.
     """
     import flatland.methods.reparam as reparam_module
-    from flatland.probes import Choice
+    from flatland.reparam.probes import Choice
 
     def at_origin(geom, origins, *args, **kwargs):
         return Choice(np.array(origins, dtype=float), np.zeros(len(origins), dtype=int))

@@ -5,7 +5,7 @@ backdrop, 16 pixels, gaussian filter, θ = the stick's x-translation. Its image 
 form ``I_j = 1 - ∫_{t_a}^{t_b} k_j``, so ``dI_j/dθ = -(k_j(t_b) - k_j(t_a)) ṫ`` with ṫ = 1 / 2.5 (film
 coordinate t = x / (y + 2.5)). The film probes of ``reparam`` are 2σ = 0.57 px apart at the
 defaults (σ = 0.4 px / √2); a stick narrower than that lies between two probes for most kernel
-centres, and without :func:`flatland.probes.film_gap_probe` the transform was the identity
+centres, and without :func:`flatland.reparam.probes.film_gap_probe` the transform was the identity
 there, losing 1 - width / 0.57 px of the edge terms (measured: 83 ± 36 % at 0.1 px, 57 ± 10 % at
 0.2 px, 1024 spp × 8 positions).
 """
@@ -22,7 +22,7 @@ from flatland.core.dual import tangent, variable
 from flatland.core.rng import Draws
 from flatland.integrator import Context
 from flatland.lights import Lights
-from flatland.methods.reparam import ReparamTransforms, default_kappa_film
+from flatland.reparam.default import ReparamTransforms, default_kappa_film
 from flatland.sampling import filter_value, sample_von_mises
 from flatland.scene import load_scene
 from flatland.state import build_state
@@ -110,7 +110,8 @@ def test02_a_thin_sticks_edge_terms_are_kept():
 def test03_every_shading_kernel_whose_probes_span_a_thin_stick_follows_it():
     """A stick seen under 0.02 rad from a shading point, below the probes' spacing 2 / √κ = 0.063 rad:
     every direction sample whose probe span [ω - 3σ, ω + 3σ] (σ = 1 / √κ) overlaps the stick's image
-    is translated like the stick (``flatland.probes.angle_gap_probe``): its angle tangent lies between the
+    is translated like the stick (``flatland.reparam.probes.angle_gap_probe``): its angle tangent lies
+    between the
     rates -h / (x² + h²) of the stick's two ends."""
     x0, height, angle = 0.3, 1.0, 0.02
     w = angle * (1.0 + x0**2)  # the stick's length for that angle at x0 (dφ/dx = 1 / (1 + x²) at height 1)

@@ -20,14 +20,14 @@ from flatland.core.dual import Dual, detach, tangent, variable
 from flatland.core.image import summarize_batches
 from flatland.core.rng import Draws
 from sphere3d import closed_form as cf
-from sphere3d.camera_kernel import KAPPA_FILM
 from sphere3d.film import FilmTransform
 from sphere3d.integrator import Identity, Shading
-from sphere3d.methods.reparam import ReparamTransforms
+from sphere3d.reparam.default import ReparamTransforms
+from sphere3d.reparam.film_kernel import KAPPA_FILM
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import GAUSSIAN_RADIUS, sample_cosine_hemisphere, sample_vmf
 from sphere3d.scene import load_scene
-from sphere3d.state import euler_matrix
+from sphere3d.state import build_state, euler_matrix
 from sphere3d.vector import norm
 
 SKY = 1.5
@@ -152,7 +152,7 @@ def footprint_rays(state):
 def regions(name):
     """Boolean masks (height, width) of the regions of ``test_hard_shadow``'s module docstring."""
     scene = load_scene(name)
-    state = scene.state()
+    state = build_state(scene)
     cam = state.camera
     ox, oy, d = footprint_rays(state)
     origin = np.array(scene.camera.position)
@@ -195,10 +195,10 @@ def rotation_loss(vertices, param, n, seed, **options):
     q(ω) = A(κ) cos ω / π is ω's density ($A = \coth κ - 1/κ$, the mean cosine of the vMF; the
     triangle is far above the horizon). Gauss–Legendre nodes along each edge within 8 σ of ω's foot.
     """
-    options = {"kappa": 1000.0, "probes": 4, "spread": 3.0, "refine": 3, **options}  # reparam's defaults
+    options = {"kappa": 1000.0, "probes": 7, "spread": 3.0, "refine": 3, **options}  # reparam's defaults
     kappa = options["kappa"]
     scene = load_scene(cf.sky_triangle_scene(vertices))
-    state = scene.state(param, variable(0.0))
+    state = build_state(scene, param, variable(0.0))
     v, vd = np.asarray(detach(state.triangles))[0], np.asarray(tangent(state.triangles))[0]
     _, exact = cf.occluded_sky_irradiance(scene, ORIGIN, UP, param)
     draws = Draws.of(seed, np.arange(n))

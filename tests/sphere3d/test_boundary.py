@@ -35,10 +35,11 @@ from flatland.core.image import summarize_batches
 from flatland.core.stats import normal_quantile, sidak
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form
-from sphere3d.camera_edges import camera_edge_term
-from sphere3d.edges import mesh_edges
+from sphere3d.boundary.camera import camera_edge_term
+from sphere3d.boundary.edges import mesh_edges
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.sampling import filter_value
+from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
 from tests.sphere3d.helpers import (
@@ -125,7 +126,7 @@ def _triangle_pixel_derivatives(param: str, nodes: int = 4000) -> np.ndarray:
 
 
 def test01_edges_of_the_builtin_meshes():
-    state = s3.load_scene("shadow").state()
+    state = build_state(s3.load_scene("shadow"))
     edges = mesh_edges(state.triangles, state.shape_of)
     shape = state.shape_of[edges.face]
     floor, box, light = (shape == i for i in range(3))
@@ -147,12 +148,12 @@ def test02_non_manifold_and_unwelded_meshes_and_degenerate_triangles():
     is accepted and gives finite results (its normal is a normalized nonzero cross product)."""
     fin = [[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-0.5, 0.8, 0.5], [-0.5, -0.8, 0.5]]
     faces = [[0, 1, 2], [1, 0, 3], [0, 1, 4]]
-    state = s3.load_scene(_black_triangle(fin, faces)).state()
+    state = build_state(s3.load_scene(_black_triangle(fin, faces)))
     edges = mesh_edges(state.triangles, state.shape_of)
     assert len(edges) == 7 and np.sum(edges.count == 3) == 1
     assert edges.always[edges.count == 3].all() and edges.other[edges.count == 3] == -1
     split = np.array([*LOCAL.tolist(), LOCAL[0].tolist(), [0.6, 0.0, 0.4]])
-    two = s3.load_scene(_black_triangle(split, [(0, 1, 2), (3, 2, 4)])).state()
+    two = build_state(s3.load_scene(_black_triangle(split, [(0, 1, 2), (3, 2, 4)])))
     welded = mesh_edges(two.triangles, two.shape_of)
     assert len(welded) == 5 and np.sum(welded.count == 2) == 1
     # the fin renders: finite, and its film-summed derivative agrees with finite differences. The film
@@ -347,9 +348,9 @@ def test08_hard_shadow_smooth_creases_add_nothing_and_regions_match_the_referenc
     """
     scene = s3.load_scene("hard_shadow")
     masks = regions("hard_shadow")
-    plain = scene.state("occluder.translate.x", 0.0)
+    plain = build_state(scene, "occluder.translate.x", 0.0)
     edges = mesh_edges(plain.triangles, plain.shape_of)
-    state = scene.state("occluder.translate.x", variable(0.0))
+    state = build_state(scene, "occluder.translate.x", variable(0.0))
     crease_only = camera_edge_term(state, plain, edges, seed=3, batch=0, points_per_pixel=16.0)
     assert np.all(crease_only[masks["occluder"]] == 0.0)
 
@@ -394,7 +395,7 @@ def _shaded_light_exact(theta: float) -> float:
 
 def test09_a_black_triangle_shading_a_light_under_a_black_sky_matches_lambert():
     """Secondary edges clipped to the light's image: under a black sky the triangle's arcs count only
-    where they cross the light's spherical image (:func:`sphere3d.shading_edges._clip_to_emitters`),
+    where they cross the light's spherical image (:func:`sphere3d.boundary.shading._clip_to_emitters`),
     and the light's own border does not move (culled). Exact derivative: central differences
     (h = 1e-5) of the closed form above, whose truncation error (~1e-9) is far below the stderr.
     Measured (2^16 samples): z 1.55 here; the mean of 8 other seeds z 0.3, and with a 1e-9 sky
@@ -416,7 +417,7 @@ def _crease_pixels(name: str) -> np.ndarray:
     """Pixels whose filter footprint (the grid of tests/sphere3d/helpers.py, footprint_rays) meets faces with
     different normals: on the cube, the images of its creases and of its silhouette."""
     scene = s3.load_scene(name)
-    state = scene.state()
+    state = build_state(scene)
     cam = state.camera
     _, _, d = footprint_rays(state)
     hits = state.tracer.intersect(np.array(scene.camera.position), d)

@@ -1,4 +1,4 @@
-"""The film kernel of the pixel integral (:mod:`sphere3d.camera_kernel`), piece by piece.
+"""The film kernel of the pixel integral (:mod:`sphere3d.reparam.film_kernel`), piece by piece.
 
 The snap that moves a bisected probe hit onto its triangle's edge or corner, the antithetic
 pair of kernel centres and the option's checks; the kernel's effect on the derivative is
@@ -14,23 +14,23 @@ from flatland.core.dual import detach, tangent, variable
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form as cf
-from sphere3d.camera_kernel import (
+from sphere3d.reparam.film_kernel import (
     KAPPA_FILM,
     _film_hull,
     _reaching_motion,
     check_kappa_film,
-    film_probes,
     film_transform,
     silhouette_snap,
 )
-from sphere3d.probes import ring_offsets
+from sphere3d.reparam.probes import ring_offsets
 from sphere3d.scene import load_scene
+from sphere3d.state import build_state
 from sphere3d.tracing import attached_points
 from sphere3d.vector import normalize
 
 
 def _state(param="tri.translate.x"):
-    return load_scene(cf.pinhole_triangle_scene(4, 8)).state(param, variable(0.0))
+    return build_state(load_scene(cf.pinhole_triangle_scene(4, 8)), param, variable(0.0))
 
 
 def test01_the_snap_moves_a_bisected_hit_onto_the_edge_or_its_corner_and_names_their_lines():
@@ -61,7 +61,7 @@ def test02_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_tr
     n = 400
     rng = np.random.default_rng(3)
     x, y = rng.uniform(2.0, 6.0, n), rng.uniform(2.0, 6.0, n)
-    film = film_transform(state, x, y, Draws.of(5, np.arange(n)), KAPPA_FILM, 4, 3.0, 3)
+    film = film_transform(state, x, y, Draws.of(5, np.arange(n)), KAPPA_FILM, 7, 3.0, 3)
     first, second = film.centres
     np.testing.assert_allclose(first + second, 2.0 * np.stack([x, y], axis=-1), atol=1e-12)
     assert len(film.rotations) == 2 and film.kappa == KAPPA_FILM
@@ -71,8 +71,7 @@ def test02_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_tr
         assert 0 < moving.sum() < n and np.all(rotation.active[moving])
 
 
-def test03_probe_counts_and_the_options_checks():
-    assert [film_probes(p) for p in (1, 2, 4, 8)] == [1, 3, 7, 15]
+def test03_the_options_checks():
     assert check_kappa_film("kappa_film", KAPPA_FILM) == 2.0 / 0.4**2  # σ = 0.4 px / √2, the same expression
     assert check_kappa_film("kappa_film", 3) == 3.0
     for bad, message in [(0.0, "must be > 0"), (1e13, r"must be <= 1e\+12"), (None, "kappa_film")]:
@@ -83,10 +82,10 @@ def test03_probe_counts_and_the_options_checks():
 
 @pytest.mark.parametrize("scene", ["hard_shadow", "hard_shadow_cube"])
 def test04_rings_skipped_by_the_film_hull_cannot_see_the_moving_occluder(scene):
-    """:func:`sphere3d.camera_kernel._reaching_motion` is conservative: of 20000 film centres, every one
+    """:func:`sphere3d.reparam.film_kernel._reaching_motion` is conservative: of 20000 film centres, every one
     whose centre or any of 64 points on its ring (radius 1.5 px) sees a moving triangle is kept; and
     the hull rules out a share of what its box keeps (else it would be pointless)."""
-    state = load_scene(scene).state("occluder.translate.x", variable(0.0))
+    state = build_state(load_scene(scene), "occluder.translate.x", variable(0.0))
     cam = state.camera
     moving = np.any(np.asarray(tangent(state.triangles)) != 0.0, axis=(1, 2))
     rng = np.random.default_rng(4)

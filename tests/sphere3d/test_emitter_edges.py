@@ -1,4 +1,4 @@
-"""The boundary term of the emitters' sharp edges (:mod:`sphere3d.emitter_edges`), against closed forms.
+"""The boundary term of the emitters' sharp edges (:mod:`sphere3d.boundary.emitters`), against closed forms.
 
 A point at the origin (normal +z) under the 0.6 × 0.4 rectangle light of
 ``test_closed_forms`` (emission 5, facing -z at height 1.5, no fade). Nothing in the
@@ -28,7 +28,7 @@ import numpy as np
 import sphere3d as s3
 from flatland.core.dual import Dual, tangent, variable
 from flatland.core.stats import normal_quantile
-from sphere3d.emitter_edges import edge_table
+from sphere3d.boundary.emitters import edge_table
 from sphere3d.integrator import Identity
 from sphere3d.rotation import Rotation
 from sphere3d.scene import load_scene

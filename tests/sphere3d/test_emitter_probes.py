@@ -1,4 +1,5 @@
-"""reparam's emitter rotation (:mod:`sphere3d.emitter_probes`) at single ground points of the penumbra.
+"""reparam's emitter rotation (:mod:`sphere3d.reparam.emitter_probes`) at single ground points of the
+penumbra.
 
 At a fixed point and normal of the ``hard_shadow`` scenes (d/d ``occluder.translate.x``,
 :func:`sphere3d.irradiance`) the ``boundary`` method is unbiased and, with the same seed,
@@ -9,7 +10,7 @@ strategy followed the mean occluded hit of 4 area probes, and its derivative was
 -45 % (sphere, x = -0.3: no probe saw the occluder, the identity dragged its shadow
 edge) to +57 % (cube, x = -0.05: the mean hit nearer the point than the silhouette).
 The edge points (sphere x = 0.13, 1.12; cube x = -0.43, 1.3) were off by +20 %, -34 %,
--19 %, -49 % (seed 11) before the aimed probes (:data:`sphere3d.emitter_probes.AIM`), and
+-19 %, -49 % (seed 11) before the aimed probes (:data:`sphere3d.reparam.emitter_probes.AIM`), and
 test01 failed there: the thin part of the light that the shadow edge cuts off was shorter
 along the light's border than the edge probes' spacing (scan: +16 %, -36 %, -23 %, -47 %).
 
@@ -26,9 +27,10 @@ import pytest
 import sphere3d as s3
 from flatland.core.dual import detach, variable
 from flatland.core.stats import normal_quantile, sidak
-from sphere3d.emitter_probes import _aimed_points
-from sphere3d.penumbra import may_see_motion
+from sphere3d.reparam.emitter_probes import _aimed_points
+from sphere3d.reparam.penumbra import may_see_motion
 from sphere3d.sampling import sample_mesh
+from sphere3d.state import build_state
 
 PARAM = "occluder.translate.x"
 N = 16384
@@ -36,7 +38,7 @@ BOUND = 0.05
 """Documented |reparam / boundary - 1| at these points (measured -3.6 % to +0.9 %, seeds 11-12):
 the cosine strategy's loss near the light's edge (its rotation follows the occluder and drags
 the light's edge; up to 3.5 % at x = 0.1) and the silhouette's motion away from the followed
-point (:mod:`sphere3d.emitter_probes`, Bias). The edge points at seed 11: sphere x = 0.13,
+point (:mod:`sphere3d.reparam.emitter_probes`, Bias). The edge points at seed 11: sphere x = 0.13,
 1.12: +1.7 %, +3.1 %; cube x = -0.43: +8.9 ± 2.6 % (the scan: +4.5 ± 0.9 %, the cosine
 strategy's excess at the outer lit edge), x = 1.3: +3.3 ± 2.9 %."""
 POINTS = [
@@ -54,7 +56,7 @@ POINTS = [
 CUBE_CORNER = ("hard_shadow_cube", -0.05)
 """Where the cube's shadow edge is two edges at different depths: +6.2 % / +7.2 % (seeds 12 / 11)
 with 8 probes on the light's edges, one rotation following one of them; with 4
-(:data:`sphere3d.emitter_probes.BOUNDARY`) +0.5 ± 0.4 % in the scan, tested below 2 %."""
+(:data:`sphere3d.reparam.emitter_probes.BOUNDARY`) +0.5 ± 0.4 % in the scan, tested below 2 %."""
 Q = normal_quantile(1.0 - sidak(1e-3, len(POINTS) + 1))
 N_BIAS = 65536
 BIASES = [
@@ -68,7 +70,7 @@ BIASES = [
     ("hard_shadow_cube", 0.88, -0.052, -0.026),
 ]
 """(scene, x, lo, hi): the relative bias reparam / boundary - 1 at (x, -0.1, 0) as measured by the
-scan of :mod:`sphere3d.emitter_probes` (Bias; seeds 1-4 × 32768, the mean ± 3 standard errors)."""
+scan of :mod:`sphere3d.reparam.emitter_probes` (Bias; seeds 1-4 × 32768, the mean ± 3 standard errors)."""
 Q_BIAS = normal_quantile(1.0 - sidak(1e-3, len(BIASES)))
 
 
@@ -92,7 +94,7 @@ def test02_four_edge_probes_keep_the_cube_corner():
 
 @pytest.mark.parametrize(("scene", "x", "lo", "hi"), BIASES)
 def test03_the_remaining_biases_keep_their_documented_size(scene, x, lo, hi):
-    """The points of the scan still biased (:mod:`sphere3d.emitter_probes`, Bias), each asserted
+    """The points of the scan still biased (:mod:`sphere3d.reparam.emitter_probes`, Bias), each asserted
     inside its measured interval widened by Q_BIAS standard errors (Šidák over the points at
     1e-3) and away from 0 by as much, so that a fix fails here and prompts an update:
 
@@ -122,11 +124,11 @@ def test03_the_remaining_biases_keep_their_documented_size(scene, x, lo, hi):
 
 @pytest.mark.parametrize("scene", ["hard_shadow", "hard_shadow_cube"])
 def test04_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the_light(scene):
-    """The cull of :func:`sphere3d.penumbra.may_see_motion` is conservative: every ground or
+    """The cull of :func:`sphere3d.reparam.penumbra.may_see_motion` is conservative: every ground or
     occluder point from which one of 64 rays to the light meets the moving occluder is kept,
     and the cull skips a good share of the ground (else it would be pointless)."""
     loaded = s3.load_scene(scene)
-    state = loaded.state(PARAM, variable(0.0))
+    state = build_state(loaded, PARAM, variable(0.0))
     rng = np.random.default_rng(5)
     x = np.column_stack([rng.uniform(-2.5, 2.5, 4000), rng.uniform(-2.5, 2.5, 4000), np.zeros(4000)])
     occluder = np.asarray(detach(state.triangles))[state.shape_of == loaded.shape_index("occluder")]
@@ -144,13 +146,13 @@ def test04_points_skipped_without_probes_cannot_see_the_occluder_in_front_of_the
 
 
 def test05_aimed_probes_point_where_the_light_is_first_covered():
-    """:func:`sphere3d.emitter_probes._aimed_points` on ``hard_shadow`` (the occluder's bounding
+    """:func:`sphere3d.reparam.emitter_probes._aimed_points` on ``hard_shadow`` (the occluder's bounding
     sphere is centred on the icosphere's centre (0.1, 0, 0.8)): from (0.3, -0.2, 0) the axis meets
     the light inside, at (-0.325, 0.425, 2.5) (2.5 / 0.8 times (-0.2, 0.2, 0.8) on), the nearest
     point; from the outer lit edge (-0.34, -0.1, 0), where the sphere hides 0.13 % of the light and
     the 12 other probes mostly miss it, the nearest point on the border is hidden; from (2, 2, 0) the
     light lies outside the occluder's bounding cone and the point gets no aimed ray."""
-    state = s3.load_scene("hard_shadow").state(PARAM, variable(0.0))
+    state = build_state(s3.load_scene("hard_shadow"), PARAM, variable(0.0))
     x = np.array([[0.3, -0.2, 0.0], [-0.34, -0.1, 0.0], [2.0, 2.0, 0.0]])
     points, worth = _aimed_points(state, x, np.zeros(3, dtype=bool), 2)
     assert np.allclose(points[0, 0], [-0.325, 0.425, 2.5], atol=1e-9)

@@ -26,7 +26,7 @@ from flatland.core.dual import Dual
 from flatland.core.stats import sidak
 from flatland.core.validate import ValidationError
 from sphere3d import closed_form as cf
-from sphere3d import tasks
+from sphere3d import execution, tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.tasks import ImageTask
 from tests.sphere3d.helpers import FollowPlane, over_batches
@@ -124,7 +124,7 @@ def test06_the_image_does_not_depend_on_chunks_or_threads(monkeypatch):
     task = _task(16, 8)
     whole = GRADIENT_METHODS.run("reparam", task)
     monkeypatch.setattr(tasks, "CHUNK", 16 * 5)  # 5 pixels per chunk: chunks end mid-row
-    monkeypatch.setattr(tasks, "WORKERS", 1)
+    monkeypatch.setattr(execution, "WORKERS", 1)
     parts = GRADIENT_METHODS.run("reparam", task)
     assert np.array_equal(whole.value, parts.value) and np.array_equal(whole.derivative, parts.derivative)
 

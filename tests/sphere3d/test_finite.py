@@ -15,8 +15,8 @@ import pytest
 
 import sphere3d as s3
 from flatland.core.validate import ValidationError
-from sphere3d.camera_kernel import KAPPA_FILM_MAX
 from sphere3d.methods.reparam import KAPPA_MAX
+from sphere3d.reparam.film_kernel import KAPPA_FILM_MAX
 from sphere3d.state import COORD_MAX
 
 OPTIONS = [

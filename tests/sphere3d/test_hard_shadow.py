@@ -36,10 +36,13 @@ import pytest
 from scipy import stats
 
 import sphere3d as s3
+from flatland.core.dual import variable
 from flatland.core.stats import sidak
 from sphere3d import shapes
+from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.sampling import FILTER_STD, GAUSSIAN_SIGMA
 from sphere3d.scene import load_scene
+from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
 from tests.sphere3d.helpers import REGIONS, over_batches, regions
@@ -76,7 +79,7 @@ def test01_scenes_are_the_issue_specification():
         assert ground.albedo == 0.5 and occ.albedo == 0.5 and occ.translate == (0.1, 0.0, 0.8)
         assert light.geometry == (("size", (1.0, 1.0)),) and light.translate == (-0.4, 0.2, 2.5)
         assert (light.emission, light.fade, light.albedo) == (20.0, 0.0, 0.0)
-        state = scene.state()
+        state = build_state(scene)
         lit = state.triangles[state.shape_of == scene.shape_index("light")]
         np.testing.assert_allclose(face_normals(lit), [[0.0, 0.0, -1.0]] * 2, atol=1e-15)  # faces -z
         np.testing.assert_allclose(lit.reshape(-1, 3)[:, 2], 2.5)
@@ -87,7 +90,7 @@ def test01_scenes_are_the_issue_specification():
     # the cube: side 0.5, rotated 30° about z, then 20° about x (R = Rx(20°) Rz(30°)), centre (0.1, 0, 0.8)
     box = cube.shapes[cube.shape_index("occluder")]
     expected = shapes.box(0.5, 0.5, 0.5).vertices @ (_axis(0, 20.0) @ _axis(2, 30.0)).T + [0.1, 0.0, 0.8]
-    state = cube.state()
+    state = build_state(cube)
     world = state.triangles[state.shape_of == cube.shape_index("occluder")]
     np.testing.assert_allclose(world, expected[box.mesh.faces], atol=1e-15)
 
@@ -219,11 +222,11 @@ REPARAM = {
     # the docstring's table is this measurement, seeds 1-8, with the default, splatted film (history:
     # the cube's silhouette 0.961 ± 0.011 before film_one_plane, 0.993 ± 0.010 with it; the penumbra
     # 0.984 -> 0.990 and 1.029 -> 0.998 with the emitter rotation on the silhouette,
-    # sphere3d.emitter_probes; with the per-pixel film the penumbra 0.990 ± 0.003 / 0.998 ± 0.003,
+    # sphere3d.reparam.emitter_probes; with the per-pixel film the penumbra 0.990 ± 0.003 / 0.998 ± 0.003,
     # the silhouette 0.981 ± 0.014 / 0.993 ± 0.010; the silhouette 0.970 ± 0.008 / 0.977 ± 0.005 before
     # the film kernels followed the junctions of the silhouette and the ground's far edge,
-    # sphere3d.junctions; the penumbra 0.989 / 0.998 before the aimed emitter probes, 0.991 / 1.000
-    # with 8 probes on the light's edges instead of 4, sphere3d.emitter_probes.BOUNDARY)
+    # sphere3d.reparam.junctions; the penumbra 0.989 / 0.998 before the aimed emitter probes, 0.991 / 1.000
+    # with 8 probes on the light's edges instead of 4, sphere3d.reparam.emitter_probes.BOUNDARY)
     "hard_shadow": {"penumbra": (0.997, 0.003), "silhouette": (0.996, 0.005)},
     "hard_shadow_cube": {"penumbra": (0.997, 0.003), "silhouette": (0.994, 0.005)},
 }
@@ -231,9 +234,9 @@ REPARAM = {
 REPARAM_SPP = 128
 PENUMBRA_TOLERANCE = 0.05
 """Largest |kept - 1| in the penumbra: the soft-shadow term of the light's sharp edge is there
-(:mod:`sphere3d.emitter_edges`; without it 3 % was kept); what remains (-1 % sphere, -0.2 % cube)
+(:mod:`sphere3d.boundary.emitters`; without it 3 % was kept); what remains (-1 % sphere, -0.2 % cube)
 is mostly the cosine strategy's loss near the light's edge, point by point -1 to -3.5 %, and the
-cube's two shadow edges at different depths (:mod:`sphere3d.emitter_probes`, Bias)."""
+cube's two shadow edges at different depths (:mod:`sphere3d.reparam.emitter_probes`, Bias)."""
 
 
 @pytest.mark.parametrize("name", SCENES)
@@ -244,7 +247,7 @@ def test04_reparam_keeps_the_penumbra_and_its_documented_fractions(name, masks):
     # the documented fraction (8 seeds, standard error 0.003) lies within it by more than the Šidák
     # quantile of its error, and this estimate agrees with it (3 % was kept before the emitter-edge
     # term); the silhouette keeps all but 0.3-0.6 % (where it crosses the ground's far edge the film
-    # kernels follow the junction, sphere3d.junctions: test06).
+    # kernels follow the junction, sphere3d.reparam.junctions: test06).
     # One 128-spp estimate (se 0.009) is too noisy to carry the 5 % bound alone (seed 11 gave the
     # cube 1.055 with the former emitter rotation, 2.8 of its standard errors above its 1.029).
     # The estimate's standard error comes from its 16 batches (kept_fraction_of_batches), hence
@@ -262,7 +265,7 @@ def test04_reparam_keeps_the_penumbra_and_its_documented_fractions(name, masks):
 
 def test05_the_identity_on_one_plane_keeps_the_cube_unbiased_and_leaves_the_sphere_alone(masks):
     # reparam's film_one_plane (default) takes the identity where every film probe of a kernel hits one
-    # plane of a flat-shaded shape (sphere3d.camera_kernel, Noise): on the cube's faces the image
+    # plane of a flat-shaded shape (sphere3d.reparam.film_kernel, Noise): on the cube's faces the image
     # gradient then comes from the shading points' motion instead of the filter weight's derivative.
     # Any rotation is a change of variables where the radiance is continuous, so the occluder's
     # pixels (every footprint point on the cube) and the silhouette keep what they kept without it.
@@ -276,7 +279,7 @@ def test05_the_identity_on_one_plane_keeps_the_cube_unbiased_and_leaves_the_sphe
     ref = _reference("hard_shadow_cube")
     task = ImageTask(load_scene("hard_shadow_cube"), PARAM, 64, 12, 16)
     images = {
-        plane: s3.GRADIENT_METHODS.run("reparam", task, film_one_plane=plane).derivative
+        plane: task.evaluate(variable(0.0), ReparamTransforms(film_one_plane=plane)).derivative
         for plane in (True, False)
     }
     q = sidak_quantile(2, 15)
@@ -287,17 +290,15 @@ def test05_the_identity_on_one_plane_keeps_the_cube_unbiased_and_leaves_the_sphe
         )
         print(f"{key}: k1 - k0 = {diff:+.4f} +- {se:.4f}, |t| {abs(diff) / se:.2f} < {q:.2f}")
         assert abs(diff) < q * se, (key, diff, se)
-    sphere = [
-        s3.render_gradient("hard_shadow", PARAM, method="reparam", spp=4, seed=3, film_one_plane=p)
-        for p in (True, False)
-    ]
+    small = ImageTask(load_scene("hard_shadow"), PARAM, 4, 3, 4)
+    sphere = [small.evaluate(variable(0.0), ReparamTransforms(film_one_plane=p)) for p in (True, False)]
     assert np.array_equal(sphere[0].derivative, sphere[1].derivative)
 
 
 @pytest.mark.slow
 def test06_following_the_junctions_keeps_the_silhouette_term(masks):
     # Where the occluder's silhouette crosses the ground's far edge, a film kernel that follows the
-    # silhouette drags the static edge (sphere3d.junctions); following their crossing keeps the term.
+    # silhouette drags the static edge (sphere3d.reparam.junctions); following their crossing keeps the term.
     # Statistic: per batch, the paired difference of the silhouette's kept fractions with and without
     # junctions (same seed, same samples: they differ only in the few kernels at a junction), mean and
     # standard error from the 16 batches, Student's t at 15 dof: significantly positive (one-sided,
@@ -307,7 +308,9 @@ def test06_following_the_junctions_keeps_the_silhouette_term(masks):
     task = ImageTask(load_scene("hard_shadow"), PARAM, 512, 13, 16)
     mask = masks["hard_shadow"]["silhouette"]
     kept = {
-        j: batch_fractions(s3.GRADIENT_METHODS.run("reparam", task, film_junctions=j).derivative, ref, mask)
+        j: batch_fractions(
+            task.evaluate(variable(0.0), ReparamTransforms(film_junctions=j)).derivative, ref, mask
+        )
         for j in (True, False)
     }
     gain, se = over_batches(kept[True] - kept[False])

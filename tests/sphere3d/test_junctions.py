@@ -1,11 +1,12 @@
-"""T-junctions on the film: a moving silhouette across a static edge (:mod:`sphere3d.junctions`).
+"""T-junctions on the film: a moving silhouette across a static edge (:mod:`sphere3d.reparam.junctions`).
 
 The closed form of :mod:`sphere3d.closed_form.junction` (a black triangle moving in front of a
 static black triangle under the sky, :func:`~sphere3d.closed_form.junction_scene`) first checks
 itself: the clipping against a polygon computed by hand, on Duals, and the derivative against
 central differences of its own value. Then ``reparam`` against it, pixel by pixel: with the
 junctions followed (the default) every pixel lies within its Šidák-corrected Student-t interval;
-without them (``film_junctions=False``) the film kernels that follow the moving silhouette drag
+without them (``ReparamTransforms(film_junctions=False)``) the film kernels that follow the moving
+silhouette drag
 the static edge, and the share of the derivative lost is tested as a bias. Where no static edge
 crosses a moving silhouette (one triangle under the sky) the option changes nothing, bit for bit.
 """
@@ -24,7 +25,7 @@ from flatland.core.dual import Dual, detach, tangent, variable
 from flatland.core.image import summarize_batches
 from flatland.core.stats import sidak
 from sphere3d import closed_form as cf
-from sphere3d.methods import GRADIENT_METHODS
+from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.tasks import ImageTask
 
 ALPHA = 1e-3
@@ -33,10 +34,10 @@ MOTIONS = {"sideways": "tri.translate.x", "depth": "tri.translate.z"}
 SPP = 2048
 LOST_WITHOUT = {"sideways": (4.20, 0.33), "depth": (13.17, 0.35)}
 """Share of the derivative lost without junctions, % ± one standard error (16384 spp, seed 11, 16
-batches): the documented bias of :mod:`sphere3d.junctions`."""
+batches): the documented bias of :mod:`sphere3d.reparam.junctions`."""
 LOST_WITH = {"sideways": (0.82, 0.29), "depth": (1.40, 0.33)}
 """The same with junctions: what the film kernel loses on a 6 px triangle anyway (its top corner,
-:mod:`sphere3d.camera_kernel`, Bias: 0.9-1.8 % for 4-8 px)."""
+:mod:`sphere3d.reparam.film_kernel`, Bias: 0.9-1.8 % for 4-8 px)."""
 
 
 def test01_clipping_on_duals_gives_the_area_and_its_derivative():
@@ -76,7 +77,7 @@ def test02_the_closed_form_derivative_matches_central_differences_of_its_value(m
 def _render(motion, junctions, spp=SPP, seed=1):
     scene = s3.load_scene(cf.junction_scene())
     task = ImageTask(scene, MOTIONS[motion], spp, seed, BATCHES)
-    return GRADIENT_METHODS.run("reparam", task, film_junctions=junctions).derivative
+    return task.evaluate(variable(0.0), ReparamTransforms(film_junctions=junctions)).derivative
 
 
 @pytest.mark.parametrize("motion", list(MOTIONS))
@@ -115,10 +116,7 @@ def test04_without_junctions_the_static_edge_is_dragged_a_documented_bias(motion
 
 def test05_without_a_static_edge_the_junctions_change_nothing():
     # one triangle under the sky: no ring sees two static things, so the images are the same, bit for bit
-    scene = cf.pinhole_triangle_scene(6.0)
-    images = [
-        s3.render_gradient(scene, "tri.translate.x", method="reparam", spp=16, seed=5, film_junctions=j)
-        for j in (True, False)
-    ]
+    task = ImageTask(s3.load_scene(cf.pinhole_triangle_scene(6.0)), "tri.translate.x", 16, 5, 16)
+    images = [task.evaluate(variable(0.0), ReparamTransforms(film_junctions=j)) for j in (True, False)]
     assert np.array_equal(images[0].derivative, images[1].derivative)
     assert np.array_equal(images[0].value, images[1].value)

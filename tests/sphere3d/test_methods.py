@@ -14,8 +14,8 @@ from scipy import stats
 
 import sphere3d as s3
 from flatland.core.validate import ValidationError
-from sphere3d import tasks
-from sphere3d.camera_kernel import KAPPA_FILM
+from sphere3d import execution, tasks
+from sphere3d.reparam.film_kernel import KAPPA_FILM
 from tests.sphere3d.helpers import over_batches
 
 
@@ -35,15 +35,14 @@ def test01_api_exports_and_methods():
     g = s3.render_gradient(_small("shadow"), "occluder.translate.x", spp=8, seed=3, kappa=300.0)
     assert isinstance(g, s3.GradientImage) and g.derivative.shape == (12, 12)
     assert dict(g.options) == {
+        "variant": "default",
         "kappa": 300.0,
         "kappa_film": KAPPA_FILM,
-        "probes": 4,
+        "probes": None,
+        "emitter_probes": 4,
         "spread": 3.0,
         "refine": 3,
         "paired": False,
-        "emitter_edges": True,
-        "film_one_plane": True,
-        "film_junctions": True,
     }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
@@ -82,7 +81,7 @@ def test03_reparam_primal_is_bit_identical_to_naive(scene, param):
 def test04_same_seed_same_image_whatever_the_threads(monkeypatch):
     d = _small("two_occluders")
     first = s3.render_gradient(d, "left.translate.x", spp=16, seed=9)
-    monkeypatch.setattr(tasks, "WORKERS", 1)
+    monkeypatch.setattr(execution, "WORKERS", 1)
     again = s3.render_gradient(d, "left.translate.x", spp=16, seed=9)
     assert np.array_equal(first.derivative, again.derivative) and np.array_equal(first.value, again.value)
     other = s3.render_gradient(d, "left.translate.x", spp=16, seed=10)
@@ -238,12 +237,12 @@ def test11_reparam_refine_is_a_checked_option_that_moves_only_the_derivative():
 def test12_the_callers_floating_point_policy_holds_in_the_worker_threads(monkeypatch):
     # np.errstate is a context variable: a thread that does not run in the caller's context
     # would warn where the caller asked for silence, or stay silent where it asked for an error
-    monkeypatch.setattr(tasks, "WORKERS", 2)
+    monkeypatch.setattr(execution, "WORKERS", 2)
 
     def divide(i: int) -> float:
         return float(np.float64(i) / np.float64(0.0))
 
     with np.errstate(divide="raise"), pytest.raises(FloatingPointError, match="divide by zero"):
-        tasks._map_threads(divide, range(1, 4))
+        execution._map_threads(divide, range(1, 4))
     with np.errstate(divide="ignore", invalid="ignore"):
-        assert tasks._map_threads(divide, range(1, 3)) == [np.inf, np.inf]
+        assert execution._map_threads(divide, range(1, 3)) == [np.inf, np.inf]

@@ -1,4 +1,4 @@
-"""The emitter probes' cull (:mod:`sphere3d.penumbra`): the umbra and penumbra volume, exactly.
+"""The emitter probes' cull (:mod:`sphere3d.reparam.penumbra`): the umbra and penumbra volume, exactly.
 
 A unit square light at z = 1 and a moving square occluder [-a, a]² at z = 0.5, both parallel:
 the segment from (x, y, z) to a light point (u, v, 1) crosses z = 0.5 at
@@ -15,7 +15,8 @@ import numpy as np
 
 import sphere3d as s3
 from flatland.core.dual import variable
-from sphere3d.penumbra import cones_overlap, may_see_motion, separating_planes
+from sphere3d.reparam.penumbra import cones_overlap, may_see_motion, separating_planes
+from sphere3d.state import build_state
 
 A = 0.15
 BAND = 0.01
@@ -38,7 +39,7 @@ def _scene(occluder: dict | None = None) -> dict:
 
 
 def _state(occluder: dict | None = None):
-    return s3.load_scene(_scene(occluder)).state("occluder.translate.x", variable(0.0))
+    return build_state(s3.load_scene(_scene(occluder)), "occluder.translate.x", variable(0.0))
 
 
 def _half_width(z: np.ndarray) -> np.ndarray:

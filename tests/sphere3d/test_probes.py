@@ -15,17 +15,17 @@ import pytest
 
 from flatland.core.dual import Dual, detach, tangent, variable
 from sphere3d import closed_form as cf
-from sphere3d.probes import (
-    mean_point_direction,
-    pair_index,
+from sphere3d.reparam.paper import mean_point_direction, pair_index
+from sphere3d.reparam.probes import (
     ring_directions,
     ring_offsets,
     select_points,
     vmf_spread_angle,
 )
+from sphere3d.reparam.snaps import line_spin
 from sphere3d.rotation import Rotation
 from sphere3d.scene import load_scene
-from sphere3d.snaps import line_spin
+from sphere3d.state import build_state
 from sphere3d.tracing import attached_points
 from sphere3d.vector import cross, normalize
 
@@ -58,7 +58,7 @@ WALL, SQUARE, LEFT, RIGHT = 0, 1, 2, 3
 
 def _select(directions, param="square.translate.x"):
     scene = load_scene(SCENE)
-    state = scene.state(param, variable(0.0))
+    state = build_state(scene, param, variable(0.0))
     d = normalize(np.asarray(directions, dtype=float))[None]
     hits = state.tracer.intersect(np.zeros(3), d)
     point, found = select_points(state, Dual(np.zeros((1, 3))), np.zeros(3), d, hits)
@@ -110,7 +110,7 @@ def test06_parallel_surfaces_that_do_not_occlude_each_other_give_p0():
         {"name": "west", "type": "rectangle", "size": [2, 2], "translate": [-1, 0, -2]},
         {"name": "east", "type": "rectangle", "size": [2, 2], "translate": [1, 0, -2]},
     ]
-    state = load_scene(dict(SCENE, shapes=halves)).state("west.translate.x", variable(0.0))
+    state = build_state(load_scene(dict(SCENE, shapes=halves)), "west.translate.x", variable(0.0))
     d = normalize(np.array([[[-0.3, 0.0, -1.0], [0.2, 0.0, -1.0]]]))
     hits = state.tracer.intersect(np.zeros(3), d)
     point, found = select_points(state, Dual(np.zeros((1, 3))), np.zeros(3), d, hits)
@@ -122,7 +122,7 @@ def test06_parallel_surfaces_that_do_not_occlude_each_other_give_p0():
 
 def test07_the_rotation_follows_the_direction_from_a_moving_origin():
     scene = load_scene(SCENE)
-    state = scene.state("square.translate.x", variable(0.0))
+    state = build_state(scene, "square.translate.x", variable(0.0))
     d = normalize(np.array([[[0.1, 0.0, -1.0], [0.3, 0.0, -1.0]]]))
     hits = state.tracer.intersect(np.zeros(3), d)
     origin = Dual(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]))  # the origin moves in y
@@ -190,12 +190,13 @@ def test10_the_ring_angle_is_defined_for_every_spread(kappa):
 
 @pytest.mark.parametrize("param", ["tri.rotate.z", "tri.rotate.x", "tri.translate.z"])
 def test11_the_spin_makes_the_rotation_follow_the_edges_great_circle(param):
-    """A rotation following a point of an edge, with the turn of :func:`~sphere3d.snaps.line_spin`, moves
+    """A rotation following a point of an edge, with the turn of :func:`~sphere3d.reparam.snaps.line_spin`,
+    moves
     the edge's great circle (unit normal m̂ ∝ V0 × V1 seen from the origin) exactly as the edge moves it:
     Ω × m̂ = dm̂/dθ; without the turn it does not (the image turns: rotations, and perspective under
     z-translation); at a corner the turn is the mean of its two edges' rates."""
     scene = load_scene(cf.sky_triangle_scene([[-0.2, -0.5, 1.0], [0.9, 0.1, 1.1], [0.1, 0.6, 0.9]]))
-    state = scene.state(param, variable(0.0))
+    state = build_state(scene, param, variable(0.0))
     tri = state.triangles[[0]]
     origin = Dual(np.zeros((1, 3)))
     point = attached_points(tri, np.array([0.3]), np.array([0.0]))  # on the edge V0 V1 (v = 0)

@@ -17,7 +17,7 @@ from flatland.core.validate import ValidationError
 from sphere3d import shapes
 from sphere3d.sampling import triangle_area
 from sphere3d.scene import list_scenes, load_scene
-from sphere3d.state import euler_matrix
+from sphere3d.state import build_state, euler_matrix
 
 
 def _area(mesh):
@@ -107,14 +107,14 @@ def test04_json_files_and_mesh_files_load(tmp_path):
     assert [len(s.mesh.faces) for s in scene.shapes[-3:]] == [2, 1, 1]
     assert scene.shapes[-3].to_dict()["path"] == str((tmp_path / "tri.obj").resolve())
     assert load_scene(scene.to_dict()) == scene
-    state = scene.state()
+    state = build_state(scene)
     np.testing.assert_allclose(state.triangles[state.shape_of == 4][0, 0], [0.0, 0.0, 1.5])
 
 
 def test05_parameters_move_what_they_name():
     scene = load_scene("shadow")
     assert "occluder.rotate.z" in scene.parameters and "camera.translate.y" in scene.parameters
-    base = scene.state()
+    base = build_state(scene)
     occ = base.shape_of == scene.shape_index("occluder")
     for param, check in [
         (
@@ -126,24 +126,24 @@ def test05_parameters_move_what_they_name():
             lambda t, v: np.testing.assert_allclose(t, v - [-0.1, 0.0, 0.9]),
         ),  # d/dθ of c + (1+θ) r
     ]:
-        s = scene.state(param, variable(0.0))
+        s = build_state(scene, param, variable(0.0))
         check(tangent(s.triangles)[occ], detach(s.triangles)[occ])
         assert np.array_equal(detach(s.triangles), base.triangles)  # θ = 0: the scene as loaded
         assert not np.any(tangent(s.triangles)[~occ])
-    rot = scene.state("occluder.rotate.z", variable(0.0))
+    rot = build_state(scene, "occluder.rotate.z", variable(0.0))
     r = euler_matrix(np.array(scene.shapes[1].rotate))
     local = (detach(rot.triangles)[occ] - [-0.1, 0.0, 0.9]) @ r  # back to object space
     # d/dγ Rz(γ) Ry Rx p = [e_z]× (R p): rotation about the shape's centre
     np.testing.assert_allclose(
         tangent(rot.triangles)[occ], np.cross([0.0, 0.0, 1.0], local @ r.T), atol=1e-12
     )
-    cam = scene.state("camera.translate.x", variable(0.0))
+    cam = build_state(scene, "camera.translate.x", variable(0.0))
     np.testing.assert_allclose(tangent(cam.camera.origin), [1.0, 0.0, 0.0])
-    assert tangent(scene.state("light.emission", variable(0.0)).emission)[2] == 1.0
-    assert tangent(scene.state("sky.emission", variable(0.0)).sky) == 1.0
-    assert tangent(scene.state("floor.albedo", variable(0.0)).albedo)[0] == 1.0
+    assert tangent(build_state(scene, "light.emission", variable(0.0)).emission)[2] == 1.0
+    assert tangent(build_state(scene, "sky.emission", variable(0.0)).sky) == 1.0
+    assert tangent(build_state(scene, "floor.albedo", variable(0.0)).albedo)[0] == 1.0
     # an emission parameter makes a dark shape an emitter (its radiance has a derivative)
-    assert scene.state("occluder.emission", variable(0.0)).emitters.size == 2 + 12  # light + occluder
+    assert build_state(scene, "occluder.emission", variable(0.0)).emitters.size == 2 + 12  # light + occluder
 
 
 BAD = [
@@ -268,7 +268,7 @@ def test08_smooth_icosphere_normals_approach_the_sphere_and_move_with_it():
     from sphere3d.tracing import intersect_triangles
 
     scene = load_scene(_smooth_sphere())
-    state = scene.state()
+    state = build_state(scene)
     origin, d, tri = _ball_hits(state)
     it = intersect_triangles(origin, d, state.triangles[tri])
     n = state.shading_normals(tri, it.b1, it.b2, it.normal)
@@ -283,19 +283,19 @@ def test08_smooth_icosphere_normals_approach_the_sphere_and_move_with_it():
     # a flat shape keeps its face normal, the very same object
     faceted = _smooth_sphere()
     faceted["shapes"][0]["smooth"] = False
-    flat = load_scene(faceted).state()
+    flat = build_state(load_scene(faceted))
     assert flat.shading_normals(tri, it.b1, it.b2, it.normal) is it.normal
     # derivative under translation and rotation: the Dual tangent against a central difference
     # with the same rays and triangles (h = 1e-6: truncation ~1e-12, rounding ~1e-10)
     h = 1e-6
     for param in ("ball.translate.x", "ball.rotate.z", "ball.rotate.x", "ball.scale"):
-        dual = scene.state(param, variable(0.0))
+        dual = build_state(scene, param, variable(0.0))
         it_d = intersect_triangles(origin, d, dual.triangles[tri])
         nd = dual.shading_normals(tri, it_d.b1, it_d.b2, it_d.normal)
         np.testing.assert_array_equal(detach(nd), n)
         fd = []
         for theta in (h, -h):
-            s = scene.state(param, theta)
+            s = build_state(scene, param, theta)
             it_s = intersect_triangles(origin, d, s.triangles[tri])
             fd.append(s.shading_normals(tri, it_s.b1, it_s.b2, it_s.normal))
         np.testing.assert_allclose(tangent(nd), (fd[0] - fd[1]) / (2 * h), atol=1e-7)
@@ -317,7 +317,7 @@ def test09_mesh_vertex_normals_from_files_inline_and_faces(tmp_path):
     np.testing.assert_allclose(
         scene.shapes[0].mesh.normals, [[0, 0.6, 0.8], [0, 0, 1], [0.6, 0, 0.8], [0, 0, 1]]
     )
-    state = scene.state()
+    state = build_state(scene)
     assert state.smooth.all()
     # at barycentrics (1/3, 1/3) of face 0: the normalized mean of its three vertex normals
     n = state.shading_normals(
@@ -333,7 +333,7 @@ def test09_mesh_vertex_normals_from_files_inline_and_faces(tmp_path):
     plain = load_scene(
         base | {"shapes": [{"name": "m", "type": "mesh", "path": str(tmp_path / "plain.obj")}]}
     )
-    assert not plain.state().smooth.any()  # smooth is off unless asked for
+    assert not build_state(plain).smooth.any()  # smooth is off unless asked for
     face = np.array([-0.5, -0.5, 1.0]) / np.sqrt(1.5)  # (v4 - v2) x (v3 - v2), the only face at v4
     np.testing.assert_allclose(plain.shapes[0].mesh.normals[3], face, rtol=1e-14)
     np.testing.assert_allclose(plain.shapes[0].mesh.normals[0], [0, 0, 1], atol=1e-15)

@@ -15,7 +15,7 @@ in an average over the image:
 - ``naive``: exactly 0 here (constant sky, black triangle: nothing moves but visibility), so its
   bias is minus the whole silhouette term;
 - ``reparam``: its measured loss of the silhouette term for small triangles, tested as a bias
-  against the numbers documented in :mod:`sphere3d.camera_kernel` (``Bias``).
+  against the numbers documented in :mod:`sphere3d.reparam.film_kernel` (``Bias``).
 
 Tests 11–15 do the same for the shading integral: the irradiance at a point under the sky with
 a black triangle above it, ``E = L (π - Φ)``, Φ by Lambert's formula (against an area quadrature;
@@ -323,7 +323,7 @@ def test09_naive_misses_the_whole_silhouette_term(size, width, motion):
     assert np.array_equal(bias, -exact) and np.abs(exact).max() > 0.1
 
 
-# reparam's share of the silhouette term lost, as documented in sphere3d.camera_kernel (Bias):
+# reparam's share of the silhouette term lost, as documented in sphere3d.reparam.film_kernel (Bias):
 # (size px, image width, motion) -> (mean, stderr) in %, `python -m benchmarks --only reparam_bias`
 # (the default, splatted film, as here)
 REPARAM_CAMERA_LOSS = {
@@ -471,7 +471,7 @@ def test14_reparam_loses_a_documented_share_of_the_shading_derivative(param, opt
 
     At the defaults (κ = 1000, 4 probes: a ring of 6) about 1 % is lost, below what 2^21 samples
     resolve (± 1 %): that row is held to its documented number only (a loss back at the 5.4 %
-    measured before the snaps of :mod:`sphere3d.snaps` shows there; test15 resolves the 1 %).
+    measured before the snaps of :mod:`sphere3d.reparam.snaps` shows there; test15 resolves the 1 %).
     With ``kappa=None`` one rotation from cosine-distributed probes serves the whole hemisphere:
     the derivative is all but lost, z > 4. Consistent with the documented number as in test10
     (Šidák over the 3 rows).
@@ -489,7 +489,7 @@ def test14_reparam_loses_a_documented_share_of_the_shading_derivative(param, opt
     assert abs(lost.mean - documented) <= q * math.hypot(lost.stderr, documented_se)
 
 
-# the share the cosine strategy's rotations lose given each kernel, as documented in sphere3d.snaps
+# the share the cosine strategy's rotations lose given each kernel, as documented in sphere3d.reparam.snaps
 # (Bias, 2^18 kernels, seed 11): parameter -> (mean, stderr) in %
 ROTATION_LOSS = {"tri.translate.z": (1.01, 0.03), "tri.rotate.x": (2.49, 0.23)}
 

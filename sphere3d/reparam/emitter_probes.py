@@ -7,7 +7,7 @@ what the probes saw:
 
 - some probes occluded, some not (the penumbra): of the closest pair of an occluded and
   a visible probe, the occluded one's hit is moved onto the silhouette between the two
-  by :data:`REFINE` bisection rays (the refinement of :func:`~sphere3d.probes.select_points`),
+  by :data:`REFINE` bisection rays (the refinement of :func:`~sphere3d.reparam.probes.select_points`),
   and that attached point is followed: the shadow edge is the occluder's silhouette, so
   the rotation holds it still where it crosses the light (Sec. 4.1: a discontinuity must
   be followed, not dragged);
@@ -16,7 +16,7 @@ what the probes saw:
   emitters, so that the samples stay attached to a moving emitter (any rotation is exact
   for a continuous integrand; this one only lowers the variance);
 - otherwise the identity. The emitters' own sharp edges are held fixed under any of these by
-  :mod:`sphere3d.emitter_edges`.
+  :mod:`sphere3d.boundary.emitters`.
 
 Near either side of a penumbra the shadow edge cuts a thin part off the light, hidden or
 visible, which reaches the light's border: the probes along the edges find it where area
@@ -124,7 +124,7 @@ a single point on the outer lit edge (sphere x = -0.34), where 63 % of the point
 +60 %.
 4 edge probes instead of 8: -8 % wall time for a 64 spp ``hard_shadow_cube`` image (0.477 to
 0.440 s, best of 6 interleaved, 2 cores), -2 % for ``hard_shadow``. Points that cannot see a moving
-occluder in front of the lights are not probed at all (:mod:`sphere3d.penumbra`).
+occluder in front of the lights are not probed at all (:mod:`sphere3d.reparam.penumbra`).
 
 Tested in ``tests/sphere3d/test_emitter_probes.py``.
 """
@@ -136,11 +136,11 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach, tangent
-from sphere3d.bisection import bisect_silhouette, closest_pair
-from sphere3d.emitter_edges import edge_points, edge_table
+from sphere3d.boundary.emitters import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, take_rows
-from sphere3d.penumbra import bounding_sphere, may_see_motion, moving_occluders
-from sphere3d.probes import direction_towards, mean_point_direction
+from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
+from sphere3d.reparam.paper import direction_towards, mean_point_direction
+from sphere3d.reparam.penumbra import bounding_sphere, may_see_motion, moving_occluders
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points, intersect_triangles
@@ -164,7 +164,8 @@ first; 0: none."""
 
 def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
     """``count`` points per row evenly spaced in arc length along the emitters' edges (random phase
-    ``u``), as :func:`~sphere3d.emitter_edges.sample_emitter_edges` places its pair; None without edges."""
+    ``u``), as :func:`~sphere3d.boundary.emitters.sample_emitter_edges` places its pair; None without
+    edges."""
     table = edge_table(state)
     if table is None or count == 0:
         return None
@@ -181,7 +182,8 @@ def _aimed_points(
     non-emitter triangle or emitter edges.
 
     The centre c is that of the moving non-emitter triangles' bounding sphere
-    (:func:`~sphere3d.penumbra.bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an edge
+    (:func:`~sphere3d.reparam.penumbra.bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an
+    edge
     $p(t) = p_0 + t e$, $t \in [0, 1]$, the cosine $a \cdot v / |v|$ with $v = p(t) - x$ has one
     critical point (its derivative's numerator is linear in t), so the extremes over the border lie
     at its vertices (each edge's start, the loops being closed) or at those critical points; the
@@ -269,7 +271,8 @@ def emitter_rotation(
     ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
     (stream ``"probes.emitter"``, keyed on each point's sample), so the primary samples are
     untouched. Points that are static, under static emitters, and whose shadow rays cannot
-    meet a moving triangle (:func:`~sphere3d.penumbra.may_see_motion`) get the identity without probes: any
+    meet a moving triangle (:func:`~sphere3d.reparam.penumbra.may_see_motion`) get the identity without
+    probes: any
     rotation the probes chose there would follow a static point, with a zero derivative.
     """
     state = shading.state

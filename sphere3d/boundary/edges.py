@@ -11,7 +11,7 @@ direct illumination those curves are images of mesh edges (Li et al. 2018,
 - **crease edges** (two non-coplanar faces): a flat-shaded face is shaded with its own
   normal, so the reflected radiance of a diffuse shape jumps across them (not on a
   smooth shape, whose interpolated vertex normals are continuous: the camera term
-  skips those, :func:`sphere3d.camera_edges.camera_candidates`).
+  skips those, :func:`sphere3d.boundary.camera.camera_candidates`).
 
 Edges are found in the scene state's world-space triangles: vertices are welded by
 exact position (the built-in shapes and loaded meshes index shared vertices, and a

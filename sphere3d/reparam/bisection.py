@@ -6,8 +6,8 @@ probe's hit onto the silhouette between it and its partner).
 shadow probes, a moving and a static film probe, two static probes that see different things) with
 the largest cosine; :func:`bisect` halves the angle between them ``refine`` times, keeping the
 inside direction's hit, by a side rule; :func:`bisect_silhouette` is the rule "the same shape,
-above the horizon". Used by :mod:`sphere3d.probes`, :mod:`sphere3d.emitter_probes` and
-:mod:`sphere3d.junctions`.
+above the horizon". Used by :mod:`sphere3d.reparam.probes`, :mod:`sphere3d.reparam.emitter_probes` and
+:mod:`sphere3d.reparam.junctions`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ __all__ = ["PAIR_ROWS", "bisect", "bisect_silhouette", "closest_pair"]
 PAIR_ROWS = 1024
 """Rows per slice of :func:`closest_pair`: the (rows, p, p) cosines of 14 probes (8 of them on the
 emitters' edges then) are 1.6 MB and stay in cache; a chunk's at once (up to 25 000 rows, 38 MB,
-above the mmap threshold of :func:`sphere3d.tasks._heap_for_temporaries`) was mapped and faulted
+above the mmap threshold of :func:`sphere3d.execution._heap_for_temporaries`) was mapped and faulted
 in anew at every call: 24 ms per call against 4 ms of arithmetic; by slices of 4096 / 1024 rows
 11 / 6 ms (the emitter probes of two 64 spp ``hard_shadow`` renders, one thread: 0.24 -> 0.06 s
 in all). The same numbers, row by row."""

@@ -1,6 +1,6 @@
 r"""Which shading points can see a moving occluder in front of the lights: the emitter probes' cull.
 
-The emitter strategy's probes (:mod:`sphere3d.emitter_probes`) are needed only at points whose
+The emitter strategy's probes (:mod:`sphere3d.reparam.emitter_probes`) are needed only at points whose
 shadow rays can meet a moving triangle: elsewhere the rotation they choose follows a static
 point and has a zero derivative. :func:`may_see_motion` rules points out by two conservative
 tests, each cheap per point:

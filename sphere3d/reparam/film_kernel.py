@@ -6,8 +6,8 @@ $g(s - c)$ of variance 1 / ``kappa_film`` ($\mathrm{pixels}^{-2}$), $∫ g(s - c
 estimator's own sample) gets a kernel centre $c \sim g(· - s)$, the reverse order of the
 paper's $ω \sim p$, $μ \sim k(·, ω)$ (theory/kernels), which keeps every evaluation at s itself
 and the primal bit-identical to ``naive``'s; around c a ring of probes
-(:func:`~sphere3d.probes.ring_offsets`, radius ``spread`` kernel standard deviations)
-chooses the point the sample's rotation follows (Sec. 4.3, :mod:`sphere3d.probes`,
+(:func:`~sphere3d.reparam.probes.ring_offsets`, radius ``spread`` kernel standard deviations)
+chooses the point the sample's rotation follows (Sec. 4.3, :mod:`sphere3d.reparam.probes`,
 with the ``refine`` bisection that moves a single probe's hit onto the silhouette between
 it and its partner). The sample is evaluated along $R·ω(s)$ with the weight
 $g(\mathrm{film}(Rω) - c) / \mathrm{detach}(g(\mathrm{film}(Rω) - c))$ (value exactly 1,
@@ -30,7 +30,7 @@ control variate of :class:`~sphere3d.tasks.ImageTask` stays exact.
 
 The default concentration is the authors' camera kernel $κ = 1 / (1 - \cos(0.4 · \mathrm{pixel\ angle}))$
 read on the film, $1 - \cos x ≈ x^2 / 2$: a Gaussian of $σ = 0.4 / \sqrt{2} ≈ 0.28$ px,
-flatland's :func:`~flatland.methods.reparam.default_kappa_film` in pixel units. The
+flatland's :func:`~flatland.reparam.default.default_kappa_film` in pixel units. The
 kernel being a fraction of a pixel wide, the probes see the silhouette next to each
 sample rather than somewhere on the pixel's footprint: two edges or a corner in one
 footprint are followed by different samples, and a silhouette a pixel or two wide is not
@@ -38,7 +38,7 @@ missed by a ring wider than itself.
 
 Where a ring sees a moving silhouette cross a static edge (the ground's far edge behind an
 occluder), the rotation follows their crossing instead of the silhouette point
-(:mod:`sphere3d.junctions`, the ``reparam`` option ``film_junctions``): one rotation, locally a
+(:mod:`sphere3d.reparam.junctions`, the ``reparam`` option ``film_junctions``): one rotation, locally a
 translation of the film, keeps both edges where a rotation following the silhouette drags the
 static one.
 
@@ -136,11 +136,11 @@ from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import FilmTransform
-from sphere3d.junctions import junction_rotation
 from sphere3d.live import all_rows, any_rows
-from sphere3d.probes import follow_probes, ring_offsets
+from sphere3d.reparam.junctions import junction_rotation
+from sphere3d.reparam.probes import follow_probes, ring_offsets
+from sphere3d.reparam.snaps import Snap, edge_snap
 from sphere3d.rotation import Rotation
-from sphere3d.snaps import Snap, edge_snap
 from sphere3d.state import SceneState, per_state
 from sphere3d.tracing import Hits, face_normals
 
@@ -148,7 +148,6 @@ __all__ = [
     "KAPPA_FILM",
     "KAPPA_FILM_MAX",
     "check_kappa_film",
-    "film_probes",
     "film_transform",
     "one_plane",
     "silhouette_snap",
@@ -160,18 +159,6 @@ kernel κ = 1 / (1 - cos(0.4 · pixel angle)) with 1 - cos x ≈ x² / 2 (Loubet
 KAPPA_FILM_MAX = 1e12
 """Largest film kernel concentration: σ = 1e-6 px, still far above the rounding of film coordinates
 (about 1e-14 px on a film of a few thousand pixels); the weight's derivative grows like √κ."""
-
-
-def film_probes(probes: int) -> int:
-    r"""Probes per film kernel, ``2 probes - 1``: the centre and twice the ring of a shading kernel.
-
-    A ring of n probes at radius r detects every straight edge within $r \cos(π/n)$ of the
-    centre, one beyond it only for some phases: with the 3 ring probes of ``probes=4``,
-    edges past $1.5 σ$ of a spread-3 ring went undetected often enough to lose 17 % of a 2 px
-    triangle's silhouette term (sideways), with 6 ($2.6 σ$) 2.4 ± 1.5 %. Camera probes are
-    traced once per camera sample, from one origin.
-    """
-    return 2 * probes - 1
 
 
 def check_kappa_film(name: str, value: Any) -> float:
@@ -213,15 +200,15 @@ def film_transform(
     kappa_film : float
         1 / variance of the Gaussian kernel, $\mathrm{pixels}^{-2}$.
     probes, spread, refine
-        As the ``reparam`` options: the centre and a ring of :func:`film_probes` ``- 1`` at
-        ``spread`` kernel standard deviations; bisection rays toward the silhouette.
+        As the ``reparam`` options: probe rays per kernel (its centre and a ring of ``probes - 1``
+        at ``spread`` kernel standard deviations); bisection rays toward the silhouette.
     plane : bool, optional
         The identity where every probe of a kernel hits one plane of a flat-shaded shape
         (:func:`one_plane`; the ``reparam`` option ``film_one_plane``, module docstring, Noise),
         while the camera stands still.
     junctions : bool, optional
         Where a ring sees a moving silhouette cross a static edge, follow their crossing
-        (:mod:`sphere3d.junctions`).
+        (:mod:`sphere3d.reparam.junctions`).
 
     Returns
     -------
@@ -241,7 +228,7 @@ def film_transform(
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)
     rows = _reaching_motion(state, centre, spread * sigma)
     if rows.size:
-        ring = centre[rows, None] + ring_offsets(spread * sigma, film_probes(probes), phase[rows])
+        ring = centre[rows, None] + ring_offsets(spread * sigma, probes, phase[rows])
         d = cam.directions(ring[..., 0], ring[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
         if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
@@ -255,7 +242,9 @@ def film_transform(
         snap = silhouette_snap(state, centre[rows], 2.0 * spread * sigma)
         o = cam.origin
         sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap)
-        if junctions:  # a moving silhouette across a static edge: follow their crossing (sphere3d.junctions)
+        if (
+            junctions
+        ):  # a moving silhouette across a static edge: follow their crossing (sphere3d.reparam.junctions)
             at, crossing = junction_rotation(
                 state, o, d, hits, moving, centre[rows], 2.0 * spread * sigma, refine
             )
@@ -372,7 +361,7 @@ def _film_hull(state: SceneState) -> tuple | None:
 def silhouette_snap(state: SceneState, centre: np.ndarray, radius: float) -> Snap:
     r"""Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
 
-    :func:`~sphere3d.snaps.edge_snap` on the film: a corner whose image lies within ``radius``
+    :func:`~sphere3d.reparam.snaps.edge_snap` on the film: a corner whose image lies within ``radius``
     pixels of the kernel ``centre`` (m, 2) is followed. A film rotation (locally a translation
     of the film) that follows a point on a straight edge's line follows the whole edge under
     translation and motion in depth (the edge's normal velocity is affine in the point and

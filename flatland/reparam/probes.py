@@ -1,6 +1,6 @@
 """Choosing the point a reparameterization follows, from probe rays (Loubet et al. 2019, Sec. 4.3).
 
-Where the integrator calls it: not directly. :class:`~flatland.methods.reparam.ReparamTransforms`
+Where the integrator calls it: not directly. :class:`~flatland.reparam.default.ReparamTransforms`
 calls :func:`select_points` from its ``camera`` and ``directions`` transforms, once per chunk
 of samples, after tracing the probes and before forming the evaluation points.
 

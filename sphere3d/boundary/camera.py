@@ -10,7 +10,7 @@ n the curve's unit normal on the film, $x^∓$ the points just before and after 
 n, $v = dx/dθ$ the velocity of the curve point (Loubet et al. 2019, Sec. 3.2; Li et
 al. 2018, Sec. 3). The filter k is static on the film and adds no term, even the box.
 
-The curves are the projections of mesh edges (:mod:`sphere3d.edges`): every
+The curves are the projections of mesh edges (:mod:`sphere3d.boundary.edges`): every
 boundary, non-manifold and crease edge (a crease between faces of a shape with zero
 albedo, or of a smooth-shaded shape, has no jump and is skipped). An edge is clipped
 to the part in front of the camera ($\mathrm{depth} > ε$) and its projection to the film
@@ -44,7 +44,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
-from sphere3d.edges import Edges
+from sphere3d.boundary.edges import Edges
 from sphere3d.integrator import Identity, camera_radiance
 from sphere3d.sampling import filter_radius, filter_value
 from sphere3d.state import SceneState
@@ -120,9 +120,7 @@ def camera_candidates(state: SceneState, edges: Edges) -> np.ndarray:
     """
     origin = np.asarray(detach(state.camera.origin))
     albedo = np.asarray(detach(state.albedo))
-    reflects = albedo > 0.0
-    if state.param is not None and state.param.endswith(".albedo"):
-        reflects = np.ones_like(reflects)
+    reflects = (albedo > 0.0) | state.albedo_varies
     # a smooth shape's vertex normals are shared by its faces: its shading is continuous across creases
     flat = ~np.asarray(state.smooth)[edges.face]
     shading_jump = edges.crease & reflects[state.shape_of[edges.face]] & flat
@@ -140,7 +138,7 @@ def camera_edge_term(
         The state with θ as a Dual (velocities); ``plain`` the same at θ0 without tangents
         (visibility and the radiance beside the edges).
     edges : Edges
-        The scene's edges (:func:`~sphere3d.edges.mesh_edges`).
+        The scene's edges (:func:`~sphere3d.boundary.edges.mesh_edges`).
     seed, batch : int
         The batch's points come from ``stream(seed, "boundary.camera", batch)``.
     points_per_pixel : float

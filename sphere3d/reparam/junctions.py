@@ -1,6 +1,6 @@
 r"""Where a moving silhouette meets a static edge on the film: the junction a film kernel follows.
 
-A film kernel (:mod:`sphere3d.camera_kernel`) whose probes see a moving shape and two different
+A film kernel (:mod:`sphere3d.reparam.film_kernel`) whose probes see a moving shape and two different
 static things (the ground and the black sky beyond its far edge, say) holds two discontinuities:
 the moving silhouette and the static edge. One rotation per kernel, locally a translation of
 the film, cannot follow the one and hold the other still (Loubet et al. 2019, Sec. 4.1: one
@@ -15,8 +15,8 @@ their ends attached to their shapes (Duals: the tangent of j is J's motion, the 
 included). The film kernel follows j instead of the point the
 probe pair chose (:func:`junction_rotation`).
 
-Each edge is found as the silhouette is (:func:`~sphere3d.bisection.bisect_silhouette`, then
-:func:`~sphere3d.snaps.edge_snap` onto the exit edge of the bisected hit's triangle): the moving
+Each edge is found as the silhouette is (:func:`~sphere3d.reparam.bisection.bisect_silhouette`, then
+:func:`~sphere3d.reparam.snaps.edge_snap` onto the exit edge of the bisected hit's triangle): the moving
 one between the closest pair of a probe on a moving triangle and one that is not; the static
 one between the closest pair of static probes that see different things (a miss counts as a
 thing), the nearer shape's triangle holding the edge, each bisection ray having to see one of
@@ -31,7 +31,7 @@ across a static black one's edge under the sky, 16 × 16 px, 16384 spp, seed 11,
 of the derivative lost (:func:`~sphere3d.closed_form.share_lost`, ± one standard error):
 sideways 4.20 ± 0.33 % without junctions, 0.82 ± 0.29 % with them; in depth 13.2 ± 0.4 % and
 1.40 ± 0.33 % (what remains is the film kernel's loss on a small triangle, its top corner:
-:mod:`sphere3d.camera_kernel`, Bias). Per pixel, at 2048 spp, the largest |z| against the closed
+:mod:`sphere3d.reparam.film_kernel`, Bias). Per pixel, at 2048 spp, the largest |z| against the closed
 form fell from 6.2 / 17.0 to 2.4 / 3.0 (Šidák limit 5.0).
 
 On the ``hard_shadow`` scenes (d/d ``occluder.translate.x``, ``reparam`` defaults, splatted film,
@@ -57,10 +57,10 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import detach
-from sphere3d.bisection import bisect, bisect_silhouette, closest_pair
 from sphere3d.live import any_rows
+from sphere3d.reparam.bisection import bisect, bisect_silhouette, closest_pair
+from sphere3d.reparam.snaps import Snap, edge_snap
 from sphere3d.rotation import Rotation
-from sphere3d.snaps import Snap, edge_snap
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
 from sphere3d.vector import cross, dot

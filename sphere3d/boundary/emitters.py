@@ -43,8 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach, tangent
-from sphere3d.edges import mesh_edges
+from flatland.core.dual import detach, tangent
+from sphere3d.boundary.edges import mesh_edges
 from sphere3d.live import any_rows, take_rows
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
@@ -56,7 +56,6 @@ __all__ = [
     "POINTS",
     "EdgeTable",
     "EmitterEdgeSamples",
-    "add_tangent",
     "edge_points",
     "edge_table",
     "emitter_edge_term",
@@ -305,10 +304,3 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
         return rows[:0], np.zeros(0)
     index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows))
     return rows[index], term
-
-
-def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:
-    """``estimate`` with ``term`` added to the tangents at ``index``: the value, bit for bit, unchanged."""
-    t = estimate.tangent.copy()
-    np.add.at(t, index, term)
-    return Dual(estimate.value, t)

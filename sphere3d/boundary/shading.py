@@ -46,7 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from sphere3d.edges import Edges
+from sphere3d.boundary.edges import Edges
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 
@@ -82,7 +82,7 @@ def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
     spherical images without changing any expectation (:func:`_pairs`, :func:`_clip_to_emitters`).
     None (no restriction) otherwise or without emitters.
     """
-    sky = float(detach(state.sky)) != 0.0 or state.param == "sky.emission"
+    sky = float(detach(state.sky)) != 0.0 or state.sky_varies
     if sky or len(state.emitters) == 0:
         return None
     triangles = np.asarray(detach(state.triangles))[state.emitters]

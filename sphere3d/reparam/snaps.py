@@ -1,11 +1,11 @@
 r"""Where on a probe's triangle a rotation follows: the snap onto an edge or corner, and the turn about it.
 
-After bisection (:func:`~sphere3d.probes.select_points`) a probe's hit lies up to
+After bisection (:func:`~sphere3d.reparam.probes.select_points`) a probe's hit lies up to
 $1/2^\mathrm{refine}$ of the probe gap inside its triangle T. :func:`edge_snap` moves it to where
 the segment of directions from the last direction that hits T to the first that misses leaves T,
 or to that edge's corner when the probe ring reaches it; :func:`line_spin` gives the rotation's
 third degree of freedom, the turn about the followed direction that keeps the snapped point's
-edges on their own motion. On the film (:mod:`sphere3d.camera_kernel`) the corner's distance is
+edges on their own motion. On the film (:mod:`sphere3d.reparam.film_kernel`) the corner's distance is
 measured in pixels, on the sphere (:func:`angle_snap`, the cosine strategy of
 :mod:`sphere3d.methods.reparam`) in radians. Loubet et al. 2019, Sec. 4.1, 4.3: refinements of
 the probe heuristic.
@@ -33,7 +33,7 @@ all                                        7.0 ± 0.1 %     1.01 ± 0.03 %
 Before: 4 probes (a ring of 3), the bisected hit followed where it lay, no turn. The kernels
 none of whose probes hit the triangle lay nearly all within 2σ of a corner, outside it: the
 corner's wedge fell between the ring's probes (a ring of 6, as on the film,
-:func:`~sphere3d.camera_kernel.film_probes`). A bisected hit lies up to 1/8 of the probe gap
+:func:`~sphere3d.reparam.film_kernel.film_probes`). A bisected hit lies up to 1/8 of the probe gap
 inside the triangle, whose image scales under z-translation, so the edge was followed at the
 wrong rate (:func:`edge_snap`); a corner was followed without its edges' turn, which a
 rotation of the triangle makes large (rotation about x: 10.9 ± 1.6 % lost before, $2^{16}$
@@ -77,7 +77,7 @@ Snap = Callable[
 """``snap(rows, origin, inside, outside, hits) -> (u, v, lines)``: where on a bisected hit's triangle to
 follow, and the two edges (pairs of the triangle's vertex slots, (k, 2, 2); the same edge twice for a
 point on one edge; -1: the hit's own point, on no edge) whose lines pass through that point
-(:func:`~sphere3d.probes.select_points`)."""
+(:func:`~sphere3d.reparam.probes.select_points`)."""
 Gap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``gap(rows, ends) -> (k, 2)``: how far the vertices ``ends - origin`` (k, 2, 3) lie from the rows'
 kernel centres, in the unit of the snap's ``radius``."""
@@ -86,7 +86,7 @@ kernel centres, in the unit of the snap's ``radius``."""
 def edge_snap(state: SceneState, gap: Gap, radius: float) -> Snap:
     r"""Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
 
-    The hook ``snap`` of :func:`~sphere3d.probes.select_points`. The point followed is where the
+    The hook ``snap`` of :func:`~sphere3d.reparam.probes.select_points`. The point followed is where the
     segment of directions from ``inside`` (hits T) to ``outside`` (misses the shape) leaves T.
     With $e_k(d) = ((V_{k+1} - o) × (V_{k+2} - o)) · d$, linear in d and proportional to the
     barycentric weight of $V_k$ of the hit along d, that exit is the smallest λ in (0, 1] with

@@ -1,0 +1,186 @@
+"""The default variant of ``reparam``: the paper's estimator with the extensions that follow each
+discontinuity where one rotation per integral cannot (Loubet et al. 2019, Sec. 4.1-4.3).
+
+:class:`ReparamTransforms` is the method's :class:`~sphere3d.integrator.Transforms`:
+
+- ``camera``: the per-sample film kernel (:mod:`sphere3d.reparam.film_kernel`), with its
+  extensions (the probe ring, bisection, snaps, junctions, one plane);
+- ``emitter``: the rotation that follows the shadow edge (:mod:`sphere3d.reparam.emitter_probes`),
+  with the emitters' own edges held fixed by their boundary term
+  (:mod:`sphere3d.boundary.emitters`);
+- ``bsdf``: the vMF convolution of the cosine-sampled integral, the probes on a ring around the
+  kernel's centre, snapped onto the edge they straddle (:mod:`sphere3d.reparam.snaps`).
+
+:mod:`sphere3d.reparam.paper` is the estimator as published; the theory page *extensions* lists
+what each extension adds and why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach
+from flatland.core.rng import Draws
+from flatland.core.translation import unit_weight
+from sphere3d.boundary.emitters import emitter_edge_term
+from sphere3d.film import FilmTransform
+from sphere3d.integrator import EmitterChange, Identity, Members, Shading
+from sphere3d.reparam.emitter_probes import PROBES, emitter_rotation
+from sphere3d.reparam.film_kernel import KAPPA_FILM, film_transform
+from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
+from sphere3d.reparam.snaps import angle_snap
+from sphere3d.rotation import Rotation
+from sphere3d.sampling import sample_cosine_hemisphere, sample_vmf, vmf_hemisphere_fraction
+from sphere3d.state import SceneState
+from sphere3d.tracing import Hits
+from sphere3d.vector import dot
+
+__all__ = ["ReparamTransforms"]
+
+
+@dataclass(frozen=True)
+class ReparamTransforms(Identity):
+    r"""The rotations of the three integrals of :mod:`sphere3d.integrator` (defaults: the method's).
+
+    The last three switches turn one extension off each, for the tests and studies that measure
+    what it adds (the method itself always uses them).
+
+    Attributes
+    ----------
+    kappa : float or None
+        vMF concentration of the convolution kernel of the cosine-sampled integral, in
+        (0, :data:`KAPPA_MAX`];
+        None: no kernel, one rotation per sample from probes drawn from the cosine
+        density itself (Sec. 4.1 over a support too large for it: biased).
+    kappa_film : float
+        1 / variance of the Gaussian film kernel of the pixel integral, $\mathrm{pixels}^{-2}$
+        (:mod:`sphere3d.reparam.film_kernel`).
+    probes : int
+        Probe rays per kernel, >= 1: its centre and a ring of ``probes - 1`` (film and cosine
+        strategy); one probe (the centre) has no pair: its attached hit is followed, the
+        identity where it misses (:mod:`sphere3d.reparam.probes`).
+    emitter_probes : int
+        Shadow probes per shading point uniform on the emitters' area, >= 1
+        (:mod:`sphere3d.reparam.emitter_probes`).
+    spread : float
+        Radius of the ring of probes around a kernel's centre, in kernel standard
+        deviations (:mod:`sphere3d.reparam.probes`), >= 0: any value has a ring, whose angle
+        grows to π (:func:`~sphere3d.reparam.probes.vmf_spread_angle`); on the film, in film
+        kernel standard deviations.
+    refine : int
+        Bisection rays that move a single probe's hit toward the silhouette next to
+        it, >= 0 (:func:`~sphere3d.reparam.probes.select_points`).
+    paired : bool
+        Two kernel samples per outer sample share one rotation (theory/kernels).
+    emitter_edges : bool
+        Add the boundary term of the emitters' sharp edges to the emitter strategy
+        (:mod:`sphere3d.boundary.emitters`), which holds them fixed under its rotation.
+    film_one_plane : bool
+        The identity for a camera sample whose film probes all hit one plane of a
+        flat-shaded shape (:func:`~sphere3d.reparam.film_kernel.one_plane`; module
+        :mod:`sphere3d.reparam.film_kernel`, Noise).
+    film_junctions : bool
+        Where a camera sample's film probes see a moving silhouette cross a static edge,
+        follow their crossing (:mod:`sphere3d.reparam.junctions`).
+    """
+
+    kappa: float | None = 1000.0
+    kappa_film: float = KAPPA_FILM
+    probes: int = 7
+    emitter_probes: int = PROBES
+    spread: float = 3.0
+    refine: int = REFINE
+    paired: bool = False
+    emitter_edges: bool = True
+    film_one_plane: bool = True
+    film_junctions: bool = True
+
+    def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
+        """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
+        return film_transform(
+            state, x, y, draws, self.kappa_film, self.probes, self.spread, self.refine, self.film_one_plane,
+            self.film_junctions,
+        )  # fmt: skip
+
+    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+        """Emitter sampling: one rotation per shading point from shadow probes (Sec. 4.3), following
+        the occluder's silhouette between a shadowed and a lit probe
+        (:func:`~sphere3d.reparam.emitter_probes.emitter_rotation`). With ``emitter_edges`` the
+        emitters' sharp edges are held fixed under it by their boundary term
+        (:func:`~sphere3d.boundary.emitters.emitter_edge_term`), at every point (any may have edge
+        samples); else only where an emitter sample is visible."""
+        m = len(shading)
+        rows = np.arange(m) if self.emitter_edges else np.flatnonzero(visible)
+        rotation = emitter_rotation(shading if rows.size == m else shading.take(rows), self.emitter_probes)
+        extra = emitter_edge_term(shading.state, shading, rotation) if self.emitter_edges else None
+        return EmitterChange(rotation, rows, extra)
+
+    def _probe_rotation(self, shading: Shading, centre: np.ndarray) -> Rotation:
+        """One rotation per shading point from a ring of probes around the kernel ``centre``.
+
+        Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
+        """
+        snap = None
+        if self.kappa is None:
+            d = sample_cosine_hemisphere(
+                shading.draws.uniforms("probes.bsdf", self.probes, 2), detach(shading.n)[:, None]
+            )
+        else:
+            phase = shading.draws.uniforms("probes.bsdf.ring")
+            ring = vmf_spread_angle(self.kappa, self.spread)
+            # the centre and a ring of probes - 1, as on the film: edges within cos(π/6) of the ring
+            d = ring_directions(centre, ring, self.probes, phase)
+            # onto the edge, or its corner up to twice the ring's radius away (as on the film)
+            snap = angle_snap(shading.state, centre, 2.0 * ring)
+        hits = shading.state.tracer.intersect(shading.origin[:, None], d)
+        # a probe below the horizon sees only the surface it leaves, where the integrand is 0
+        # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
+        normal = detach(shading.n)
+        hits = hits.without(dot(d, normal[:, None]) <= 0.0)
+        spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(self.kappa))
+        return follow_probes(
+            shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
+        )
+
+    def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
+        r"""$w = k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$ in log space: value exactly 1
+        (Loubet et al. 2019, Sec. 4.2)."""
+        return unit_weight(self.kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
+
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
+        """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
+        if self.paired:  # evaluated at the two members only
+            return self._paired(shading, mu)
+        # samples whose integrand is 0 with zero derivative need no rotation (and no probes)
+        live = np.flatnonzero(shading.contributes(mu, hits))
+        sub, mu_l = shading.take(live), mu[live]
+        if self.kappa is None:
+            return Members(self._probe_rotation(sub, mu_l).apply(mu_l), live)
+        # kernel centre ω ~ k(·, μ) around the primary sample μ: the joint density of (μ, ω) is
+        # the paper's "ω ~ p, μ ~ k(·, ω)" read the other way (k symmetric), and μ stays the
+        # naive sample, so the primal is bit-identical to the naive one
+        centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, self.kappa)
+        rotated = self._probe_rotation(sub, centre).apply(mu_l)
+        # f(Rμ) k(Rμ, ω) / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
+        return Members(rotated, live, weights=self._kernel_weight(rotated, centre))
+
+    def _paired(self, shading: Shading, mu: np.ndarray) -> Members:
+        r"""The paper's order: outer $ω = μ \sim p$, two kernel samples share one rotation
+        (theory/kernels)."""
+        rotation = self._probe_rotation(shading, mu)
+        u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
+        members, rotated, weights, mass = [], [], [], []
+        for j in range(2):  # the two members of each pair (not a loop over samples)
+            member = sample_vmf(u[:, j], mu, self.kappa)
+            r = rotation.apply(member)
+            members.append(member)
+            rotated.append(r)
+            weights.append(self._kernel_weight(r, mu))  # |w| < SMALL_WEIGHT counts as 1 in paired_combine
+            # centres ω are cosine samples, confined to the hemisphere: 1 / C(n·Rμ) restores the kernel
+            # mass that lies below the horizon, ∫_H k(y, ω) dω = C(n·y)   (sampling.vmf_hemisphere_fraction)
+            c = vmf_hemisphere_fraction(dot(r, detach(shading.n)), self.kappa)
+            mass.append(np.where(detach(c) > 0.0, c, 1.0))  # C = 0 only far below the horizon, where f = 0
+        return Members(tuple(rotated), None, tuple(members), tuple(weights), tuple(mass), paired=True)
