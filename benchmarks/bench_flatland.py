@@ -1,6 +1,6 @@
 """Flatland renderer: ray-caster throughput and seconds per image (best of 3 runs).
 
-Targets (issue 3): the ``reparam`` gradient image of ``shadow`` at 512 pixels × 64 spp
+Targets: the ``reparam`` gradient image of ``shadow`` at 512 pixels × 64 spp
 in at most 1 s on a 2-core machine, and no method slower than 5× the primal render.
 """
 

@@ -15,7 +15,7 @@ pixel samplers with the balance heuristic (Veach 1997; Loubet et al. 2019, Sec. 
 kernel weights below). Unbiased: with N samples per pixel and the mean taken over N,
 $E = Σ_{p'} ∫ p(s - p') k(s - p) L(s) / q(s) ds = ∫ k(s - p) L(s) ds$. The filter's
 weight derivative (the dominant noise of ``reparam`` on ``hard_shadow``,
-:mod:`sphere3d.reparam.film_kernel`, Noise) is shared among up to nine samplers' samples instead
+:mod:`sphere3d.reparam.film_kernel`) is shared among up to nine samplers' samples instead
 of one pixel's.
 
 Under a camera rotation (:func:`~sphere3d.integrator.pixel_samples`, the film kernel of
@@ -38,48 +38,16 @@ the mean radiance of pixel p's own samples, leaving sample i out when it is one 
 (any subset of pixel p's i.i.d. samples has the same mean). The value gets the same
 control variate, $c_{p,-i} (w_{i,p} - [i ∈ p])$: $E Σ_i w_{i,p} = N$, so a constant radiance
 is estimated exactly, where the raw splat's value is noisier than one pixel's own samples
-(the number of neighbours' samples landing near p varies; closed-form triangle, 256 spp:
-value RMSE 0.023 raw, 0.0039 controlled, 0.0089 unsplatted). The derivative gets that control
+(the number of neighbours' samples landing near p varies). The derivative gets that control
 variate's tangent, $c_{p,-i} \dot w_{i,p} + \dot c_{p,-i} (w_{i,p} - [i ∈ p])$ (zero mean alike):
 the derivative of the value's estimate, so a radiance linear in θ gives value / θ exactly, and
-the splatted $\dot L$ loses the weights' noise as the value does (``hard_shadow``, seeds 1-4,
-RMSE at 16 / 64 spp: ``boundary`` 0.085 / 0.048 → 0.079 / 0.044 on the sphere, 0.098 / 0.054 →
-0.093 / 0.051 on the cube; ``reparam`` within 0.3 %). See
+the splatted $\dot L$ loses the weights' noise as the value does. See
 :meth:`~sphere3d.tasks.ImageTask._splat_chunk`.
 
-Measured on the ``hard_shadow`` scenes (d/d ``occluder.translate.x``, ``reparam`` defaults,
-``python -m benchmarks --only hard_shadow``: seeds 1-4 at 16 and 64 spp, 1-2 at 256), RMSE per
-pixel against the stored reference, unsplatted → splatted, and Mitsuba 3.4.1's
-``direct_reparam`` (issue 11):
-
-==========  ==================  ==================  ==================
-scene       16 spp              64 spp              256 spp
-==========  ==================  ==================  ==================
-sphere      0.961 → 0.434       0.500 → 0.233       0.285 → 0.150
-Mitsuba     0.73                0.43                0.27
-cube        1.216 → 0.505       0.607 → 0.280       0.327 → 0.188
-Mitsuba     0.83                0.48                0.32
-==========  ==================  ==================  ==================
-
-At 16 and 64 spp (mostly noise) the squared error is 4.6 to 5.8 times smaller; a derivation
-predicted about 6 for the filter-weight term, 88-91 % of the unsplatted variance. Bias floor
-(256 spp, 6 seeds; 2 seeds as the benchmark: heavy-tailed without splatting): 0.104 (0.103)
-against 0.121 (0.088) on the sphere, 0.131 (0.128) against 0.142 (0.108) on the cube: no sign of
-added bias; at 256 spp it is now about half the squared error. (Both measured before the emitter
-rotation followed the shadow edge, :mod:`sphere3d.reparam.emitter_probes`; since then ``make bench``
-gives bias floors (6 seeds) 0.086 / 0.058 per-pixel / splatted on the sphere, 0.092 / 0.074 on
-the cube, and splatted RMSE 0.42 / 0.22 / 0.12 and 0.49 / 0.26 / 0.15; with the film kernels
-following junctions, :mod:`sphere3d.reparam.junctions`, splatted bias floors 0.028 / 0.026.) The value's
-standard
-error halves (0.0135 → 0.0075 at 64 spp). Cost per 64 spp image, the two films alternating in
-one run (best of seeds 1-3, a loaded 2-core machine): one thread's CPU time (process time) 0.85
-→ 1.02 s (sphere) and 0.94 → 1.19 s (cube), +19 % and +26 %; wall clock on two threads 0.55 →
-0.63 s (sphere, +16 %). Before the stencils' slots came from the film point's offset, with one
-bincount per quantity, and the gather ran on the threads: +48 % and +35 % CPU, +39 % wall (same
-images, bit for bit). The batches' standard errors understate the spread by a few percent: on
-the sphere at 16 spp the derivative's variance over 32 seeds is 1.03 times the mean squared
-standard error (16 other seeds: 1.08; without splatting 0.96), the pooled scale coupling the
-batches weakly (:meth:`~sphere3d.tasks.ImageTask._control_variate`).
+What it costs and gains (RMSE, value and derivative noise against the per-pixel film): the
+``hard_shadow`` measurement page, whose ``reparam (pixel film)`` rows are the per-pixel film. The
+batches' standard errors understate the spread slightly: the pooled scale of the control
+variate couples the batches weakly (:meth:`~sphere3d.tasks.ImageTask._control_variate`).
 
 Independence of chunks and threads: each chunk holds whole pixels and sums, per source
 pixel p', batch and target offset p - p', over the source's own samples (:func:`stencil`);

@@ -132,12 +132,8 @@ class ImageTask:
         $\mathrm{Var}\, D_b = σ^2 / n$ ($n = N / \mathrm{batches}$, $σ^2$ the controlled per-sample variance,
         usually of the order of $E[((L - E L) \dot w)^2] ≥ γ^2$). The batch spread thus understates the
         variance of the image by a relative $(\mathrm{batches} - 1) n γ^2 / ((N - 1)^2 σ^2) ≈ γ^2 / (σ^2 N)$,
-        at most about $1 / N$. Measured on ``hard_shadow`` at 16 spp (reparam, 32 seeds): mean correlation of
-        two batches -0.0002 (per-batch scope -0.0008), variance over seeds / mean squared standard error 0.998
-        (0.987). The pooled scale also has less noise of its own than a batch's (N - 1 samples instead of n -
-        1). Pixel RMSE of ``reparam`` on ``hard_shadow`` (sphere / cube) at 16 / 64 / 256 spp: 0.99 / 0.58 /
-        0.41 and 1.55 / 0.83 / 0.53, against 2.02 / 0.64 / 0.42 and 3.24 / 0.92 / 0.54 per batch. A regression
-        coefficient ($Σ \dot e \dot w / Σ \dot w^2$ over the others) was no better there (1.04 / 0.58 / 0.41).
+        at most about $1 / N$. The pooled scale also has less noise of its own than a batch's (N - 1
+        samples instead of n - 1), which matters most at few samples per batch.
         """
         est = samples.estimate.reshape(batches, -1, per_batch)
         n = self._cv_samples(batches, per_batch)

@@ -22,8 +22,8 @@ the Reynolds transport theorem
 $ω^∓ = ω ∓ δ m$ just beside the arc, dℓ its arc length (radians). The first term is the
 ``naive`` estimator. For the second, only the silhouette edges that can contribute are
 candidates (:func:`_pairs`): an edge that does not move, seen from a point that does not
-move, has $m·\dot ω = 0$ exactly (with ``occluder.translate.x`` the emitter's own border, which
-drew 91 % of the samples on ``hard_shadow`` before this cull); and under a black sky f
+move, has $m·\dot ω = 0$ exactly (with ``occluder.translate.x`` the emitter's own border, most of
+the candidates' length); and under a black sky f
 vanishes outside the emitters' directions on both sides of every arc, so an arc counts only
 where it crosses an emitter's spherical image: each arc above the horizon ($n·(P - x) > 0$, a
 linear condition in s) is clipped to the image of every emitter triangle
@@ -31,9 +31,8 @@ linear condition in s) is clipped to the image of every emitter triangle
 clipped). Each shading point draws k sub-arcs among its candidates' with probability ∝ their
 angle ($Γ = Σ \mathrm{angles}$), then a point uniform in angle on each: density $c/Γ$ per radian,
 c the number of sub-arcs of that arc holding the point (1 unless emitters overlap as seen
-from x), and the estimate is the mean over the k draws of $(Γ/c) [f(ω^-) - f(ω^+)] (m·\dot ω)$.
-On ``hard_shadow`` 99.8 % of the drawn points have a nonzero jump, against 10 % with the
-arcs clipped to a cone around the emitters' bounding sphere and no cull. The 3D point P
+from x), and the estimate is the mean over the k draws of $(Γ/c) [f(ω^-) - f(ω^+)] (m·\dot ω)$:
+nearly every drawn point has a nonzero jump. The 3D point P
 behind ω on the edge is found in the plane of the arc; $\dot ω$ comes from forward AD of
 ``normalize(P(θ) - x(θ))`` with the edge's Dual vertices. Both sides are traced (two rays
 per draw); $L_i$ along a ray is deterministic, so the jump is exact up to the offset δ = :data:`EPS_ANGLE`.

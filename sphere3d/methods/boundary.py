@@ -23,12 +23,9 @@ __all__ = ["RATE", "SECONDARY", "boundary"]
 RATE = 2.0
 """Default film edge points per pixel of projected edge length and sample."""
 SECONDARY = 4
-"""Default edge samples per shading point. With RATE, measured on ``hard_shadow`` at 48 spp (4 seeds, CPU
-time of both threads; the per-pixel film, ``film="pixel"``, then the default): (MSE - reference
-variance) × CPU seconds 0.0115, against 0.0258 at (1.0, 1): rate 1 → 2 halves the camera term's variance
-(0.0024 → 0.0011 per pixel, averaged over the film), 1 → 4 draws quarter the shading term's (0.0076 →
-0.0018), each for 5-15 % more time (the silhouette test, shared by the draws, dominates); 2 or 8 draws,
-rate 3 or 4 are within the noise of this choice."""
+"""Default edge samples per shading point. With RATE, chosen for the least (error × time) on
+``hard_shadow``: the camera term's variance falls like 1 / ``rate`` and the shading term's like
+1 / ``secondary``, each for a small share more time, the silhouette test being shared by the draws."""
 
 
 @GRADIENT_METHODS.register(

@@ -1,127 +1,60 @@
 r"""The film kernel of the pixel integral: rotations per camera sample, chosen inside small kernels.
 
-The pixel integral $∫ k(s) L(ω(s)) ds$ is convolved with a Gaussian film kernel
-$g(s - c)$ of variance 1 / ``kappa_film`` ($\mathrm{pixels}^{-2}$), $∫ g(s - c) dc = 1$ for every s
-(Loubet et al. 2019, Sec. 4.2). Each camera sample s (drawn from the filter, the naive
+The default variant's pixel integral (Loubet et al. 2019, Sec. 4.2, 4.3; the extensions are
+listed in the theory page *extensions*). The pixel integral $∫ k(s) L(ω(s)) ds$ is convolved
+with a Gaussian film kernel $g(s - c)$ of variance 1 / ``kappa_film`` ($\mathrm{pixels}^{-2}$),
+$∫ g(s - c) dc = 1$ for every s. Each camera sample s (drawn from the filter, the naive
 estimator's own sample) gets a kernel centre $c \sim g(· - s)$, the reverse order of the
 paper's $ω \sim p$, $μ \sim k(·, ω)$ (theory/kernels), which keeps every evaluation at s itself
 and the primal bit-identical to ``naive``'s; around c a ring of probes
 (:func:`~sphere3d.reparam.probes.ring_offsets`, radius ``spread`` kernel standard deviations)
-chooses the point the sample's rotation follows (Sec. 4.3, :mod:`sphere3d.reparam.probes`,
-with the ``refine`` bisection that moves a single probe's hit onto the silhouette between
-it and its partner). The sample is evaluated along $R·ω(s)$ with the weight
+chooses the point the sample's rotation follows (:mod:`sphere3d.reparam.probes`, with the
+``refine`` bisection onto the silhouette and the snap onto the hit triangle's edge,
+:func:`silhouette_snap`). The sample is evaluated along $R·ω(s)$ with the weight
 $g(\mathrm{film}(Rω) - c) / \mathrm{detach}(g(\mathrm{film}(Rω) - c))$ (value exactly 1,
 :func:`~flatland.core.translation.unit_weight`), next to the filter's own
 $k J (Rω) / \mathrm{detach}(k J (Rω))$ (:func:`~sphere3d.integrator.pixel_samples`).
 
-Each sample gets two centres, $c = s + σz$ and its mirror image $c' = s - σz$, each with its
-own probes and rotation, and the estimate is the mean of the two (an antithetic pair, not
-the authors' paired samples: those share one rotation between two evaluation points and
-change the primal; ``paired`` leaves the film kernel as it is). Where both rotations
-follow the same motion, the kernel weights' derivatives $κ (c - s)·\dot f$ and $κ (c' - s)·\dot f$
-cancel; the radiance is evaluated once, along the mean of the two rotated directions'
-tangents (exact: the derivative is linear in them).
+**Antithetic centres.** Each sample gets two centres, $c = s + σz$ and its mirror image
+$c' = s - σz$, each with its own probes and rotation, and the estimate is the mean of the two
+(not the authors' paired samples, which share one rotation between two evaluation points and
+change the primal). Where both rotations follow the same motion, the kernel weights'
+derivatives $κ (c - s)·\dot f$ and $κ (c' - s)·\dot f$ cancel; the radiance is evaluated once,
+along the mean of the two rotated directions' tangents (exact: the derivative is linear in
+them). Unbiased for a silhouette that the rotation follows: for a fixed centre the rotation is
+one change of variables of the whole film integral, and integrating over c restores the pixel
+integral. The product of the two weights keeps a zero-mean derivative,
+$d/dθ ∫ dc ∫ k(\mathrm{film}\, Rω) J g(\mathrm{film}\, Rω - c) dω = d/dθ\, 1 = 0$, so the
+filter-weight control variate of :class:`~sphere3d.tasks.ImageTask` stays exact.
 
-Unbiased for a silhouette that the rotation follows: for a fixed centre the rotation is
-one change of variables of the whole film integral, and integrating over c restores
-the pixel integral. The product of the two weights keeps a zero-mean derivative,
-$d/dθ ∫ dc ∫ k(\mathrm{film}\, Rω) J g(\mathrm{film}\, Rω - c) dω = d/dθ\, 1 = 0$, so the filter-weight
-control variate of :class:`~sphere3d.tasks.ImageTask` stays exact.
+**The kernel's width.** The default concentration is the authors' camera kernel
+$κ = 1 / (1 - \cos(0.4 · \mathrm{pixel\ angle}))$ read on the film, $1 - \cos x ≈ x^2 / 2$: a
+Gaussian of $σ = 0.4 / \sqrt{2} ≈ 0.28$ px, flatland's
+:func:`~flatland.reparam.default.default_kappa_film` in pixel units. The kernel being a fraction
+of a pixel wide, the probes see the silhouette next to each sample rather than somewhere on the
+pixel's footprint: two edges or a corner in one footprint are followed by different samples.
 
-The default concentration is the authors' camera kernel $κ = 1 / (1 - \cos(0.4 · \mathrm{pixel\ angle}))$
-read on the film, $1 - \cos x ≈ x^2 / 2$: a Gaussian of $σ = 0.4 / \sqrt{2} ≈ 0.28$ px,
-flatland's :func:`~flatland.reparam.default.default_kappa_film` in pixel units. The
-kernel being a fraction of a pixel wide, the probes see the silhouette next to each
-sample rather than somewhere on the pixel's footprint: two edges or a corner in one
-footprint are followed by different samples, and a silhouette a pixel or two wide is not
-missed by a ring wider than itself.
+**Nothing to follow.** Where every probe of a kernel hits one plane of one flat-shaded shape
+(:func:`one_plane`), nothing in sight is discontinuous and the rotation is the identity, as
+flatland's probes take it when they all see one primitive (any rotation is a change of
+variables of a continuous integrand: unbiased). The derivative of those samples then comes
+from their shading points sliding over the moving face, not from the filter weight's
+derivative times a noisy radiance: less variance. Not applied while the camera moves (every
+surface then moves in the image), nor to smooth shapes (interpolated normals: the radiance
+varies across the probes' triangles). Rows whose probes cannot reach a moving triangle's film
+image (the hull of its vertices' images, :func:`_reaching_motion`) are not probed at all.
 
-Where a ring sees a moving silhouette cross a static edge (the ground's far edge behind an
-occluder), the rotation follows their crossing instead of the silhouette point
-(:mod:`sphere3d.reparam.junctions`, the ``reparam`` option ``film_junctions``): one rotation, locally a
-translation of the film, keeps both edges where a rotation following the silhouette drags the
-static one.
+**T-junctions.** Where a ring sees a moving silhouette cross a static edge (the ground's far
+edge behind an occluder), the rotation follows their crossing instead of the silhouette point
+(:mod:`sphere3d.reparam.junctions`): one rotation, locally a translation of the film, keeps both
+edges where a rotation following the silhouette drags the static one.
 
-Bias
-----
-Measured against the closed forms of :mod:`sphere3d.closed_form` by
-``python -m benchmarks --only reparam_bias`` (``reparam`` defaults: ``kappa_film`` 12.5,
-4 probes (7 on the film), spread 3, refine 3; the default, splatted film; seed 11, 16 batches;
-± one standard error; with the per-pixel film 2 px lost 2.3 ± 0.4 / 4.8 ± 0.5 %);
-tested as biases in ``tests/sphere3d/test_triangle_closed_form.py`` (test10).
-
-A black triangle about s pixels across against a constant sky
-(:func:`~sphere3d.closed_form.pinhole_triangle_scene`, gaussian filter), moving sideways
-(``translate.x``) or away from the camera (``translate.z``).
-Share of the silhouette term lost, $1 - Σ \mathrm{sign}(g) d / Σ |g|$ over the film (g the exact
-derivative per pixel, d the estimate; :func:`~sphere3d.closed_form.share_lost`):
-
-========  ==================  ==================  ==================
-size      image, spp          sideways            depth
-========  ==================  ==================  ==================
-1 px      8 × 8, 65536        31.7 % ± 0.4 %      49.4 % ± 0.5 %
-2 px      8 × 8, 65536        2.4 % ± 0.2 %       4.6 % ± 0.4 %
-4 px      8 × 8, 65536        1.4 % ± 0.1 %       1.8 % ± 0.1 %
-8 px      16 × 16, 16384      0.9 % ± 0.1 %       1.1 % ± 0.1 %
-20 px     32 × 32, 4096       0.8 % ± 0.1 %       0.8 % ± 0.1 %
-========  ==================  ==================  ==================
-
-Short of the exact derivative where a kernel reaches a discontinuity that its rotation
-does not follow: an edge between the ring's probes, or, on a triangle about a pixel
-across, all three edges inside one kernel (a rotation follows two edges at their common
-corner, not three). Motion in depth loses more there: the edges' film velocities differ
-(the image scales about the principal point), while a sideways translation moves every
-edge alike. Not fixed by more samples.
-
-Noise
------
-Measured with the per-pixel film (``film="pixel"``, the default until film splatting,
-:mod:`sphere3d.film`, became it; the splatted film shares the filter weight's derivative
-among up to nine pixels' samples: its numbers are in that module).
-On ``hard_shadow`` (64 spp in one batch, 4 seeds, against the stored reference) one
-kernel centre per sample doubled the derivative's RMSE (0.57 to 1.00), from the kernel
-scores on the occluder's lit silhouette; with the antithetic pair it is 0.57, as with one
-rotation per pixel.
-
-Where the variance of ``reparam`` comes from on the ``hard_shadow`` scenes (d/d
-``occluder.translate.x``, defaults before ``film_one_plane``; seed 1, 64 spp in 16 batches,
-per-pixel variance over batches scaled to 16 spp, summed over the pixels and divided by
-4096, so the columns add up to the squared RMSE's noise part). Each component is the
-tangent of one term, the others' tangents set to 0, on the same samples: the filter
-weight $k J$ with its control variate (:class:`~sphere3d.tasks.ImageTask`), the film
-kernel weight g, the emitter strategy, the emitters' edge term, the cosine strategy:
-
-==============  ===================  ============  ========  =====  ======  =====
-scene           filter weight        film kernel   emitter   edges  cosine  total
-==============  ===================  ============  ========  =====  ======  =====
-sphere          0.82 (0.53 + 0.29)   0.054         0.0003    0.014  0.040   0.93
-cube            1.90 (0.99 + 0.91)   0.060         0.0001    0.016  0.091   2.10
-==============  ===================  ============  ========  =====  ======  =====
-
-In brackets the silhouette and occluder regions (``tests/sphere3d/test_hard_shadow.py``);
-the edge and cosine terms sit in the penumbra. The filter weight's derivative
-$\dot w = ∇\log k·\dot f$ multiplies the sample's radiance, whose noise (the irradiance
-estimate's) the pixel control variate cannot remove: with 16 shading estimates averaged
-per camera sample (a diagnostic) that column falls to 0.34 / 0.85, on the occluder pixels
-0.29 to 0.03 (sphere); the emitter and cosine strategies' noise weigh about alike. Wider
-or narrower film kernels do not help: ``kappa_film`` 6.25 / 25 gave RMSE 0.95 / 0.97 at 16 spp
-(sphere; 1.52 / 1.56 cube) against 0.96 (1.54).
-
-``film_one_plane`` (default): where every probe of a kernel hits one plane of one
-flat-shaded shape (:func:`one_plane`), nothing in sight is discontinuous and the rotation
-is the identity, as flatland's probes take it when they all see one primitive (any
-rotation is a change of variables of a continuous integrand: unbiased). The derivative
-of those samples then comes from their shading points sliding over the moving face,
-not from $\dot w$ times a noisy radiance. On the cube (``make bench`` seeds) RMSE at
-16 / 64 / 256 spp 1.54 / 0.76 / 0.40 became 1.22 / 0.61 / 0.33; on the occluder pixels the
-filter weight's variance fell from 0.91 to 0.20 (all terms: 0.96 to 0.30), at 3 % more CPU
-time (1.82 to 1.88 s per 64 spp, process time, measured in the same minutes). The drop in
-squared error at 256 spp (0.053) is the drop in variance (0.055), the bias changes within
-its noise (the silhouette keeps 99.3 ± 1.0 % instead of 96.1 ± 1.1 %). Not applied while
-the camera moves (every surface then moves in the image; not measured there). Smooth
-shapes are left out: on the icosphere the same rule raised the RMSE at 16 spp from 0.96
-to 1.04 (the emitter edge term at shading points sliding over the sphere: variance 0.37
-on the occluder) for 13 % more CPU time.
+Where it is biased: a kernel holding a discontinuity its rotation does not follow: an edge
+between the ring's probes, or a feature about a pixel across whose edges move differently
+inside one kernel (a small triangle's three edges: a rotation follows two at their common
+corner, not three; motion in depth and rotation make its edges' film velocities differ, where a
+sideways translation moves every edge alike). Not reduced by more samples. Sizes: the
+``reparam_bias`` and atlas measurement pages.
 """
 
 from __future__ import annotations
@@ -234,7 +167,7 @@ def film_transform(
         if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
             seen = any_rows(hits.on(moving))
             rows, d, hits = rows[seen], d[seen], hits.take(seen)
-            if plane:  # one plane in sight, nothing to follow: the identity (module docstring, Noise)
+            if plane:  # one plane in sight, nothing to follow: the identity (module docstring)
                 keep = ~one_plane(state, hits)
                 rows, d, hits = rows[keep], d[keep], hits.take(keep)
         # a corner up to twice the ring's radius away: its second edge still enters the ring if it
@@ -268,7 +201,7 @@ def one_plane(state: SceneState, hits: Hits) -> np.ndarray:
     vertex on probe 0's plane. There the radiance is continuous across the probes'
     triangles (one albedo, one normal); a crease between two faces changes the normal,
     so a ring across it is not one plane. Smooth shapes (interpolated vertex normals)
-    never count: module docstring, Noise.
+    never count: module docstring, Nothing to follow.
     """
     tri = np.maximum(hits.triangle, 0)
     same = all_rows(hits.hit) & all_rows(hits.shape == hits.shape[:, :1])
@@ -305,8 +238,7 @@ def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.
     convex hull of their vertices' images (a triangle projects to the triangle of its vertices'
     images), so a row whose centre lies farther than ``reach`` from that hull (farther than
     ``reach`` outside one of its edges' lines) cannot see one; first by the hull's box, then by
-    its edges (:func:`_film_hull`). The hull keeps 73 % (``hard_shadow_cube``) and 78 %
-    (``hard_shadow``) of the rows the box keeps, the same image bit for bit.
+    its edges (:func:`_film_hull`); the result is the same, bit for bit, as probing every row.
     """
     cam = state.camera
     if np.any(tangent(cam.origin) != 0.0):

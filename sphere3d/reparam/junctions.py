@@ -24,30 +24,11 @@ the two (seeing a moving triangle instead abandons the row). A row is followed a
 only where both edges are found (a corner of either is left to the single-edge rule) and J lies
 within ``radius`` pixels of the kernel's centre.
 
-Bias
-----
-Measured on the closed form of :mod:`sphere3d.closed_form.junction` (a 6 px black triangle moving
-across a static black one's edge under the sky, 16 × 16 px, 16384 spp, seed 11, 16 batches), share
-of the derivative lost (:func:`~sphere3d.closed_form.share_lost`, ± one standard error):
-sideways 4.20 ± 0.33 % without junctions, 0.82 ± 0.29 % with them; in depth 13.2 ± 0.4 % and
-1.40 ± 0.33 % (what remains is the film kernel's loss on a small triangle, its top corner:
-:mod:`sphere3d.reparam.film_kernel`, Bias). Per pixel, at 2048 spp, the largest |z| against the closed
-form fell from 6.2 / 17.0 to 2.4 / 3.0 (Šidák limit 5.0).
-
-On the ``hard_shadow`` scenes (d/d ``occluder.translate.x``, ``reparam`` defaults, splatted film,
-against the stored reference of :mod:`benchmarks.hard_shadow_reference`) the ten pixels where the
-occluder's silhouette crosses the ground's far edge held 86 % (sphere) and 97 % (cube) of the
-squared bias floor before, up to 2.0 (of -13.1) and 3.1 (of -15.8) per pixel; the bias floor
-(6 seeds at 256 spp) fell from 0.058 to 0.028 (sphere) and from 0.074 to 0.026 (cube; 0.025 with
-the aimed emitter probes, ``make bench``), the silhouette region's kept fraction (8 seeds × 128
-spp) from 0.970 ± 0.008 to 0.997 ± 0.005 and from 0.977 ± 0.005 to 0.994 ± 0.005. Junction rows are few
-(137 of 131 072 film kernels at 16 spp on ``hard_shadow``): +0.3 % CPU time (one thread, medians
-of 5, alternating).
-
-Still biased where the two edges cross outside ``radius`` of the kernel's centre (the single-edge
-rule applies), where a third discontinuity lies between the static probes (the row is abandoned),
-and at a corner of either edge. Tested in ``tests/sphere3d/test_junctions.py`` and
-``tests/sphere3d/test_hard_shadow.py`` (test06).
+Exact to first order in the distance from J, for straight edges; the closed form of
+:mod:`sphere3d.closed_form.junction` (a black triangle moving across a static one's edge) checks
+it. Still biased where the two edges cross outside ``radius`` of the kernel's centre (the
+single-edge rule applies), where a third discontinuity lies between the static probes (the row
+is abandoned), and at a corner of either edge.
 """
 
 from __future__ import annotations

@@ -1,59 +1,26 @@
 r"""Where on a probe's triangle a rotation follows: the snap onto an edge or corner, and the turn about it.
 
-After bisection (:func:`~sphere3d.reparam.probes.select_points`) a probe's hit lies up to
-$1/2^\mathrm{refine}$ of the probe gap inside its triangle T. :func:`edge_snap` moves it to where
-the segment of directions from the last direction that hits T to the first that misses leaves T,
-or to that edge's corner when the probe ring reaches it; :func:`line_spin` gives the rotation's
-third degree of freedom, the turn about the followed direction that keeps the snapped point's
-edges on their own motion. On the film (:mod:`sphere3d.reparam.film_kernel`) the corner's distance is
-measured in pixels, on the sphere (:func:`angle_snap`, the cosine strategy of
-:mod:`sphere3d.methods.reparam`) in radians. Loubet et al. 2019, Sec. 4.1, 4.3: refinements of
-the probe heuristic.
+An extension of the probe heuristic (Loubet et al. 2019, Sec. 4.1, 4.3; theory page
+*extensions*). After bisection (:func:`~sphere3d.reparam.probes.select_points`) a probe's hit
+lies up to $1/2^\mathrm{refine}$ of the probe gap inside its triangle T. :func:`edge_snap`
+moves it to where the segment of directions from the last direction that hits T to the first
+that misses leaves T, or to that edge's corner when the probe ring reaches it; :func:`line_spin`
+gives the rotation's third degree of freedom, the turn about the followed direction that keeps
+the snapped point's edges on their own motion. On the film (:mod:`sphere3d.reparam.film_kernel`)
+the corner's distance is measured in pixels, on the sphere (:func:`angle_snap`, the cosine
+strategy of :mod:`sphere3d.reparam.default`) in radians.
 
-Bias
-----
-What they removed from the cosine strategy's loss on a black triangle under the sky
-(:mod:`sphere3d.methods.reparam`, Bias), measured without the noise of the samples μ: per
-kernel centre ω of $2^{18}$ cosine samples (seed 11), the derivative expected given the
-rotation chosen, $-q(ω)^{-1} ∫_{∂T} f k\, (Ω × μ)·n\, dl$ along the triangle's edges inside the
-kernel (the divergence theorem: the rotation's velocity Ω × μ where the exact derivative has
-the edges' own), against the exact $-q(ω)^{-1} ∫_{∂T} f k\, \dot μ·n\, dl$ (q: the density of ω; f the
-sky's cosine, k the vMF, n the edge's outward normal). Share of dE/dθ lost (z-translation;
-± one standard error over the kernels; kernels split by what their probes saw):
-
-=========================================  ==============  ==============
-kernels                                    before          after
-=========================================  ==============  ==============
-no probe hits the triangle                 4.6 %           0.75 %
-one edge, probes hit the triangle          1.2 %           0.04 %
-a corner or two edges, probes hit it       1.2 %           0.22 %
-all                                        7.0 ± 0.1 %     1.01 ± 0.03 %
-=========================================  ==============  ==============
-
-Before: 4 probes (a ring of 3), the bisected hit followed where it lay, no turn. The kernels
-none of whose probes hit the triangle lay nearly all within 2σ of a corner, outside it: the
-corner's wedge fell between the ring's probes (a ring of 6, as on the film,
-:func:`~sphere3d.reparam.film_kernel.film_probes`). A bisected hit lies up to 1/8 of the probe gap
-inside the triangle, whose image scales under z-translation, so the edge was followed at the
-wrong rate (:func:`edge_snap`); a corner was followed without its edges' turn, which a
-rotation of the triangle makes large (rotation about x: 10.9 ± 1.6 % lost before, $2^{16}$
-kernels; :func:`line_spin`, weighted by the kernel at a corner). Per case ($2^{18}$ kernels;
-the benchmark's cases, ``benchmarks/bench_reparam_bias.py``):
-
-=================================  ===============  ===============
-case                               before           after
-=================================  ===============  ===============
-z-translation                      7.00 ± 0.12 %    1.01 ± 0.03 %
-x-translation                      6.77 ± 0.41 %    1.45 ± 0.08 %
-scale                              6.97 ± 0.12 %    1.09 ± 0.03 %
-rotation about x                   10.9 ± 1.6 %     2.49 ± 0.23 %
-rotation about y                   3.91 ± 0.38 %    1.11 ± 0.10 %
-lower edge 20° up, x-translation   3.87 ± 0.11 %    0.58 ± 0.02 %
-lower edge 5° up, x-translation    3.03 ± 0.09 %    0.52 ± 0.01 %
-=================================  ===============  ===============
-
-(rotation about x before: $2^{16}$ kernels). Tested in
-``tests/sphere3d/test_triangle_closed_form.py`` (test15, ``helpers.rotation_loss``).
+Why: a rotation that follows a point inside T drifts from the edge's motion by the point's
+distance from the edge times the rate at which the triangle's image scales or turns (motion in
+depth, rotation); on the edge's line, with the edge's own turn, it follows the edge exactly
+under rigid motion and scaling. At a corner the two edges turn differently: the turn is their
+rates weighted by the kernel, exact for neither alone. Divergence theorem form of what is left
+(``tests/sphere3d/helpers.py`` ``rotation_loss``): given the rotation chosen in a kernel centred
+at ω, the derivative expected over the kernel's samples is
+$-q(ω)^{-1} ∫_{∂T} f k\, (Ω × μ)·n\, dl$ (Ω the rotation's angular velocity, n the edges'
+outward normal, q the density of ω, f the integrand, k the kernel), where the exact one has
+the edges' own velocity $\dot μ$ in place of Ω × μ: the two agree wherever the snapped edge
+is the only one in the kernel. Measured on the bias atlas and ``reparam_bias`` pages.
 """
 
 from __future__ import annotations

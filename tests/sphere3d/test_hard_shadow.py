@@ -1,6 +1,6 @@
 """The hard_shadow benchmark scenes: their specification, and the gradient methods per pixel, per region.
 
-The scenes of issue 11 (``hard_shadow``: icosphere occluder; ``hard_shadow_cube``) have
+The benchmark scenes (``hard_shadow``: icosphere occluder; ``hard_shadow_cube``) have
 a stored per-pixel reference derivative d/d ``occluder.translate.x``
 (``benchmarks/reference/*.npz``, Richardson-extrapolated central differences, see
 :mod:`benchmarks.hard_shadow_reference`). The image is cut into regions by closed
