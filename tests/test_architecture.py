@@ -20,6 +20,7 @@ import importlib.util
 import inspect
 import json
 import pkgutil
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -343,3 +344,14 @@ def test12_finite_difference_steps_are_the_documented_ones():
         method = importlib.import_module(f"{package}.methods").GRADIENT_METHODS.get("finite_difference")
         assert method.options["h"].default == h, package
         assert f"default h = {h:.0e}".replace("e-0", "e-") in inspect.getdoc(method.func), package
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test14_reparams_option_table_lists_exactly_the_registered_options_in_order(package):
+    """Each ``reparam`` docstring holds one table of its options (name, default, meaning, values); its
+    first column names the registered options, in their order, and nothing else."""
+    method = importlib.import_module(f"{package}.methods").GRADIENT_METHODS.get("reparam")
+    doc = inspect.getdoc(method.func)
+    table = doc[doc.index("Options\n-------") :].split("\n\n")[0]
+    names = [m.group(1) for m in re.finditer(r"^``(\w+)``", table, re.M)]
+    assert names == list(method.options), (names, list(method.options))

@@ -87,31 +87,30 @@ def reparam(
 
     Options
     -------
-    ================  =========  ===============================================  ====================
-    option            default    meaning                                          values
-    ================  =========  ===============================================  ====================
-    ``variant``       default    ``"paper"``: the estimator as published          ``"default"``,
-                                 (:mod:`sphere3d.reparam.paper`); ``"default"``:  ``"paper"``
-                                 with the extensions (theory page *extensions*)
-    ``kappa``         1000       vMF concentration of the cosine strategy's       (0, 1e15]; None: no
-                                 kernel (width about $1/\sqrt{κ}$ rad)            kernel (default
-                                                                                  variant, for study)
-    ``kappa_film``    12.5       1 / variance of the Gaussian film kernel,        (0, 1e12]
-                                 $\mathrm{px}^{-2}$ (the authors' camera kernel,
-                                 σ ≈ 0.28 px)
-    ``probes``        7 / 4      probe rays per kernel (film and cosine           integer >= 1
-                                 strategy): a centre and a ring (default), drawn
-                                 from the kernel (paper)
-    ``emitter_probes``  4        shadow probes per shading point uniform on the   integer >= 1
-                                 emitters' area
-    ``spread``        3          radius of the probe ring in kernel standard      >= 0
-                                 deviations (default variant)
-    ``refine``        3          bisection rays moving a single probe's hit       integer >= 0
-                                 toward the silhouette (default variant)
-    ``paired``        False      two kernel samples share one rotation in the     bool
-                                 cosine strategy (default variant; the paper
-                                 variant always pairs)
-    ================  =========  ===============================================  ====================
+    ====================  =========  =================================================  ======================
+    option                default    meaning                                            values
+    ====================  =========  =================================================  ======================
+    ``variant``           default    ``"paper"``: the estimator as published            ``"default"``,
+                                     (:mod:`sphere3d.reparam.paper`); ``"default"``:    ``"paper"``
+                                     with the extensions (theory page *extensions*)
+    ``kappa``             1000       vMF concentration of the cosine strategy's         (0, 1e15]; None: no
+                                     kernel (width about 1/√κ rad)                      kernel (default
+                                                                                        variant, for study)
+    ``kappa_film``        12.5       1 / variance of the Gaussian film kernel,          (0, 1e12]
+                                     px⁻² (the authors' camera kernel, σ ≈ 0.28 px)
+    ``probes``            7 / 4      probe rays per kernel (film and cosine             integer >= 1
+                                     strategy): a centre and a ring (default), drawn
+                                     from the kernel (paper)
+    ``emitter_probes``    4          shadow probes per shading point uniform on the     integer >= 1
+                                     emitters' area
+    ``spread``            3          radius of the probe ring in kernel standard        >= 0
+                                     deviations (default variant)
+    ``refine``            3          bisection rays moving a single probe's hit         integer >= 0
+                                     toward the silhouette (default variant)
+    ``paired``            False      two kernel samples share one rotation in the       bool
+                                     cosine strategy (default variant; the paper
+                                     variant always pairs)
+    ====================  =========  =================================================  ======================
 
     Constants of the default variant that change results, each in the module that uses it:
     the emitter strategy's probes along the emitters' edges
