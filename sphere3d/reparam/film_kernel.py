@@ -137,7 +137,8 @@ def film_transform(
         at ``spread`` kernel standard deviations); bisection rays toward the silhouette.
     plane : bool, optional
         The identity where every probe of a kernel hits one plane of a flat-shaded shape
-        (:func:`one_plane`; the ``reparam`` option ``film_one_plane``, module docstring, Noise),
+        (:func:`one_plane`; :class:`~sphere3d.reparam.default.ReparamTransforms` ``film_one_plane``,
+        module docstring),
         while the camera stands still.
     junctions : bool, optional
         Where a ring sees a moving silhouette cross a static edge, follow their crossing
