@@ -5,8 +5,8 @@ figures) takes its colours from here, so a method looks the same wherever it is
 drawn: the reparameterization in blue, the boundary term in orange, naive
 differentiation in red, finite differences in purple and closed forms and
 references in black. Variants of one method (options such as ``kappa=10`` or
-``paired``) share the method's colour and differ by marker or line style
-(:func:`series_styles`).
+``paired``) take shades of the method's colour, the first the colour itself, and
+differ by marker or line style too (:func:`series_styles`).
 Series that name no method take colours from :data:`OTHER_COLOURS`, none of which a
 method uses: it is the colour cycle of every Axes the figure modules make
 (:func:`neutral_cycle`). Scene sketches draw with :data:`SKETCH_COLOURS`: emitters in
@@ -25,8 +25,10 @@ from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.colors import Normalize
+from matplotlib.colors import Normalize, to_rgb
 from matplotlib.figure import Figure
+from matplotlib.legend import Legend
+from matplotlib.ticker import LogLocator, MaxNLocator, NullFormatter, NullLocator, SymmetricalLogLocator
 
 from flatland.core.validate import ValidationError
 
@@ -39,9 +41,13 @@ __all__ = [
     "OTHER_COLOURS",
     "PRIMAL",
     "REFERENCE_STYLE",
+    "SHADES",
     "SKETCH_COLOURS",
     "TWO_SIGMA",
     "coverage_label",
+    "integer_ticks",
+    "legend_outside",
+    "log_ticks",
     "method_colour",
     "method_of",
     "neutral_cycle",
@@ -49,6 +55,8 @@ __all__ = [
     "radiance_norm",
     "same_length",
     "series_styles",
+    "shade",
+    "symlog_axis",
     "symmetric_limit",
     "symmetric_norm",
 ]
@@ -84,6 +92,9 @@ FIGSIZE = (6.4, 3.6)
 """Default size of a one-panel figure, in inches."""
 REFERENCE_STYLE = {"color": METHOD_COLOURS["reference"], "linestyle": "--", "linewidth": 1.0}
 """How closed forms and references are drawn."""
+SHADES = (0.0, 0.45, -0.5, 0.7, -0.7, 0.25, -0.25, 0.85)
+"""Shade of the k-th variant of one method (:func:`shade`): 0 the method's colour, > 0 toward black,
+< 0 toward white; alternating, so neighbouring variants differ most."""
 TWO_SIGMA = math.erf(2.0 / math.sqrt(2.0))
 """Coverage of ± 2 standard errors under a normal law, 0.9545."""
 
@@ -116,14 +127,23 @@ def method_colour(label: str, default: Any = None) -> Any:
     return default if method is None else METHOD_COLOURS[method]
 
 
+def shade(colour: Any, amount: float) -> tuple[float, float, float]:
+    """``colour`` mixed with black (``amount`` > 0) or white (``amount`` < 0) by ``|amount|`` in [0, 1]."""
+    rgb = np.array(to_rgb(colour))
+    target = np.zeros(3) if amount > 0 else np.ones(3)
+    return tuple(float(c) for c in rgb + abs(amount) * (target - rgb))
+
+
 def series_styles(
     labels: Iterable[str], vary: str = "marker", others: bool = True
 ) -> dict[str, dict[str, Any]]:
     """Colour, and the property that tells a method's variants apart, of each series label of a figure.
 
     A label naming a method gets the method's colour; the k-th distinct label of one
-    method (its variants: other options) gets the k-th entry of :data:`MARKERS` or
-    :data:`LINESTYLES`, after ``vary``. Labels naming no method take
+    method (its variants: other options) gets the k-th shade of that colour
+    (:data:`SHADES`: the first is the colour itself) and the k-th entry of
+    :data:`MARKERS` or :data:`LINESTYLES`, after ``vary``, so variants differ by
+    colour and by marker or line style. Labels naming no method take
     :data:`OTHER_COLOURS` in order (cycling) when ``others`` is true, and no style
     at all otherwise (they then take the colour cycle of their Axes).
     """
@@ -145,8 +165,53 @@ def series_styles(
             continue
         k = variants.get(method, 0)
         variants[method] = k + 1
-        styles[label] = {"color": METHOD_COLOURS[method], vary: cycle[k % len(cycle)]}
+        colour = METHOD_COLOURS[method] if k == 0 else shade(METHOD_COLOURS[method], SHADES[k % len(SHADES)])
+        styles[label] = {"color": colour, vary: cycle[k % len(cycle)]}
     return styles
+
+
+def legend_outside(ax: Axes, where: str = "right", **options: Any) -> Legend:
+    """The legend of ``ax`` outside its frame, so it never covers data: to the ``"right"`` of the Axes
+    (top aligned) or ``"below"`` it (under the x label, several columns)."""
+    if where == "right":
+        placement = {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0), "borderaxespad": 0.0}
+    elif where == "below":
+        placement = {"loc": "upper center", "bbox_to_anchor": (0.5, -0.18), "borderaxespad": 0.0}
+    else:
+        raise ValidationError("where", f"must be 'right' or 'below', got {where!r}")
+    return ax.legend(**{"fontsize": 8, **placement, **options})
+
+
+def integer_ticks(axis: Any) -> None:
+    """Ticks of ``axis`` (``ax.xaxis``) at whole numbers only: counts, iterations."""
+    axis.set_major_locator(MaxNLocator(integer=True))
+
+
+def log_ticks(axis: Any) -> None:
+    """Readable ticks on a logarithmic ``axis``: at 1, 2 and 5 times the powers of ten, at most about
+    six, written as plain numbers, with unlabelled minor ticks (a short axis otherwise labels every
+    minor tick, and the labels run into each other)."""
+    axis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0), numticks=6))
+    axis.set_major_formatter("{x:g}")
+    axis.set_minor_locator(LogLocator(base=10.0, subs=np.arange(2, 10), numticks=12))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def symlog_axis(ax: Axes, values: Any, linthresh: float, numticks: int = 6) -> None:
+    """A symmetric-logarithmic y axis for signed ``values``: linear within ``linthresh`` of zero.
+
+    The linear part gets a quarter of the axis (matplotlib's default gives it the height of
+    one decade, so ``-10^0``, ``0`` and ``10^0`` pile up when many decades are shown), and
+    the decades at most ``numticks`` labelled ticks, without minor ticks.
+    """
+    values = np.abs(np.asarray(values, dtype=np.float64))
+    top = float(values[np.isfinite(values)].max(initial=linthresh))
+    decades = max(math.log10(max(top, linthresh) / linthresh), 1.0)
+    ax.set_yscale("symlog", linthresh=linthresh, linscale=decades / 3.0)
+    locator = SymmetricalLogLocator(linthresh=linthresh, base=10.0, subs=(1.0,))
+    locator.set_params(numticks=numticks)
+    ax.yaxis.set_major_locator(locator)
+    ax.yaxis.set_minor_locator(NullLocator())
 
 
 def coverage_label(level: float) -> str:
