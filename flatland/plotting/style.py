@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -44,6 +45,7 @@ __all__ = [
     "SHADES",
     "SKETCH_COLOURS",
     "TWO_SIGMA",
+    "category_ticks",
     "coverage_label",
     "integer_ticks",
     "legend_outside",
@@ -180,6 +182,16 @@ def legend_outside(ax: Axes, where: str = "right", **options: Any) -> Legend:
     else:
         raise ValidationError("where", f"must be 'right' or 'below', got {where!r}")
     return ax.legend(**{"fontsize": 8, **placement, **options})
+
+
+def category_ticks(ax: Axes, positions: Sequence[float], labels: Sequence[str]) -> None:
+    """Name the x positions of ``ax`` with ``labels`` (methods, integrals), horizontally and wrapped at
+    spaces to the width one label has (the Axes' share of its figure's width over the number of
+    labels), so that neighbouring labels never run into each other."""
+    share = ax.get_position().width * ax.figure.get_figwidth() / max(len(labels), 1)
+    width = max(6, int(12 * share))  # about 12 characters of 8 pt text per inch
+    wrapped = [textwrap.fill(str(t), width, break_long_words=False) for t in labels]
+    ax.set_xticks(list(positions), wrapped, fontsize=8)
 
 
 def integer_ticks(axis: Any) -> None:

@@ -26,6 +26,7 @@ from flatland.plotting.style import (
     METHOD_COLOURS,
     OTHER_COLOURS,
     REFERENCE_STYLE,
+    category_ticks,
     coverage_label,
     method_colour,
     new_axes,
@@ -96,7 +97,7 @@ def plot_estimates(
                       color=method_colour(label), label=None if i == 0 else "_estimate")  # fmt: skip
     if reference is not None:
         ax.axhline(float(reference), label=reference_label, **REFERENCE_STYLE)
-    ax.set_xticks(positions, labels, rotation=20, ha="right")
+    category_ticks(ax, positions, labels)
     ax.set_xlim(-0.5, len(labels) - 0.5)
     ax.set_ylabel(ylabel or ("dI/dθ" if of == "derivative" else "I"))
     ax.legend(loc="best", fontsize=8)
