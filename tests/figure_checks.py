@@ -14,11 +14,13 @@ window extent of each text and legend (``get_window_extent``), in display pixels
 * a legend entry whose series draws nothing (``"boundary (rmse 0 left out)"``).
 
 Extents are shrunk by :data:`SLACK` pixels before they are compared, so texts that
-merely touch (a descender on the next line's ascender) do not count.
+merely touch (a descender on the next line's ascender) do not count, and a legend is
+compared with the data of its Axes only where it lies inside the Axes (data is clipped
+to its Axes).
 
-:func:`install_notebook_check` registers a check after every cell of an IPython kernel:
-a cell whose value is a figure with a defect writes the defects to stderr, which the
-tutorial test (tests/test_tutorials.py) rejects as it rejects any output on stderr.
+:func:`install_notebook_check` checks every figure an IPython kernel displays: a figure
+with a defect writes the defects to stderr, which the tutorial test
+(tests/test_tutorials.py) rejects as it rejects any output on stderr.
 """
 
 from __future__ import annotations
@@ -193,8 +195,11 @@ def legend_over_data(fig: Figure, renderer: Any) -> list[str]:
     for legend, axes in _legends(fig):
         box = legend.get_window_extent(renderer)
         for ax in axes:
+            inside = Bbox.intersection(box, ax.get_window_extent(renderer))  # data is clipped to its Axes
+            if inside is None or inside.width <= 2 * SLACK or inside.height <= 2 * SLACK:
+                continue
             for what, path, filled in _data_paths(ax):
-                if _covers(box, path, filled):
+                if _covers(inside, path, filled):
                     found.append(f"{_name(ax)} legend covers the {what}")
                     break
     return found
@@ -240,29 +245,42 @@ def figure_defects(fig: Figure) -> list[str]:
 
 
 def install_notebook_check(dump: str | None = None) -> None:
-    """After every cell of this IPython kernel, report the defects of a figure the cell returns on stderr.
+    """Check every figure this IPython kernel displays (a cell's value or ``display(fig)``) and report
+    its defects on stderr.
 
-    With ``dump`` (a folder), every such figure is also written there as ``figNN.png``, in order.
+    The check wraps the PNG formatter of :class:`~matplotlib.figure.Figure`, which
+    ``%matplotlib inline`` installs in a notebook's first cell: after every cell the wrapper is
+    put back if the formatter was replaced. With ``dump`` (a folder), every displayed figure is
+    also written there as ``figNN.png``, in order.
     """
     from pathlib import Path
 
     from IPython import get_ipython
 
+    shell = get_ipython()
     count = itertools.count(1)
 
-    def check(result: Any) -> None:
-        value = getattr(result, "result", None)
-        if not isinstance(value, Figure):
-            return
-        defects = figure_defects(value)
-        number = next(count)
-        if dump:
-            Path(dump).mkdir(parents=True, exist_ok=True)
-            value.savefig(Path(dump) / f"fig{number:02d}.png", dpi=80)
-        if defects:
-            print(f"figure {number}: layout defects:\n  " + "\n  ".join(defects), file=sys.stderr)
+    def checked(original: Any) -> Any:
+        def png(fig: Figure, *args: Any, **kwargs: Any) -> Any:
+            number = next(count)
+            defects = figure_defects(fig)
+            if dump:
+                Path(dump).mkdir(parents=True, exist_ok=True)
+                fig.savefig(Path(dump) / f"fig{number:02d}.png", dpi=80, bbox_inches="tight")
+            if defects:
+                print(f"figure {number}: layout defects:\n  " + "\n  ".join(defects), file=sys.stderr)
+            return original(fig, *args, **kwargs)
 
-    get_ipython().events.register("post_run_cell", check)
+        png.checks_layout = True
+        return png
+
+    def ensure(*_: Any) -> None:
+        formatter = shell.display_formatter.formatters["image/png"]
+        current = formatter.type_printers.get(Figure)
+        if current is not None and not getattr(current, "checks_layout", False):
+            formatter.for_type(Figure, checked(current))
+
+    shell.events.register("post_run_cell", ensure)
 
 
 __all__ = [

@@ -281,6 +281,18 @@ def tutorials_kernels(tmp_path, monkeypatch, flatland_films):
                 title=f"{name} at θ = 1.0, N = 200,000",
             )
         )
+    # a scene study's sweep (flatland study shadow): few decades, intervals wider than most biases
+    shadow_kappa = np.array([10.0, 100.0, 1000.0, 10000.0, 100000.0])
+    figs.append(
+        pt.plot_kappa_tradeoff(
+            shadow_kappa,
+            [-7.0, 3.0, 0.2, -4.0, -30.0],
+            [13.0, 9.0, 16.0, 20.0, 8.0],
+            [460.0, 300.0, 650.0, 880.0, 1500.0],
+            level=LEVEL,
+            title="study 'shadow': dI/dθ of shadow:occluder.translate.x",
+        )
+    )
     rmse = {f"N = {n:,}": np.sqrt((2.0 / (1 + kappas)) ** 2 + 0.09 * kappas / n) for n in (10_000, 1_000_000)}
     figs.append(
         pt.plot_curves(

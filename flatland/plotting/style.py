@@ -29,7 +29,7 @@ from matplotlib.axes import Axes
 from matplotlib.colors import Normalize, to_rgb
 from matplotlib.figure import Figure
 from matplotlib.legend import Legend
-from matplotlib.ticker import LogLocator, MaxNLocator, NullFormatter, NullLocator, SymmetricalLogLocator
+from matplotlib.ticker import FixedLocator, LogLocator, MaxNLocator, NullFormatter, NullLocator
 
 from flatland.core.validate import ValidationError
 
@@ -213,16 +213,18 @@ def symlog_axis(ax: Axes, values: Any, linthresh: float, numticks: int = 6) -> N
     """A symmetric-logarithmic y axis for signed ``values``: linear within ``linthresh`` of zero.
 
     The linear part gets a quarter of the axis (matplotlib's default gives it the height of
-    one decade, so ``-10^0``, ``0`` and ``10^0`` pile up when many decades are shown), and
-    the decades at most ``numticks`` labelled ticks, without minor ticks.
+    one decade), and the ticks are 0 and the powers of ten at or beyond ``linthresh`` on each
+    side, at most ``numticks`` in all, without minor ticks: matplotlib's own locator also ticks
+    the decades inside the linear part, where ``-10^0``, ``0`` and ``10^0`` pile up.
     """
     values = np.abs(np.asarray(values, dtype=np.float64))
-    top = float(values[np.isfinite(values)].max(initial=linthresh))
-    decades = max(math.log10(max(top, linthresh) / linthresh), 1.0)
+    top = max(float(values[np.isfinite(values)].max(initial=linthresh)), linthresh)
+    decades = max(math.log10(top / linthresh), 1.0)
     ax.set_yscale("symlog", linthresh=linthresh, linscale=decades / 3.0)
-    locator = SymmetricalLogLocator(linthresh=linthresh, base=10.0, subs=(1.0,))
-    locator.set_params(numticks=numticks)
-    ax.yaxis.set_major_locator(locator)
+    powers = np.arange(math.ceil(math.log10(linthresh) - 1e-9), math.floor(math.log10(top) + 1e-9) + 1)
+    stride = max(1, math.ceil(len(powers) / max(1, (numticks - 1) // 2)))
+    ticks = 10.0 ** powers[::-1][::stride][::-1]
+    ax.yaxis.set_major_locator(FixedLocator([*(-ticks[::-1]), 0.0, *ticks]))
     ax.yaxis.set_minor_locator(NullLocator())
 
 
