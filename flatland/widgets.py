@@ -85,7 +85,7 @@ def kernel_view(kappa: float, theta: float = 1.0, n: int = 20_000, seed: int = 1
     fig = plot_grid(
         2, titles=[f"two_steps at θ = {theta:g}, kernel κ = {kappa:g}", f"dI/dθ from {n:,} samples"]
     )
-    pt.plot_integrand(x, detach(integral.f(x, theta)), jumps, label="f(x, θ)", ax=fig.axes[0])
+    pt.plot_integrand(x, detach(integral.f(x, theta)), jumps, label="f(x, θ)", annotate=False, ax=fig.axes[0])
     centre, width = 0.5 * (where[0] + where[-1]), 1.0 / np.sqrt(kappa)
     kernel = np.exp(-0.5 * ((x - centre) / width) ** 2)
     scale = float(np.max(np.abs(detach(integral.f(x, theta))))) or 1.0
