@@ -1,7 +1,8 @@
 """Per-pixel reference derivative of the ``hard_shadow`` scenes: finite differences, Richardson-extrapolated.
 
 ``python -m benchmarks.hard_shadow_reference [--scenes hard_shadow hard_shadow_cube] [--passes 64]``
-writes ``benchmarks/reference/<scene>.npz``: the derivative of every pixel with
+writes ``sphere3d/scenes/references/<scene>.npz`` (package data, read by
+:func:`sphere3d.scene.load_reference`): the derivative of every pixel with
 respect to ``occluder.translate.x`` at θ = 0 and its standard error.
 
 Estimator. Pass k renders the image at θ = ±h and ±h/2 with the samples of seed
@@ -69,7 +70,7 @@ H = 0.01
 SEED = 1000
 SPP_PER_PASS = 1024
 PASSES = 64
-DIRECTORY = Path(__file__).parent / "reference"
+DIRECTORY = Path(__file__).resolve().parents[1] / "sphere3d" / "scenes" / "references"  # package data
 
 
 def richardson_pass(scene_name: str, seed: int, spp: int = SPP_PER_PASS, h: float = H) -> np.ndarray:

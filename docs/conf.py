@@ -36,6 +36,8 @@ extensions = [
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
+    "sphinx_copybutton",
+    "sphinx-mathjax-offline",  # MathJax 3 copied into _static: formulas typeset without a network
     "myst_nb",
     "project_docs",
 ]
@@ -77,7 +79,8 @@ nb_output_stderr = "warn"
 nb_merge_streams = True
 
 # --- HTML
-html_theme = "alabaster"
+html_theme = "furo"  # a readable, searchable theme with a light and a dark mode
 html_title = "reparam-lab"
 html_static_path = ["_static"]
-html_theme_options = {"description": "Differentiating discontinuous integrands", "fixed_sidebar": True}
+copybutton_prompt_text = r">>> |\.\.\. |\$ "  # copy commands and code, not their prompts
+copybutton_prompt_is_regexp = True

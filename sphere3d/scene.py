@@ -73,8 +73,10 @@ __all__ = [
     "Shape",
     "check_vector",
     "list_scenes",
+    "load_reference",
     "load_scene",
     "parameter_names",
+    "reference_path",
 ]
 
 SHAPE_TYPES = ("rectangle", "box", "icosphere", "disk", "mesh")
@@ -350,6 +352,35 @@ def _builtin_dir():
 def list_scenes() -> tuple[str, ...]:
     """Names of the built-in scenes (``sphere3d/scenes/*.json``)."""
     return tuple(sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".json")))
+
+
+def reference_path(name: str) -> Path:
+    """Where the stored reference derivative image of the built-in scene ``name`` is (package data,
+    ``sphere3d/scenes/references/<name>.npz``, written by ``python -m benchmarks.hard_shadow_reference``)."""
+    return Path(str(_builtin_dir() / "references" / f"{name}.npz"))
+
+
+def load_reference(name: str) -> dict[str, Any]:
+    """The stored reference derivative image of a built-in scene, as a dict of arrays.
+
+    Central differences with common random numbers, Richardson-extrapolated over two steps
+    (truncation $O(h^4)$), with a standard error per pixel: ``derivative``, ``stderr``, the two
+    differences ``d_h`` and ``d_h2``, and the settings (``scene``, ``param``, ``h``, ``spp``).
+    Shipped with the package, so a tutorial reads it from an installed copy too.
+
+    Raises
+    ------
+    ValidationError
+        If the scene has no stored reference (naming the scenes that have one).
+    """
+    path = reference_path(str(name))
+    if not path.is_file():
+        stored = sorted(
+            p.name[:-4] for p in (_builtin_dir() / "references").iterdir() if p.name.endswith(".npz")
+        )
+        raise ValidationError("name", f"no stored reference for {name!r}; stored: {', '.join(stored)}")
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
 
 
 def load_scene(source: Any) -> Scene:

@@ -43,8 +43,13 @@ from jupyter_client.manager import KernelManager
 from nbclient import NotebookClient
 from nbclient.exceptions import CellExecutionError
 
-source, target, workdir, sockets, timeout = sys.argv[1:6]
+source, target, workdir, sockets, timeout, root, dump = sys.argv[1:8]
 nb = nbformat.read(source, as_version=4)
+# a first cell, taken out again below: every figure a cell returns is checked for layout defects
+# (tests/figure_checks.py), which are written to stderr
+check = f"import sys; sys.path.insert(0, {root!r})\n"
+check += f"from tests.figure_checks import install_notebook_check; install_notebook_check({dump or None!r})"
+nb.cells.insert(0, nbformat.v4.new_code_cell(check))
 # IPC sockets in a private folder: no TCP ports to race for with other processes on the machine
 kernel = KernelManager(kernel_name="python3", transport="ipc", ip=sockets)
 client = NotebookClient(nb, km=kernel, timeout=int(timeout), resources={"metadata": {"path": workdir}})
@@ -54,6 +59,7 @@ try:
     client.execute()
 except CellExecutionError as exc:
     status, error = 1, str(exc)
+nb.cells.pop(0)
 nbformat.write(nb, target)
 print(json.dumps({"seconds": time.perf_counter() - start, "error": error}))
 sys.exit(status)
@@ -153,6 +159,8 @@ def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
             str(TUTORIALS),
             str(sockets),
             str(CELL_TIMEOUT),
+            str(ROOT),
+            os.environ.get("FIGURE_DUMP", "") and str(Path(os.environ["FIGURE_DUMP"]) / path.stem),
         ],
         capture_output=True,
         text=True,

@@ -17,6 +17,14 @@
 # %% [markdown]
 # # 1. The Leibniz rule: moving limits and moving discontinuities
 #
+# **What you will learn.**
+#
+# - why the derivative of an integral has a term for every jump that moves with θ (the Leibniz
+#   rule), checked on every textbook integral
+# - forward-mode dual numbers (`Dual`, `variable`, `tangent`, `detach`): how the library computes
+#   derivatives, used by every later notebook
+# - why a Monte Carlo estimator differentiated sample by sample sees no jump
+#
 # A rendered pixel is an integral $I(\theta) = \int_X f(x, \theta)\, dx$, and inverse rendering
 # needs its derivative with respect to a scene parameter $\theta$. The integral depends on $\theta$
 # in three ways: through the values of $f$, through the limits of integration, and through the
@@ -48,6 +56,46 @@ from flatland.integrals import Circle
 from flatland.plotting import textbook as pt
 
 SEED = 20191117
+
+# %% [markdown]
+# ## Derivatives by dual numbers
+#
+# Every derivative in this course is computed by *forward-mode automatic differentiation*. A
+# `Dual` is an array carrying two numbers per entry: a value and a *tangent*, the derivative of
+# that value with respect to the one scalar parameter $\theta$. Arithmetic on Duals applies the
+# chain rule entry by entry, so code written like plain numpy computes a function and its
+# derivative at once: $(u v)' = u' v + u v'$, $\sin(u)' = \cos(u)\, u'$, and so on.
+#
+# - `variable(theta0)` is $\theta$ itself at $\theta_0$: value $\theta_0$, tangent 1.
+# - `tangent(y)` reads $dy/d\theta$; `detach(y)` the value alone, as a plain number or array
+#   (its derivative dropped).
+# - `y - detach(y)` has value 0 and tangent $dy/d\theta$: a quantity that is zero *now* but
+#   moves like $y$. Tutorial 6 builds its translations from exactly this.
+# - Comparisons act on values and return plain booleans, so an indicator such as
+#   $1_{x > \theta}$ has derivative 0 wherever it is evaluated: the jump's motion is invisible to
+#   it. That is the term the Leibniz rule below adds back, and the term naive differentiation
+#   misses (tutorial 4).
+
+# %%
+theta_dual = variable(0.5)
+y = np.sin(theta_dual) * theta_dual**2
+grid01 = np.linspace(0.0, 1.0, 5)
+decay = np.exp(-grid01 * theta_dual)  # an array: one value and one tangent per entry
+indicator = np.where(grid01 > theta_dual, 1.0, 0.0)  # compared on values: a plain array
+moving_zero = theta_dual - detach(theta_dual)
+print(f"y = sin(θ) θ² at θ = 0.5: value {detach(y):.6f}, dy/dθ {tangent(y):.6f}")
+print("d/dθ exp(-x θ) on the grid:", np.round(tangent(decay), 6))
+print("indicator 1[x > θ]:", indicator, "(a plain array, no tangent)")
+print(f"θ - detach(θ): value {detach(moving_zero)}, derivative {tangent(moving_zero)}")
+
+# %%
+# check: the tangents are the hand-derived derivatives (rounding tolerance 1e-12): (sin θ θ²)' =
+# cos θ θ² + 2 θ sin θ, (e^(-xθ))' = -x e^(-xθ); the indicator carries no tangent; θ - detach(θ) is 0
+# moving at speed 1
+assert abs(tangent(y) - (np.cos(0.5) * 0.25 + 2 * 0.5 * np.sin(0.5))) < 1e-12
+assert np.allclose(tangent(decay), -grid01 * np.exp(-grid01 * 0.5), rtol=0, atol=1e-12)
+assert isinstance(indicator, np.ndarray) and indicator.tolist() == [0.0, 0.0, 0.0, 1.0, 1.0]
+assert detach(moving_zero) == 0.0 and tangent(moving_zero) == 1.0
 
 # %% [markdown]
 # ## Where the terms come from

@@ -17,6 +17,14 @@
 # %% [markdown]
 # # 2. Monte Carlo, importance sampling and control variates
 #
+# **What you will learn.**
+#
+# - Monte Carlo integration, importance sampling and control variates, with variances measured
+#   against their predictions
+# - the statistics every check cell of the course relies on: standard errors, z and t quantiles, and
+#   the Šidák correction for several comparisons
+# - why differentiating the estimator is correct when the integrand is smooth
+#
 # Renderers estimate integrals by Monte Carlo, and every gradient estimator in this project is a
 # Monte Carlo estimator too; its variance decides how many samples a trustworthy answer costs.
 # This notebook measures the three facts of `docs/theory/monte_carlo.md`:
@@ -74,6 +82,47 @@ print(f"z-score {plain.z_score(exact, of='value'):+.2f}")
 # %%
 # check: the closed form lies within z = 3.29 standard errors (two-sided 99.9 %)
 assert abs(plain.value - exact) <= z * plain.value_stderr
+
+# %% [markdown]
+# ## How the check cells decide: standard errors, z, t and the Šidák correction
+#
+# Every check cell of the course compares a Monte Carlo number with a closed form (or with
+# another measurement) and must pass when the code is right, however the random numbers fall,
+# except with a small, stated probability. The recipe, used from here on:
+#
+# - **Standard error.** An estimate $\hat I$ from $N$ independent samples has standard error
+#   $\mathrm{se} = \hat\sigma/\sqrt N$, $\hat\sigma$ the samples' standard deviation.
+# - **z-score.** $z = (\hat I - I)/\mathrm{se}$ is nearly standard normal when the estimator is
+#   unbiased (central limit theorem). The check passes when $|z| \le z_\alpha$, the two-sided
+#   normal quantile of level $1 - \alpha$: 3.29 for $\alpha = 10^{-3}$ (99.9 %), 2.58 for 1 %.
+#   A correct estimator then fails with probability $\alpha$; a biased one fails more often as
+#   $N$ grows, since its $|z|$ grows like $\sqrt N$.
+# - **Student's t.** The renderers estimate se from $B$ independent *batches* (16 by default),
+#   not from the samples; se is then itself uncertain, and the quantile is Student's t with
+#   $B - 1$ degrees of freedom (larger than the normal one: 4.07 instead of 3.29 at 99.9 % for 15).
+# - **Šidák correction.** A cell that makes $m$ comparisons (one per pixel, per method, per
+#   sample count) tests each at level $\alpha_1 = 1 - (1 - \alpha)^{1/m}$, so that the whole cell
+#   fails by chance with probability $\alpha$ (for independent comparisons; fewer otherwise).
+#   With $\alpha = 10^{-3}$ and $m = 64$ pixels each comparison uses $|z| \le 4.4$.
+# - **Variances** are compared with a chi-square interval instead (below).
+#
+# The tolerance of every check is derived this way and stated in its first line; none is tuned
+# until the check passes. The intervals the figures and command lines *print* use one level
+# throughout, 99 % two-sided (`flatland.core.stats.LEVEL`). The quantiles, computed:
+
+# %%
+z999 = normal_quantile(0.999)
+alpha64 = sidak(1e-3, 64)
+z64 = normal_quantile(1 - alpha64)
+t999 = stats.t.ppf(1 - 0.001 / 2, 15)
+print(f"z at 99.9 %: {z999:.3f};  t (15 degrees of freedom): {t999:.3f}")
+print(f"Šidák over 64 comparisons: each at α1 = {alpha64:.3e}, z = {z64:.3f}")
+
+# %%
+# check: the quantiles are the normal and Student-t laws' (exact up to rounding), and 64 comparisons at
+# α1 fail together with probability α = 1e-3 when independent: 1 - (1 - α1)^64 = α
+assert abs(z999 - 3.2905) < 1e-4 and abs(t999 - 4.0728) < 1e-4
+assert abs((1 - (1 - alpha64) ** 64) - 1e-3) < 1e-12 and 4.31 < z64 < 4.33
 
 # %% [markdown]
 # ## The variance falls like $1/N$

@@ -17,6 +17,12 @@
 # %% [markdown]
 # # 3. Samples that depend on θ
 #
+# **What you will learn.**
+#
+# - what changes when the samples themselves depend on θ (a sampler that follows the parameter)
+# - where the jump of the estimator then sits in the random numbers u, and which samplers follow it
+# - how to differentiate through the density p
+#
 # Tutorial 2 differentiated an estimator whose samples $x_i \sim p$ did not depend on $\theta$. Renderers
 # often sample in a way that does: a light sampled by its current position, a direction sampled by
 # the current roughness. The samples are then made from $\theta$-independent random numbers $u_i$ by a
@@ -79,11 +85,13 @@ jump = step.discontinuities(variable(theta0))[0]  # location c(θ) as a Dual (ta
 # Each sampler maps uniforms $u$ and a parameter $\theta$ (a float or a forward-mode `Dual`) to samples
 # $x$ and their density $p(x, \theta)$, both computed with $\theta$ so that their derivatives follow:
 #
-# - **translated at speed $v$**: $T(u, \theta) = s\,\Phi^{-1}(u) + v\,(\theta - \theta_0)$, the library's
+# - **translated at speed $v$**: $T(u, \theta) = s\,\Phi^{-1}(u) + v\,(\theta - \theta_0)$, the
+#   library's
 #   proposal $\mathcal N(0, s^2)$ shifted by $v(\theta - \theta_0)$, with density $\mathcal N(x; v(\theta -
 #   \theta_0), s^2)$. $v = 0$ is the fixed sampler of tutorials 2 and 4; $v = 1$ moves the samples with
 #   the jump;
-# - **truncated at θ**: the ideal proposal of tutorial 2, $p(x, \theta) = K(x)/(1 - \Phi(\theta))$ on
+# - **truncated at θ**: the ideal proposal of tutorial 2, $p(x, \theta) = K(x)/(1 - \Phi(\theta))$
+#   on
 #   $x > \theta$, sampled by $T(u, \theta) = \Phi^{-1}\bigl(\Phi(\theta) + u\,(1 - \Phi(\theta))\bigr)$. Its
 #   breakpoint $u = 0$ is mapped to $c(\theta) = \theta$ for every $\theta$.
 #

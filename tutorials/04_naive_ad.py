@@ -17,6 +17,12 @@
 # %% [markdown]
 # # 4. Why naive automatic differentiation fails
 #
+# **What you will learn.**
+#
+# - why naive automatic differentiation of a Monte Carlo estimator misses the moving jump, seen as a
+#   staircase in θ
+# - the same failure at a silhouette in a flatland image
+#
 # Forward-mode automatic differentiation of a Monte Carlo estimator is exact for smooth
 # integrands (Loubet et al. 2019, Sec. 3.1): the derivative of the estimator is an unbiased estimator of the
 # derivative. This notebook shows, on two integrals side by side, what goes wrong when the

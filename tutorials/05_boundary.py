@@ -17,6 +17,12 @@
 # %% [markdown]
 # # 5. Boundary terms: edge sampling in flatland
 #
+# **What you will learn.**
+#
+# - how to add the missing term directly: boundary (edge) sampling in flatland, checked against
+#   closed forms
+# - what it costs, and why it is hard to carry over to 3D
+#
 # Naive differentiation returns the interior term of the Leibniz rule and drops the term of the
 # moving discontinuities (tutorials 1 and 4). The direct remedy is to compute that term and add
 # it (`docs/theory/leibniz.md`, `docs/theory/boundary.md`):

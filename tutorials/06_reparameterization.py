@@ -17,6 +17,13 @@
 # %% [markdown]
 # # 6. Reparameterization by translation
 #
+# **What you will learn.**
+#
+# - the paper's idea: a change of variables (a translation) that moves with the discontinuity, so
+#   the samples no longer cross it
+# - how that reparameterizes a textbook step, a pixel integral and a shading integral
+# - why one translation per integral is not enough (sliders: move θ and watch the two pictures)
+#
 # Naive differentiation fails because the samples stay put while the discontinuity moves
 # (tutorial 4). Loubet et al. (2019, Sec. 3.2) turn this around: change the variable
 # of integration so that the discontinuity does not move. With $x = T(y, \theta)$,
@@ -52,6 +59,7 @@ from flatland.core.stats import normal_quantile, sidak
 from flatland.plotting import textbook as pt
 from flatland.plotting import tutorials as ptu
 from flatland.sampling import filter_value, sample_tent
+from flatland.widgets import explore, translation_view
 
 SEED = 20191117
 N = 200_000
@@ -101,8 +109,25 @@ fig = ptu.plot_grid(2, titles=["in x: f(x, θ)", "in y: f(y + θ − θ0, θ)"])
 for th in (theta0, theta0 + 0.6):
     pt.plot_integrand(grid, detach(step.f(grid, th)), [th], label=f"θ = {th}", ax=fig.axes[0])
     in_y = detach(step.f(grid + (th - theta0), th))  # T(y, θ) = y + θ - θ0 as plain numbers
-    pt.plot_integrand(grid, in_y, [theta0], label=f"θ = {th}", ax=fig.axes[1], xlabel="y")
+    pt.plot_integrand(grid, in_y, [theta0], label=f"θ = {th}", ax=fig.axes[1], xlabel="y",
+                      ylabel="f(y + θ − θ0, θ)")  # fmt: skip
 fig
+
+# %% [markdown]
+# **Explore.** The same two pictures behind a slider for $\theta$ (`flatland.widgets.translation_view`):
+# move it and watch the jump run away in $x$ while it stays at $\theta_0$ in $y$. (In a static copy
+# of this page the slider does not run; open the notebook in Jupyter.)
+
+# %%
+explore_translation = explore(translation_view, theta=(-0.5, 1.5, 1.1))
+explore_translation
+
+# %%
+# check: one slider and the figure's output; the view it redraws keeps the jump at θ0 = 0.5 in y for any θ
+assert len(explore_translation.children) == 2
+assert all(
+    line.get_xdata()[0] == 0.5 for line in translation_view(-0.3).axes[1].lines if line.get_linestyle() == ":"
+)
 
 # %% [markdown]
 # ## 2. A pixel integral: translating the film coordinate

@@ -17,6 +17,12 @@
 # %% [markdown]
 # # 8. Choosing the transform by ray tracing: probe rays
 #
+# **What you will learn.**
+#
+# - how a renderer finds the point to follow: probe rays and the six-step rule of the paper's Sec.
+#   4.3, case by case
+# - what the chosen point does to a pixel's derivative (slider: the number of probes)
+#
 # In tutorial 6 we told the translation which point to follow: the bar's end, whose film
 # coordinate $t_a(\theta)$ we knew. Tutorial 7 confined each translation to a narrow kernel around
 # its sample. A renderer knows neither where the silhouettes in a pixel are nor how they move.
@@ -24,21 +30,25 @@
 # support and choosing, with a short heuristic, one point $p$ whose motion the transform follows
 # (`docs/theory/probes.md`; in flatland `flatland.reparam.probes.select_points`):
 #
-# 1. pair probe 0 with the *last* probe that hits a different shape (a miss is "no shape");
-# 2. if only one of the pair hits, use the hit;
-# 3. if both hit, the tangent line $(p_0, n_0)$ *occludes* $p_1$ when it separates $p_1$ from the
-#    origin $o$: $\bigl(n_0\cdot(p_1 - p_0)\bigr)\bigl(n_0\cdot(o - p_0)\bigr) < 0$, and likewise
-#    for $(p_1, n_1)$; if exactly one occludes the other, use the point on the occluder;
-# 4. otherwise nearly parallel lines ($|n_0\cdot n_1| > 0.99$) use $p_0$, and other lines are
-#    intersected: the corner where the two surfaces meet;
-# 5. no probe hits, or all hit one primitive: nothing to follow, the transform is the identity.
+# 1. pair probe 0 with the last probe that hits a *different* shape (a miss is "no shape");
+# 2. if only one of the pair hits, use its hit point;
+# 3. if both hit, test with the tangent line $(p_0, n_0)$ whether it separates $p_1$ from the ray
+#    origin $o$, $\text{occludes} = \bigl(n_0\cdot(p_1 - p_0)\bigr)\bigl(n_0\cdot(o - p_0)\bigr) < 0$,
+#    and likewise for $(p_1, n_1)$; if exactly one occludes the other, use the point on the occluder;
+# 4. if the normals are nearly parallel, $|n_0\cdot n_1| > 0.99$, use $p_0$;
+# 5. otherwise intersect the two tangent lines: the corner where the two surfaces meet;
+# 6. if no probe hits, or all hit one primitive, nothing is followed: the transform is the identity.
+#
+# These are the six steps of `docs/theory/probes.md`, numbered the same way there, in the figures
+# and in the checks below. The library reports which point it chose in `choice.code` (-1 nothing,
+# 0 probe 0's shape, 1 the partner's shape, 2 the corner); `CHOSEN` in the first cell names them.
 #
 # Of the shape chosen, flatland uses the hit *next to the switch* (the probe on that shape whose
 # neighbour sees something else) and can move it toward the discontinuity by bisection. The
 # point is *attached*: it keeps its barycentric coordinate and moves with its segment, so its
 # derivative is the motion the translation follows.
 #
-# Each rule gets a hand-made scene below, the flatland counterparts of the cases of the
+# Each step gets a hand-made scene below, the flatland counterparts of the cases of the
 # library's test `tests/flatland/test_methods.py::test04`, made geometrically consistent so that
 # the probes can really be traced. For each we draw the scene, the probes, the pair, the bracket
 # and the chosen point, and check the chosen point against its value derived by hand. The last
@@ -73,6 +83,7 @@ from flatland.sampling import filter_value, sample_filter
 from flatland.scene import load_scene
 from flatland.state import build_state
 from flatland.tracing import attached_points, cast, film_coordinate, film_direction
+from flatland.widgets import explore, probes_view
 
 SEED = 20191117
 CAMERA = {"position": [0.0, 0.0], "direction": [0.0, 1.0], "fov": 1.0, "pixels": 4}
@@ -80,6 +91,7 @@ ORIGIN = np.array(CAMERA["position"])
 SIGMA, SPREAD, PROBES = 0.1, 3.0, 4
 OFFSETS = SIGMA * SPREAD * np.linspace(-1.0, 1.0, PROBES)  # (-0.3, -0.1, 0.1, 0.3)
 TOL = ROUNDING * 4.0  # rounding: 64 ulps of the scenes' size (coordinates below 4)
+CHOSEN = {-1: "nothing (step 6)", 0: "probe 0's shape", 1: "the partner's shape", 2: "the corner (step 5)"}
 
 
 def segment(name, a, b, **material):
@@ -101,7 +113,7 @@ WALL = segment("wall", [-1.0, 2.0], [1.0, 2.0])  # a background at y = 2
 # barycentric coordinate along it — to `select_points`, together with the θ-dependent scene, a
 # direction inside the kernel (its centre, to reject corners behind the camera) and, for
 # bisection, the probes' film coordinates and the tracer. It also keeps, for the figures, what
-# each probe sees (its shape, -1 for a miss), the pair of rule 1, the first *bracket* (two
+# each probe sees (its shape, -1 for a miss), the pair of step 1, the first *bracket* (two
 # adjacent probes that see different shapes: the discontinuity lies between them) and the
 # tangent lines of the pair.
 
@@ -116,7 +128,7 @@ class Probed(NamedTuple):
     pair: tuple | None  # probe 0 and its partner
     bracket: tuple | None  # the first two adjacent probes that see different shapes
     tangents: list  # (point, normal) of the pair's hits where both hit
-    code: int  # the rule that chose (-1 none, 0 probe 0's shape, 1 the partner's, 2 the corner)
+    code: int  # the point chosen (-1 none, 0 probe 0's shape, 1 the partner's, 2 the corner): CHOSEN
     attached: object  # the chosen point, attached: a Dual, shape (1, 2)
     point: np.ndarray  # its value
     velocity: np.ndarray  # its derivative dp/dθ: the motion the transform follows
@@ -149,7 +161,7 @@ def probe(shapes, param, refine=0):
     ends = np.where(hit[:, None], hit_points, ORIGIN + 3.5 * film_direction(geom0, OFFSETS))
     shape = np.where(hit, geom.prim_shape[np.maximum(prim, 0)], -1)
     differs = np.flatnonzero(shape != shape[0])
-    pair = (0, int(differs[-1])) if differs.size else None  # rule 1: the last probe that sees another shape
+    pair = (0, int(differs[-1])) if differs.size else None  # step 1: the last probe that sees another shape
     switch = np.flatnonzero(shape[1:] != shape[:-1])
     bracket = (int(switch[0]), int(switch[0]) + 1) if switch.size else None
     both = pair is not None and hit[list(pair)].all()
@@ -185,7 +197,7 @@ expected_ends = [[-0.3, 1.0], [-0.1, 1.0], [0.2, 2.0], [0.6, 2.0]]
 assert np.allclose(occluder.ends, expected_ends, rtol=0.0, atol=TOL)
 
 # %% [markdown]
-# ## 2. The pair rule and the occlusion test
+# ## 2. Steps 1 and 3: the pair and the occlusion test
 #
 # Probe 0 sees the occluder; the last probe that sees something else is probe 3 (the wall), so
 # the pair is (0, 3). Probes 1 and 2 are adjacent and see different shapes: they *bracket* the
@@ -193,12 +205,14 @@ assert np.allclose(occluder.ends, expected_ends, rtol=0.0, atol=TOL)
 # $p_0 = (-0.3, 1)$, $p_1 = (0.6, 2)$ and normals $n_0 = n_1 = \pm(0, 1)$ (the products below do
 # not depend on the sign):
 #
-# - line 0 ($y = 1$): $\bigl(n_0\cdot(p_1 - p_0)\bigr)\bigl(n_0\cdot(o - p_0)\bigr) = (1)(-1) = -1 < 0$:
+# - line 0 ($y = 1$): $\bigl(n_0\cdot(p_1 - p_0)\bigr)\bigl(n_0\cdot(o - p_0)\bigr) = (1)(-1) = -1 <
+#   0$:
 #   it separates $p_1$ from $o$, so the occluder occludes the wall;
-# - line 1 ($y = 2$): $\bigl(n_1\cdot(p_0 - p_1)\bigr)\bigl(n_1\cdot(o - p_1)\bigr) = (-1)(-2) = 2 > 0$:
+# - line 1 ($y = 2$): $\bigl(n_1\cdot(p_0 - p_1)\bigr)\bigl(n_1\cdot(o - p_1)\bigr) = (-1)(-2) = 2 >
+#   0$:
 #   the wall does not occlude the occluder.
 #
-# Exactly one occludes: the point is on the occluder (rule code 0, probe 0's shape), and of its
+# Exactly one occludes (step 3): the point is on the occluder, probe 0's shape, and of its
 # hits the one next to the switch, probe 1's $(-0.1, 1)$. It is attached to the moving segment,
 # so $dp/d\theta = (1, 0)$. We compute the two products from the attached hit points and normals:
 
@@ -207,7 +221,7 @@ assert np.allclose(occluder.ends, expected_ends, rtol=0.0, atol=TOL)
 line0 = (n0 @ (p1 - p0)) * (n0 @ (ORIGIN - p0))
 line1 = (n1 @ (p0 - p1)) * (n1 @ (ORIGIN - p1))
 print(f"pair {occluder.pair}, bracket {occluder.bracket}; line 0: {line0:+.3f}, line 1: {line1:+.3f}")
-print(f"rule {occluder.code}: chosen point {occluder.point}, dp/dθ = {occluder.velocity}")
+print(f"chosen: {CHOSEN[occluder.code]}, point {occluder.point}, dp/dθ = {occluder.velocity}")
 
 # %%
 # check: the pair, the bracket and both products are the hand-derived ones, and the library chose probe 1's
@@ -224,15 +238,15 @@ assert np.allclose(occluder.velocity, [1.0, 0.0], rtol=0.0, atol=TOL)
 # hit with the pair thick, the bracket shaded, the two tangent lines dotted and the chosen point.
 
 # %%
-plot_case(occluder, title="the occluder occludes the wall: rule 0")
+plot_case(occluder, title="step 3: the occluder occludes the wall")
 
 # %% [markdown]
-# ## 3. Only one of the pair hits
+# ## 3. Step 2: only one of the pair hits
 #
 # Without the wall the probes right of the occluder's end escape. A miss counts as "no shape", so
-# the pair is still (0, 3), and only probe 0 hits: its shape is followed (rule 0), at the hit next
+# the pair is still (0, 3), and only probe 0 hits: its shape is followed (step 2), at the hit next
 # to the switch, $(-0.1, 1)$. Mirrored, with the occluder from $(0, 1)$ to $(1, 1)$, probes 0 and 1
-# escape and only the partner hits: rule 1, its shape's hit next to the switch, probe 2's
+# escape and only the partner hits: step 2 again, the partner's shape, its hit next to the switch, probe 2's
 # $(0.1, 1)$.
 
 # %%
@@ -245,8 +259,8 @@ for ax, case in zip(fig.axes, alone.values(), strict=True):
 fig
 
 # %%
-# check: rule 0 at probe 1's hit (-0.1, 1) and rule 1 at probe 2's hit (0.1, 1), both moving with the
-# occluder (rounding tolerance TOL)
+# check: step 2 takes probe 0's shape at probe 1's hit (-0.1, 1), then the partner's at probe 2's
+# hit (0.1, 1), both moving with the occluder (rounding tolerance TOL)
 first, second = alone.values()
 assert first.shape.tolist() == [0, 0, -1, -1] and second.shape.tolist() == [-1, -1, 0, 0]
 assert (first.code, second.code) == (0, 1)
@@ -254,18 +268,18 @@ assert np.allclose([first.point, second.point], [[-0.1, 1.0], [0.1, 1.0]], rtol=
 assert np.allclose([first.velocity, second.velocity], [[1.0, 0.0], [1.0, 0.0]], rtol=0.0, atol=TOL)
 
 # %% [markdown]
-# ## 4. The occluder wins whichever probe hit it
+# ## 4. Step 3 again: the occluder wins whichever probe hit it
 #
 # Put the occluder on the right, from $(0, 1)$ to $(1, 1)$, in front of the wall: now probe 0 sees
 # the wall and the partner (probe 3) the occluder. By the same two products with the roles
 # swapped, line 1 ($y = 1$) separates $p_0 = (-0.6, 2)$ from $o$ and line 0 ($y = 2$) does not,
-# so the partner's shape is followed (rule 1), at probe 2's hit $(0.1, 1)$. Side by side with
+# so the partner's shape is followed (step 3), at probe 2's hit $(0.1, 1)$. Side by side with
 # section 2's scene:
 
 # %%
 occluders = {
-    "probe 0 on the occluder: rule 0": occluder,
-    "the partner on the occluder: rule 1": probe([near_right, WALL], "near.translate.x"),
+    "step 3, probe 0 on the occluder": occluder,
+    "step 3, the partner on the occluder": probe([near_right, WALL], "near.translate.x"),
 }
 fig = plot_grid(2, titles=list(occluders))
 for ax, case in zip(fig.axes, occluders.values(), strict=True):
@@ -274,26 +288,26 @@ fig
 
 # %%
 # check: whichever probe hit it, the point is on the occluder, next to the switch (rounding tolerance TOL)
-swapped = occluders["the partner on the occluder: rule 1"]
+swapped = occluders["step 3, the partner on the occluder"]
 assert swapped.shape.tolist() == [1, 1, 0, 0] and swapped.pair == (0, 3) and swapped.code == 1
 assert np.allclose(swapped.point, [0.1, 1.0], rtol=0.0, atol=TOL)
 assert np.allclose(swapped.velocity, [1.0, 0.0], rtol=0.0, atol=TOL)
 
 # %% [markdown]
-# ## 5. Tangent lines: the corner, and nearly parallel lines
+# ## 5. Steps 4 and 5: nearly parallel lines, and the corner
 #
 # When neither tangent line separates the other hit from the origin, both surfaces are seen up to
 # where they meet, and the point to follow is that meeting point. Take a roof seen from below:
 # `left` from $(-1, 1)$ to $(0, 2)$ (the line $y = x + 2$) and `right` from $(0, 2)$ to $(1, 1)$ (the
 # line $y = 2 - x$), and move `right` along $x$. The probe at film coordinate $t$ hits `left` where
 # $y = t y + 2$, at $y = 2/(1 - t)$, and `right` at $y = 2/(1 + t)$. Neither line separates the other
-# hit from $o$, the normals $(\mp 1, 1)/\sqrt2$ are perpendicular, so rule 2 intersects the lines:
+# hit from $o$, the normals $(\mp 1, 1)/\sqrt2$ are perpendicular, so step 5 intersects the lines:
 # $y = x + 2$ and $y = 2 - (x - \theta)$ meet at $(\theta/2, 2 + \theta/2)$, the corner $(0, 2)$
 # moving with $dp/d\theta = (1/2, 1/2)$ — the derivative of the intersection of two *moving*
 # lines, recomputed from the attached points and normals.
 #
 # Lines that are nearly parallel meet far away or at a badly conditioned point (a small error in
-# either normal moves it far along the lines), so above $|n_0\cdot n_1| > 0.99$ the rule falls back
+# either normal moves it far along the lines), so above $|n_0\cdot n_1| > 0.99$ step 4 falls back
 # to probe 0's shape. `west` from $(-1, 3)$ to $(0, 3)$
 # and `east` from $(0, 3)$ to $(1, 2.95)$ have $|n_0\cdot n_1| = 1/\sqrt{1 + 0.05^2} = 0.99875$; neither
 # occludes the other, so the point is `west`'s hit next to the switch, probe 1's
@@ -305,15 +319,19 @@ roof = probe([segment("left", [-1.0, 1.0], [0.0, 2.0]), segment("right", [0.0, 2
 flat = probe([segment("west", [-1.0, 3.0], [0.0, 3.0]), segment("east", [0.0, 3.0], [1.0, 2.95])],
              "west.translate.x")  # fmt: skip
 (_, n_west), (_, n_east) = flat.tangents
-print(f"roof: rule {roof.code}, point {roof.point}, dp/dθ {roof.velocity}")
-print(f"west/east: |n0·n1| = {abs(n_west @ n_east):.5f} > {PARALLEL}: rule {flat.code}, point {flat.point}")
-fig = plot_grid(2, titles=["a roof seen from below: the corner", "nearly parallel: probe 0's shape"])
+print(f"roof: {CHOSEN[roof.code]}, point {roof.point}, dp/dθ {roof.velocity}")
+print(
+    f"west/east: |n0·n1| = {abs(n_west @ n_east):.5f} > {PARALLEL}: {CHOSEN[flat.code]}, point {flat.point}"
+)
+fig = plot_grid(
+    2, titles=["step 5: a roof seen from below, the corner", "step 4: nearly parallel, probe 0's shape"]
+)
 plot_case(roof, ax=fig.axes[0])
 plot_case(flat, ax=fig.axes[1])
 fig
 
 # %%
-# check: the roof's corner (0, 2) moving at (1/2, 1/2) (rule 2), and west's hit (-0.3, 3) (rule 0) with
+# check: the roof's corner (0, 2) moving at (1/2, 1/2) (step 5), and west's hit (-0.3, 3) (step 4) with
 # |n0·n1| = 1/sqrt(1 + 0.05²) (rounding tolerance TOL)
 assert roof.pair == (0, 3) and roof.code == 2
 assert np.allclose(roof.point, [0.0, 2.0], rtol=0.0, atol=TOL)
@@ -384,7 +402,7 @@ for ax, k in zip(fig.axes, (0, 2), strict=True):
 fig
 
 # %% [markdown]
-# ## 7. Nothing to follow: the identity
+# ## 7. Step 6: nothing to follow, the identity
 #
 # When every probe hits the same primitive, or none hits, no discontinuity is in sight and the
 # transform stays the identity (code -1). Following the hit anyway would be unbiased too, but it
@@ -491,7 +509,8 @@ closed = -float(filter_value("gaussian", T_EDGE, centre, width))  # -k_4(t_e) t_
 epsilon = 2.0 * stats.norm.sf(3.0)
 d_chosen = tangent(chosen)
 mean, stderr = d_chosen.mean(), d_chosen.std(ddof=1) / np.sqrt(N)
-print(f"samples per rule (identity, 0, 1, 2): {np.bincount(choice.code + 1, minlength=4).tolist()}")
+counts = np.bincount(choice.code + 1, minlength=4).tolist()
+print(f"samples per choice (nothing, probe 0's shape, the partner's, the corner): {counts}")
 print(f"dI_4/dθ following the chosen points: {mean:.4f} ± {stderr:.4f}")
 print(f"closed form -k_4(t_e) = {closed:.4f}; predicted mean (1 - ε) closed = {(1 - epsilon) * closed:.4f}")
 print(f"following the wall instead: {tangent(wall).mean():.4f}")
@@ -522,6 +541,22 @@ print(f"library pixel {PIXEL}: {library.derivative[PIXEL]:.4f} ± {library.deriv
 # mean (1 - ε) · closed form
 t_level = stats.t.ppf(1.0 - sidak(1e-3, 1) / 2.0, library.batches - 1)
 assert abs(library.derivative[PIXEL] - (1.0 - epsilon) * closed) <= t_level * library.derivative_stderr[PIXEL]
+
+# %% [markdown]
+# **Explore.** How many probes does the rule need, and how far from the occluder's end may the
+# sample be? `flatland.widgets.probes_view` traces section 1's scene with the number of probes and
+# the sample's film coordinate set by the sliders, and draws the choice. With two probes far from
+# the end nothing brackets it, and the point chosen is on the wall, which does not move.
+# (Open the notebook in Jupyter to move the sliders.)
+
+# %%
+explore_probes = explore(probes_view, probes=(2, 12, 4), offset=(-0.5, 0.5, 0.0))
+explore_probes
+
+# %%
+# check: two sliders and the output; the default view chooses probe 1's hit on the occluder, as in section 2
+assert len(explore_probes.children) == 3
+assert "point (-0.10, 1.00), dp/dθ = 1.00" in probes_view(4).axes[0].get_title()
 
 # %% [markdown]
 # ## Summary

@@ -17,6 +17,12 @@
 # %% [markdown]
 # # 9. Pitfalls: box filters, overlapping occluders, hard-edged emitters
 #
+# **What you will learn.**
+#
+# - three ordinary situations where reparameterization is biased: a box pixel filter, overlapping
+#   occluders, emitters with hard edges
+# - how to predict each bias
+#
 # Reparameterization is unbiased when, inside each kernel, one translation makes *every*
 # discontinuity static (tutorials 6 and 7). Three ordinary situations break that, and each
 # produces a bias that does not shrink with more samples:

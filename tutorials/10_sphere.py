@@ -17,6 +17,11 @@
 # %% [markdown]
 # # 10. On the sphere: rotations, vMF kernels and Embree
 #
+# **What you will learn.**
+#
+# - the same code on the sphere: rotations instead of translations, von Mises–Fisher kernels, Embree
+# - how hits are re-attached to θ, and the kernel's trade-off against a closed form on S²
+#
 # Everything so far lived in flatland, where directions are angles on the circle $S^1$. A real
 # renderer integrates over the sphere of directions $S^2$ and traces rays against triangle meshes.
 # The `sphere3d` package carries each idea over (Loubet et al. 2019, Sec. 4.1-4.2):
@@ -342,7 +347,9 @@ assert estimates["κ = 10⁴"].derivative_stderr > 1.3 * default.derivative_stde
 # The estimates with their 99 % intervals against the closed form:
 
 # %%
-pt.plot_estimates(estimates, float(tangent(E)), title="black triangle under the sky: dE/dθ on S²")
+pt.plot_estimates(
+    estimates, float(tangent(E)), title="black triangle under the sky: dE/dθ on S²", ylabel="dE/dθ"
+)
 
 # %% [markdown]
 # ## Summary

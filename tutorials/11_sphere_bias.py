@@ -17,6 +17,12 @@
 # %% [markdown]
 # # 11. Where reparameterization is biased on the sphere
 #
+# **What you will learn.**
+#
+# - where reparameterization is biased on the sphere, measured against exact references: the
+#   penumbra of a sharp light and silhouettes narrower than the probes
+# - how to compare methods by error against time, and how to measure a bias region by region
+#
 # Notebook 10 showed `reparam` agreeing with finite differences on a box in front of the sky.
 # The change of variables is exact only where the rotation it builds follows *every*
 # discontinuity inside the kernel it is applied to (Loubet et al. 2019, Sec. 4.1-4.3). This
@@ -39,19 +45,26 @@
 # %%
 # %matplotlib inline
 import time
-from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 import sphere3d as s3
-from flatland.core.stats import sidak
+from flatland.core.image_bias import (
+    floor_along,
+    fractions,
+    kept,
+    mean_se,
+    over_batches,
+    sidak_t,
+    squared_bias,
+)
 from flatland.plotting import textbook as pt
 from flatland.plotting import tutorials as ptu
 from flatland.plotting.convergence import plot_error_time
 from sphere3d import closed_form as cf
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.sampling import filter_radius
+from sphere3d.scene import load_reference
 from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 
@@ -63,74 +76,15 @@ ALPHA = 1e-3  # family-wise level of every check cell (two-sided, Šidák over i
 
 def quantile(comparisons):
     """Two-sided Student-t quantile (15 degrees of freedom) at level ALPHA, Šidák over ``comparisons``."""
-    return stats.t.ppf(1 - sidak(ALPHA, comparisons) / 2, BATCHES - 1)
+    return sidak_t(ALPHA, comparisons, BATCHES - 1)
 
 
 def run(scene, param, method, spp, seed, **options):
-    """Per-batch derivative images (BATCHES, height, width) of ``method`` (with ``options``), the CPU
-    seconds taken, and the mean rendered image."""
+    """Per-batch derivative images (BATCHES, height, width) of ``method``, the CPU seconds taken,
+    and the mean rendered image."""
     start = time.process_time()
     tally = GRADIENT_METHODS.run(method, ImageTask(scene, param, spp, seed, BATCHES), **options)
     return tally.derivative, time.process_time() - start, tally.value.mean(axis=0)
-
-
-def mean_se(batches):
-    """Mean image and its standard error over the batches (per pixel)."""
-    return batches.mean(axis=0), batches.std(axis=0, ddof=1) / np.sqrt(len(batches))
-
-
-def over_batches(values):
-    """Mean of a statistic computed once per batch, shape (batches,), and its standard error from the
-    batches' spread: the batches are independent, the pixels of one image are not (the default film
-    counts each sample in every pixel its filter covers), so Student's t with 15 degrees of freedom."""
-    return values.mean(), values.std(ddof=1) / np.sqrt(len(values))
-
-
-def fractions(batches, ref, ref_se, mask):
-    """Per batch, the least-squares fraction of ``ref`` that the batch's image keeps in ``mask``,
-    Σ d_b r / Σ (r² - s_r²): linear in the image, so their mean is the mean image's fraction."""
-    r, rse = ref[mask], ref_se[mask]
-    return batches[:, mask] @ r / np.sum(r**2 - rse**2)
-
-
-def kept(batches, ref, ref_se, mask):
-    """The mean of ``fractions`` and its standard error: the batches' spread (``over_batches``) and,
-    added in quadrature, the reference's per-pixel errors propagated, Σ d² s_r² / (Σ (r² - s_r²))²
-    (the reference counts each sample in its own pixel only: its pixels are independent)."""
-    k, se = over_batches(fractions(batches, ref, ref_se, mask))
-    r, rse, d = ref[mask], ref_se[mask], batches.mean(axis=0)[mask]
-    return k, np.hypot(se, np.sqrt(np.sum(d**2 * rse**2)) / np.sum(r**2 - rse**2))
-
-
-def floor_along(fractions, ref, masks):
-    """RMS per pixel of the bias along the reference, (k - 1) r in each region: a lower bound of the
-    RMS bias (the part orthogonal to the reference is not counted)."""
-    return np.sqrt(
-        sum((k - 1.0) ** 2 * np.sum(ref[m] ** 2) for (k, _), m in zip(fractions, masks, strict=True))
-        / ref.size
-    )
-
-
-def squared_bias(batches, ref, ref_se=0.0):
-    """Mean over pixels of (d - ref)² - se² - ref_se² (d, se: the batches' mean image and its standard
-    error), an unbiased estimate of the mean squared bias, and its standard error.
-
-    Nonlinear in the batches, so the error is the jackknife's: the estimate without batch b, b = 1..B,
-    and se² = (B - 1) / B Σ_b (x_(b) - mean x_(.))², with Student's t at B - 1 = 15 degrees of freedom.
-    The reference is the same in every x_(b); its own noise e (s_r per pixel, independent pixels) adds
-    Var Σ_p ((b_p - e_p)² - s_r²) / P² = Σ_p (4 b_p² s_r² + 2 s_r⁴) / P² (e normal), b_p² estimated by
-    the pixel's own term, in quadrature."""
-
-    def estimate(b):
-        return np.mean((b.mean(axis=0) - ref) ** 2 - b.var(axis=0, ddof=1) / len(b) - ref_se**2)
-
-    n = len(batches)
-    leave_one_out = np.array([estimate(np.delete(batches, b, axis=0)) for b in range(n)])  # n images
-    jackknife = (n - 1) / n * np.sum((leave_one_out - leave_one_out.mean()) ** 2)
-    d, se = mean_se(batches)
-    per_pixel = (d - ref) ** 2 - se**2 - ref_se**2
-    reference = max(0.0, np.sum(4.0 * per_pixel * ref_se**2 + 2.0 * ref_se**4)) / d.size**2
-    return estimate(batches), np.sqrt(jackknife + reference)
 
 
 # %% [markdown]
@@ -141,17 +95,15 @@ def squared_bias(batches, ref, ref_se=0.0):
 # with smooth normals) between them. The parameter `occluder.translate.x` moves the sphere
 # sideways, which moves its silhouette in the image and its soft shadow on the ground.
 #
-# The reference derivative image is stored with the benchmarks of the repository
-# (`benchmarks/reference/hard_shadow.npz`): central differences with common random numbers,
-# Richardson-extrapolated over h = 0.01 and 0.005 (truncation $O(h^4)$), at many thousand
-# samples per pixel, with a standard error per pixel. It is read from the repository that
-# holds the package.
+# The reference derivative image ships with the package (`sphere3d.scene.load_reference`):
+# central differences with common random numbers, Richardson-extrapolated over h = 0.01 and
+# 0.005 (truncation $O(h^4)$), at many thousand samples per pixel, with a standard error per
+# pixel.
 
 # %%
 SCENE = s3.load_scene("hard_shadow")
 PARAM = "occluder.translate.x"
-with np.load(Path(s3.__file__).resolve().parents[1] / "benchmarks" / "reference" / "hard_shadow.npz") as z:
-    ref = {k: z[k] for k in z.files}
+ref = load_reference("hard_shadow")
 REF, REF_SE = ref["derivative"], ref["stderr"]
 print(f"reference: {ref['param']}, h = {ref['h']}, {ref['spp']} spp, shape {REF.shape}")
 print(f"largest |dI/dθ| {np.abs(REF).max():.1f}, median stderr {np.median(REF_SE[REF_SE > 0]):.4f}")
@@ -226,7 +178,7 @@ assert np.sum(REF[masks.any(axis=0)] ** 2) > 0.95 * np.sum(REF**2)
 # spread over the pixels: the film counts every sample in each pixel its filter covers, so
 # neighbouring pixels share samples and their errors are correlated. The 16 batches share none;
 # the estimate is not linear in them, so the error is the jackknife's (the estimate recomputed
-# without each batch in turn, `squared_bias` in the setup cell), with 15 degrees of freedom. For
+# without each batch in turn, `flatland.core.image_bias.squared_bias`), with 15 degrees of freedom. For
 # `boundary` and finite differences it should be 0. For `reparam` it is positive, but at these
 # sample counts its noise hides it; section 3 measures the part of its bias that lies along the
 # reference much more precisely, and the figure draws that.
@@ -270,7 +222,7 @@ assert b2 >= -q * b2_se, (b2, b2_se)
 # linear in the image, so it is computed per batch; its standard error comes from the spread of the
 # 16 batches' fractions (the pixels are correlated, the batches are not) and from the reference's
 # per-pixel standard errors (its pixels are independent: each of its samples counts in its own
-# pixel only), `kept` in the setup cell. The bias along the reference, $(k - 1)\,r$ in each region,
+# pixel only), `flatland.core.image_bias.kept`. The bias along the reference, $(k - 1)\,r$ in each region,
 # is a lower bound of a method's bias (`floor_along`): for `reparam` it is the floor drawn in the
 # error-against-time figure.
 

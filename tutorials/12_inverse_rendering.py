@@ -17,6 +17,11 @@
 # %% [markdown]
 # # 12. Inverse rendering: recovering an occluder's position
 #
+# **What you will learn.**
+#
+# - inverse rendering: recover an occluder's position by gradient descent, naive against reparam, in
+#   flatland and on the sphere
+#
 # The point of differentiable rendering: given a photograph, find the scene that produced it.
 # Here the scene is known except for one number, the horizontal position $\theta$ of an occluder,
 # and the "photograph" is an image rendered with the occluder moved to $\theta^\ast = 0.3$. We

@@ -260,6 +260,14 @@ recursively: every public module gets a page listing the functions and classes i
 defines and exports in ``__all__``. New modules appear here without editing the
 docs; a new package is added to ``API_PACKAGES`` in ``docs/conf.py``.
 
+Start here: what each package exports at its top level (its ``__all__``), which is all
+the tutorials and the command line use; each name links to the page of the module
+that defines it.
+
+{exports}
+
+Every module:
+
 .. autosummary::
    :toctree: generated
    :recursive:
@@ -283,7 +291,12 @@ def write_api_index(path: Path, packages: Iterable[str]) -> list[str]:
         if getattr(sys.modules[name], "__file__", None) is None:
             continue  # an empty folder imports as a namespace package: nothing to document
         found.append(name)
-    text = API_INDEX.format(entries="\n".join(f"   {name}" for name in found))
+    exports = "\n\n".join(
+        f"``{name}``: " + ", ".join(f":py:obj:`~{name}.{n}`" for n in sorted(sys.modules[name].__all__))
+        for name in found
+        if hasattr(sys.modules[name], "__all__")
+    )
+    text = API_INDEX.format(entries="\n".join(f"   {name}" for name in found), exports=exports)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists() or path.read_text(encoding="utf-8") != text:
         path.write_text(text, encoding="utf-8")

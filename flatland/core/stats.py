@@ -17,6 +17,7 @@ import numpy as np
 from scipy import special, stats
 
 __all__ = [
+    "LEVEL",
     "ROUNDING",
     "Chi2Result",
     "Interval",
@@ -44,6 +45,8 @@ to exactly 0.0, so a zero-variance estimator reports a zero standard error on ev
 CPU; :func:`summarize`, :func:`flatland.core.image.summarize_batches` and the study
 runner all go through it.
 """
+LEVEL = 0.99
+"""The one confidence level of every printed interval and flag: 99 %, two-sided."""
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from flatland.core.validate import ValidationError
-from flatland.plotting.style import FIGSIZE, new_axes, series_styles
+from flatland.plotting.style import FIGSIZE, legend_outside, log_ticks, new_axes, series_styles
 
 __all__ = ["plot_error_time"]
 
@@ -89,7 +89,7 @@ def plot_error_time(
     unknown = sorted(set(floors) - set(data))
     if unknown:
         raise ValidationError("floors", f"names no series: {unknown}")
-    ax = new_axes(ax, title, FIGSIZE)
+    ax = new_axes(ax, title, (FIGSIZE[0] + 2.4, FIGSIZE[1]))  # room for the legend on the right
     styles = series_styles(data)
     for label, (seconds, rmse) in data.items():
         style = styles[label]
@@ -105,8 +105,10 @@ def plot_error_time(
     ax.plot(guide, e0 * np.sqrt(t0 / guide), color="0.3", lw=1.0, ls=":", label="∝ 1/√t (guide)")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    log_ticks(ax.xaxis)  # a decade or less of seconds: labelled minor ticks would run into each other
+    log_ticks(ax.yaxis)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
+    legend_outside(ax, fontsize=7)  # right of the axes, clear of the lines
     return ax.figure

@@ -3,8 +3,10 @@
 Gradient images use a diverging colormap centred on zero with one symmetric colour
 scale shared by every method in a figure, so equal colours mean equal derivatives.
 A 1D film is drawn as a strip (one row of pixels stretched vertically) and, in the
-panel, also as curves with ± 2 standard-error bands (their coverage, 95.45 %, in
-the legend), each method in its colour (:mod:`flatland.plotting.style`).
+panel, also as curves with bands at the one printed level
+(:data:`~flatland.core.stats.LEVEL`, 99 % two-sided, ± 2.58 standard errors; the
+legend says it), each method in its colour (:mod:`flatland.plotting.style`), the
+legend beside the curves rather than over them.
 
 Every function writes one PNG and returns its path. Given a ``sketch`` (a function that
 draws into a matplotlib Axes, e.g. a flatland scene with
@@ -16,7 +18,8 @@ backend is selected or needed and nothing stays open after saving.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Mapping
+import textwrap
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +28,12 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.gridspec import GridSpecBase
 
+from flatland.core.stats import LEVEL
 from flatland.plotting.bands import draw_estimate
 from flatland.plotting.style import (
     DIVERGING,
     PRIMAL,
-    TWO_SIGMA,
+    legend_outside,
     method_colour,
     neutral_cycle,
     radiance_norm,
@@ -47,6 +51,7 @@ __all__ = [
     "plot_gradient",
     "plot_image",
     "plot_panel",
+    "rare_events_note",
     "save_png",
     "symmetric_limit",
 ]
@@ -97,23 +102,22 @@ def _film(ax: Any, array: np.ndarray, cmap: str, norm: Normalize, title: str = "
 
 
 def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, color: Any = None) -> None:
-    """A film as a curve over pixel centres with its ± 2 standard-error band (coverage 95.45 %)."""
+    """A film as a curve over pixel centres with its band at :data:`~flatland.core.stats.LEVEL`."""
     x = np.arange(np.size(array)) + 0.5
-    halfwidth = None if stderr is None else 2 * stderr
-    draw_estimate(ax, x, array, halfwidth=halfwidth, level=TWO_SIGMA, label=label, color=color, lw=1.2)
+    draw_estimate(ax, x, array, stderr=stderr, level=LEVEL, label=label, color=color, lw=1.2)
 
 
 def _strip_over_curve(
     fig: Figure, sketch: Sketch | None, values: np.ndarray, stderr: np.ndarray | None, cmap: str,
     norm: Normalize, title: str, ylabel: str,
 ) -> tuple[Any, Any, Any]:  # fmt: skip
-    """A 1D film's two panels: its strip over its curve (± 2 standard errors, legend naming the band), on
-    one pixel axis; returns the strip's and the curve's axes and the strip's image."""
+    """A 1D film's two panels: its strip over its curve (its band at the printed level, the legend naming
+    it), on one pixel axis; returns the strip's and the curve's axes and the strip's image."""
     top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
     strip = _film(top, values, cmap, norm, title)
     top.set_xlabel("")
     _curve(bottom, values, stderr, ylabel, color="k")
-    bottom.legend(fontsize=8, loc="upper right")  # names the band and its coverage
+    legend_outside(bottom)  # names the band and its coverage, clear of the curve
     bottom.set_xlabel("pixel")
     bottom.set_ylabel(ylabel)
     bottom.set_xlim(0, values.size)
@@ -124,15 +128,16 @@ def image_figure(
     value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
     sketch: Sketch | None = None,
 ) -> Path:  # fmt: skip
-    """A rendered image (1D: strip over a curve with ±2 standard errors; 2D: grey image), the
-    ``sketch`` (if given) on its left."""
+    """A rendered image (1D: strip over a curve with its band; 2D: grey image), the ``sketch`` (if given)
+    on its left."""
     value = np.asarray(value)
     norm = radiance_norm(value)
     if value.ndim == 1:
-        fig = Figure(figsize=(7, 3.2))
+        fig = Figure(figsize=(8.5, 3.4), layout="constrained")
         _strip_over_curve(fig, sketch, value, stderr, PRIMAL, norm, title, "radiance")
     else:
-        fig = Figure(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4))
+        # constrained layout: the title stays over the image, clear of the colour bar
+        fig = Figure(figsize=(5, 5 * value.shape[0] / max(value.shape[1], 1) + 0.4), layout="constrained")
         ax = grid_beside(fig, sketch, 1, 1).subplots()
         fig.colorbar(_film(ax, value, PRIMAL, norm, title), ax=ax, shrink=0.8)
     return save_png(fig, path)
@@ -148,14 +153,16 @@ def gradient_figure(
     limit = symmetric_limit([derivative]) if limit is None else limit
     norm = symmetric_norm(limit)
     if derivative.ndim == 1:
-        fig = Figure(figsize=(7, 3.2))
+        fig = Figure(figsize=(8.5, 3.4), layout="constrained")
         top, bottom, strip = _strip_over_curve(
             fig, sketch, derivative, stderr, DIVERGING, norm, title, "dI/dθ"
         )
         fig.colorbar(strip, ax=[top, bottom], shrink=0.6, label="dI/dθ")
         bottom.axhline(0.0, color="0.5", lw=0.6)
     else:
-        fig = Figure(figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4))
+        fig = Figure(
+            figsize=(5, 5 * derivative.shape[0] / max(derivative.shape[1], 1) + 0.4), layout="constrained"
+        )
         ax = grid_beside(fig, sketch, 1, 1).subplots()
         fig.colorbar(_film(ax, derivative, DIVERGING, norm, title), ax=ax, shrink=0.8, label="dI/dθ")
     return save_png(fig, path)
@@ -167,13 +174,15 @@ def panel_figure(
     path: str | os.PathLike,
     title: str = "",
     sketch: Sketch | None = None,
+    notes: Sequence[str] = (),
 ) -> Path:
     """The side-by-side panel: primal, then each method's derivative on one shared diverging scale.
 
     ``gradients`` maps a column title to ``(derivative, stderr)``. A 1D film gets a
-    second row with all derivatives as curves (± 2 standard errors) on one axis, each
-    in its method's colour when the title names one (``"finite differences"`` does).
-    The ``sketch``, if given, draws a first column spanning both rows.
+    second row with all derivatives as curves (bands at the printed level) on one axis,
+    each in its method's colour when the title names one (``"finite differences"`` does),
+    the legend right of the curves. The ``sketch``, if given, draws a first column
+    spanning both rows; ``notes`` are lines printed under the figure.
     """
     primal = np.asarray(primal)
     columns = 1 + len(gradients)
@@ -181,8 +190,8 @@ def panel_figure(
     norm = symmetric_norm(limit)
     primal_norm = radiance_norm(primal)
     if primal.ndim == 1:
-        fig = Figure(figsize=(2.6 * columns, 5.2))
-        grid = grid_beside(fig, sketch, 2, columns, height_ratios=(1, 1.6), hspace=0.45)
+        fig = Figure(figsize=(2.6 * columns + 1.6, 5.2 + 0.25 * len(notes)), layout="constrained")
+        grid = grid_beside(fig, sketch, 2, columns, height_ratios=(1, 1.6))
         axes = [fig.add_subplot(grid[0, i]) for i in range(columns)]
         curves = neutral_cycle(fig.add_subplot(grid[1, :]))
     else:
@@ -204,7 +213,10 @@ def panel_figure(
         curves.set_ylim(-1.15 * limit, 1.15 * limit)
         curves.set_xlabel("pixel")
         curves.set_ylabel("dI/dθ")
-        curves.legend(fontsize=8, ncols=min(len(gradients), 5), loc="upper right")
+        legend_outside(curves)
+    if notes:  # wrapped to the figure's width, about 15 characters of 8 pt text per inch
+        width = int(15 * fig.get_figwidth())
+        fig.supxlabel("\n".join(textwrap.fill(n, width) for n in notes), fontsize=8, ha="left", x=0.01)
     if title:
         fig.suptitle(title)
     return save_png(fig, path)
@@ -230,6 +242,26 @@ def plot_panel(
     sketch: Sketch | None = None,
 ) -> Path:  # fmt: skip
     """The side-by-side panel from an Image and GradientImages keyed by column title (the ``sketch``
-    first, if given)."""
+    first, if given), with a note under it for each finite-difference column (:func:`rare_events_note`)."""
     columns = {label: (g.derivative, g.derivative_stderr) for label, g in gradients.items()}
-    return panel_figure(primal.value, columns, path, title, sketch)
+    notes = [rare_events_note(label, g) for label, g in gradients.items() if g.method == "finite_difference"]
+    return panel_figure(primal.value, columns, path, title, sketch, notes)
+
+
+def rare_events_note(label: str, gradient: Any) -> str:
+    """Why a finite-difference film can zig-zag between 0 and large values, as a note under a figure.
+
+    With common random numbers, $[Î(θ_0 + h) - Î(θ_0 - h)] / 2h$ is non-zero in a pixel only where
+    one of its rays (camera or shadow) hits something else at $θ_0 + h$ than at $θ_0 - h$: a ray
+    within about $h |c'|$ of a moving edge. With a small step that is a rare event per pixel, so
+    in a penumbra some pixels have none (exactly 0, and a zero standard error) and their neighbours
+    one or two (a large value): noise of a few rare events, not the shape of the derivative.
+    """
+    h = dict(gradient.options).get("h")
+    step = "" if h is None else f", h = {h:g}"
+    return (
+        f"{label}{step}: a pixel is non-zero only if one of its rays hits something else at θ + h than "
+        "at θ − h, a rare event for a small h: in a penumbra some pixels have none (exactly 0, zero "
+        "standard error) and their neighbours a few (large values). That zig-zag is noise, not the "
+        "derivative; more samples or a larger h smooth it."
+    )

@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from flatland.app.table import method_label
 from flatland.plotting.bands import draw_estimate
 from flatland.plotting.films import save_png
-from flatland.plotting.style import series_styles
+from flatland.plotting.style import legend_outside, log_ticks, series_styles, symlog_axis
 
 __all__ = [
     "efficiency_figure",
@@ -36,10 +36,11 @@ __all__ = [
 ]
 
 
-def _series(rows: Sequence[Any]) -> dict[str, list[Any]]:
+def _series(rows: Sequence[Any], count: str = "n") -> dict[str, list[Any]]:
     """Rows that vary ``kappa``, grouped by everything else (method, other options, sample count).
 
-    Keyed by a label showing the method, the other options the configuration set, and n.
+    Keyed by a label showing the method, the other options the configuration set, and the
+    sample count per trial under its name ``count`` (``n`` for integrals, ``spp`` for scenes).
     """
     groups: dict[tuple[Any, ...], list[Any]] = {}
     labels: dict[tuple[Any, ...], str] = {}
@@ -50,7 +51,7 @@ def _series(rows: Sequence[Any]) -> dict[str, list[Any]]:
             continue
         key = (cell.method, tuple((k, repr(v)) for k, v in cell.options if k != "kappa"), cell.n)
         shown = [(k, v) for k, v in cell.options if k != "kappa" and k in cell.given]
-        labels[key] = f"{method_label(cell.method, shown)} n={cell.n}"
+        labels[key] = f"{method_label(cell.method, shown)} {count}={cell.n}"
         groups.setdefault(key, []).append(r)
     return {
         labels[k]: sorted(v, key=lambda r: r.cell.options_dict["kappa"])
@@ -64,16 +65,18 @@ def has_kappa_series(rows: Sequence[Any]) -> bool:
     return bool(_series(rows))
 
 
-def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
+def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "", count: str = "n") -> Path:
     """Bias ± confidence interval and standard deviation per sample against κ, on log axes.
 
     The trade-off of Loubet et al. 2019, Sec. 4.2: a wide kernel (small κ) leaves
-    bias, a narrow one (large κ) adds variance.
+    bias, a narrow one (large κ) adds variance. Each series (a method's other options and
+    sample count, ``count`` its name in the legend) has its own shade and marker; the
+    legend sits under the panels, clear of the data.
     """
-    series = _series(rows)
+    series = _series(rows, count)
     if not series:
         raise ValueError("rows: no method is run at two or more values of kappa")
-    fig = Figure(figsize=(11, 4.2), layout="constrained")
+    fig = Figure(figsize=(11, 4.6 + 0.2 * math.ceil(len(series) / 3)), layout="constrained")
     left, right = fig.subplots(1, 2)
     level = rows[0].level
     styles = series_styles(series)
@@ -86,7 +89,9 @@ def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") 
         right.plot(kappa, [math.sqrt(r.variance_per_sample) for r in group], label=label, **styles[label])
     left.axhline(0.0, color="0.4", lw=0.8, ls="--")
     left.set_xscale("log")
-    left.set_yscale("symlog", linthresh=_linthresh([r for group in series.values() for r in group]))
+    shown = [r for group in series.values() for r in group]
+    extent = [v for r in shown for v in (r.bias_low, r.bias_high)]
+    symlog_axis(left, extent, _linthresh(shown))
     left.set_xlabel("κ (kernel concentration)")
     left.set_ylabel("bias of dI/dθ")
     left.set_title("bias (wide kernel: transform misses discontinuities)", fontsize=10)
@@ -97,7 +102,8 @@ def kappa_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") 
     right.set_title("noise (narrow kernel: large d log k / dθ)", fontsize=10)
     for ax in (left, right):
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+    handles, names = left.get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncols=min(3, len(names)), fontsize=8)
     if title:
         fig.suptitle(title)
     return save_png(fig, path)
@@ -164,38 +170,43 @@ def efficiency_figure(rows: Sequence[Any], path: str | os.PathLike, title: str =
 def error_time_figure(rows: Sequence[Any], path: str | os.PathLike, title: str = "") -> Path:
     """RMSE against the reference versus wall time per estimate, log-log, one line per method.
 
-    Each line joins one method's cells (same options) at its sample counts. An
+    Each line joins one method's cells (same options) at its sample counts, in the
+    method's colour (its variants in shades of it, with their own markers). An
     unbiased estimator's RMSE falls as 1/sqrt(t) (the dotted guide, drawn through
     the geometric centre of the unbiased points); a biased one levels off at its
     |bias| (dashed line, "BIASED" in the legend, its |bias| at the largest count
-    drawn as a thin horizontal line). Cells with an RMSE of 0 cannot sit on a log
-    axis and are left out (their method's legend entry says so).
+    drawn as a thin horizontal line). Cells with an RMSE of 0 (an exact estimator)
+    cannot sit on a log axis: the legend entry of a series with some says how many
+    are not drawn, and a series with nothing else is named under the axis instead of
+    in the legend. The legend stands right of the axes, clear of the data.
     """
     groups: dict[str, list[Any]] = {}
     for r in rows:
         groups.setdefault(r.cell.label, []).append(r)
-    fig = Figure(figsize=(7.5, 5.2), layout="constrained")
+    fig = Figure(figsize=(9.5, 5.2), layout="constrained")
     ax = fig.subplots()
-    styles = series_styles(groups)  # a method's colour; its variants (other options) by marker
+    styles = series_styles(groups)  # a method's colour; its variants (other options) by shade and marker
     unbiased_points = []
+    exact = []
     for label, group in groups.items():
         group = sorted(group, key=lambda r: r.cell.n)
         points = [(r.seconds_per_trial, r.rmse) for r in group if r.rmse > 0.0 and r.seconds_per_trial > 0.0]
         biased = any(r.biased for r in group)
+        if not points:
+            exact.append(label)
+            continue
+        left_out = len(group) - len(points)
         name = (
             label
             + (" (BIASED)" if biased else "")
-            + ("" if len(points) == len(group) else " (rmse 0 left out)")
+            + (f" ({left_out} cells with RMSE 0 not drawn)" if left_out else "")
         )
         color, marker = styles[label]["color"], styles[label]["marker"]
-        if points:
-            t, e = np.array(points).T
-            ax.plot(t, e, marker=marker, ms=4, lw=1.4, ls="--" if biased else "-", color=color, label=name)
-        else:
-            ax.plot([], [], marker=marker, color=color, label=name)
+        t, e = np.array(points).T
+        ax.plot(t, e, marker=marker, ms=4, lw=1.4, ls="--" if biased else "-", color=color, label=name)
         if biased:
             ax.axhline(abs(group[-1].bias), color=color, lw=0.7, ls=":", alpha=0.8)
-        elif points:
+        else:
             unbiased_points.extend(points)
     if unbiased_points:
         t, e = np.array(unbiased_points).T
@@ -204,10 +215,13 @@ def error_time_figure(rows: Sequence[Any], path: str | os.PathLike, title: str =
         ax.plot(guide, e0 * np.sqrt(t0 / guide), color="0.3", lw=1.0, ls=":", label="∝ 1/√t (guide)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("wall time per estimate (s)")
+    log_ticks(ax.xaxis)
+    log_ticks(ax.yaxis)
+    note = f"\nRMSE 0 at every sample count, not on the log axis: {', '.join(exact)}" if exact else ""
+    ax.set_xlabel("wall time per estimate (s)" + note)
     ax.set_ylabel("RMSE of dI/dθ vs the reference")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
+    legend_outside(ax, fontsize=7)
     if title:
         ax.set_title(title, fontsize=10)
     return save_png(fig, path)
@@ -233,7 +247,7 @@ def _study_title(result: Any) -> str:
 
 def plot_kappa(result: Any, path: str | os.PathLike) -> Path:
     """Bias ± CI and standard deviation against κ for a study result."""
-    return kappa_figure(result.rows, path, _study_title(result))
+    return kappa_figure(result.rows, path, _study_title(result), result.config.problem.count_name)
 
 
 def plot_error_time(result: Any, path: str | os.PathLike) -> Path:

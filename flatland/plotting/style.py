@@ -5,8 +5,8 @@ figures) takes its colours from here, so a method looks the same wherever it is
 drawn: the reparameterization in blue, the boundary term in orange, naive
 differentiation in red, finite differences in purple and closed forms and
 references in black. Variants of one method (options such as ``kappa=10`` or
-``paired``) share the method's colour and differ by marker or line style
-(:func:`series_styles`).
+``paired``) take shades of the method's colour, the first the colour itself, and
+differ by marker or line style too (:func:`series_styles`).
 Series that name no method take colours from :data:`OTHER_COLOURS`, none of which a
 method uses: it is the colour cycle of every Axes the figure modules make
 (:func:`neutral_cycle`). Scene sketches draw with :data:`SKETCH_COLOURS`: emitters in
@@ -20,13 +20,16 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.colors import Normalize
+from matplotlib.colors import Normalize, to_rgb
 from matplotlib.figure import Figure
+from matplotlib.legend import Legend
+from matplotlib.ticker import FixedLocator, LogLocator, MaxNLocator, NullFormatter, NullLocator
 
 from flatland.core.validate import ValidationError
 
@@ -39,9 +42,14 @@ __all__ = [
     "OTHER_COLOURS",
     "PRIMAL",
     "REFERENCE_STYLE",
+    "SHADES",
     "SKETCH_COLOURS",
     "TWO_SIGMA",
+    "category_ticks",
     "coverage_label",
+    "integer_ticks",
+    "legend_outside",
+    "log_ticks",
     "method_colour",
     "method_of",
     "neutral_cycle",
@@ -49,6 +57,8 @@ __all__ = [
     "radiance_norm",
     "same_length",
     "series_styles",
+    "shade",
+    "symlog_axis",
     "symmetric_limit",
     "symmetric_norm",
 ]
@@ -84,6 +94,9 @@ FIGSIZE = (6.4, 3.6)
 """Default size of a one-panel figure, in inches."""
 REFERENCE_STYLE = {"color": METHOD_COLOURS["reference"], "linestyle": "--", "linewidth": 1.0}
 """How closed forms and references are drawn."""
+SHADES = (0.0, 0.45, -0.5, 0.7, -0.7, 0.25, -0.25, 0.85)
+"""Shade of the k-th variant of one method (:func:`shade`): 0 the method's colour, > 0 toward black,
+< 0 toward white; alternating, so neighbouring variants differ most."""
 TWO_SIGMA = math.erf(2.0 / math.sqrt(2.0))
 """Coverage of ± 2 standard errors under a normal law, 0.9545."""
 
@@ -116,14 +129,23 @@ def method_colour(label: str, default: Any = None) -> Any:
     return default if method is None else METHOD_COLOURS[method]
 
 
+def shade(colour: Any, amount: float) -> tuple[float, float, float]:
+    """``colour`` mixed with black (``amount`` > 0) or white (``amount`` < 0) by ``|amount|`` in [0, 1]."""
+    rgb = np.array(to_rgb(colour))
+    target = np.zeros(3) if amount > 0 else np.ones(3)
+    return tuple(float(c) for c in rgb + abs(amount) * (target - rgb))
+
+
 def series_styles(
     labels: Iterable[str], vary: str = "marker", others: bool = True
 ) -> dict[str, dict[str, Any]]:
     """Colour, and the property that tells a method's variants apart, of each series label of a figure.
 
     A label naming a method gets the method's colour; the k-th distinct label of one
-    method (its variants: other options) gets the k-th entry of :data:`MARKERS` or
-    :data:`LINESTYLES`, after ``vary``. Labels naming no method take
+    method (its variants: other options) gets the k-th shade of that colour
+    (:data:`SHADES`: the first is the colour itself) and the k-th entry of
+    :data:`MARKERS` or :data:`LINESTYLES`, after ``vary``, so variants differ by
+    colour and by marker or line style. Labels naming no method take
     :data:`OTHER_COLOURS` in order (cycling) when ``others`` is true, and no style
     at all otherwise (they then take the colour cycle of their Axes).
     """
@@ -145,8 +167,65 @@ def series_styles(
             continue
         k = variants.get(method, 0)
         variants[method] = k + 1
-        styles[label] = {"color": METHOD_COLOURS[method], vary: cycle[k % len(cycle)]}
+        colour = METHOD_COLOURS[method] if k == 0 else shade(METHOD_COLOURS[method], SHADES[k % len(SHADES)])
+        styles[label] = {"color": colour, vary: cycle[k % len(cycle)]}
     return styles
+
+
+def legend_outside(ax: Axes, where: str = "right", **options: Any) -> Legend:
+    """The legend of ``ax`` outside its frame, so it never covers data: to the ``"right"`` of the Axes
+    (top aligned) or ``"below"`` it (under the x label, several columns)."""
+    if where == "right":
+        placement = {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0), "borderaxespad": 0.0}
+    elif where == "below":
+        placement = {"loc": "upper center", "bbox_to_anchor": (0.5, -0.18), "borderaxespad": 0.0}
+    else:
+        raise ValidationError("where", f"must be 'right' or 'below', got {where!r}")
+    return ax.legend(**{"fontsize": 8, **placement, **options})
+
+
+def category_ticks(ax: Axes, positions: Sequence[float], labels: Sequence[str]) -> None:
+    """Name the x positions of ``ax`` with ``labels`` (methods, integrals), horizontally and wrapped at
+    spaces to the width one label has (the Axes' share of its figure's width over the number of
+    labels), so that neighbouring labels never run into each other."""
+    share = ax.get_position().width * ax.figure.get_figwidth() / max(len(labels), 1)
+    width = max(6, int(12 * share))  # about 12 characters of 8 pt text per inch
+    wrapped = [textwrap.fill(str(t), width, break_long_words=False) for t in labels]
+    ax.set_xticks(list(positions), wrapped, fontsize=8)
+
+
+def integer_ticks(axis: Any) -> None:
+    """Ticks of ``axis`` (``ax.xaxis``) at whole numbers only: counts, iterations."""
+    axis.set_major_locator(MaxNLocator(integer=True))
+
+
+def log_ticks(axis: Any) -> None:
+    """Readable ticks on a logarithmic ``axis``: at 1, 2 and 5 times the powers of ten, at most about
+    six, written as plain numbers, with unlabelled minor ticks (a short axis otherwise labels every
+    minor tick, and the labels run into each other)."""
+    axis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0), numticks=6))
+    axis.set_major_formatter("{x:g}")
+    axis.set_minor_locator(LogLocator(base=10.0, subs=np.arange(2, 10), numticks=12))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def symlog_axis(ax: Axes, values: Any, linthresh: float, numticks: int = 6) -> None:
+    """A symmetric-logarithmic y axis for signed ``values``: linear within ``linthresh`` of zero.
+
+    The linear part gets a quarter of the axis (matplotlib's default gives it the height of
+    one decade), and the ticks are 0 and the powers of ten at or beyond ``linthresh`` on each
+    side, at most ``numticks`` in all, without minor ticks: matplotlib's own locator also ticks
+    the decades inside the linear part, where ``-10^0``, ``0`` and ``10^0`` pile up.
+    """
+    values = np.abs(np.asarray(values, dtype=np.float64))
+    top = max(float(values[np.isfinite(values)].max(initial=linthresh)), linthresh)
+    decades = max(math.log10(top / linthresh), 1.0)
+    ax.set_yscale("symlog", linthresh=linthresh, linscale=decades / 3.0)
+    powers = np.arange(math.ceil(math.log10(linthresh) - 1e-9), math.floor(math.log10(top) + 1e-9) + 1)
+    stride = max(1, math.ceil(len(powers) / max(1, (numticks - 1) // 2)))
+    ticks = 10.0 ** powers[::-1][::stride][::-1]
+    ax.yaxis.set_major_locator(FixedLocator([*(-ticks[::-1]), 0.0, *ticks]))
+    ax.yaxis.set_minor_locator(NullLocator())
 
 
 def coverage_label(level: float) -> str:

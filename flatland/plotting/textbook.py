@@ -42,6 +42,7 @@ from flatland.integrals import Discontinuity
 from flatland.plotting.style import (
     FIGSIZE,
     REFERENCE_STYLE,
+    category_ticks,
     method_colour,
     new_axes,
     same_length,
@@ -290,7 +291,7 @@ def plot_terms(
         ax.plot(positions, same_length("totals", totals, m), "D", color=REFERENCE_STYLE["color"],
                 label=total_label)  # fmt: skip
     ax.axhline(0.0, color="gray", linewidth=0.8)
-    ax.set_xticks(positions, cases, rotation=20, ha="right")
+    category_ticks(ax, positions, cases)
     ax.set_ylabel(ylabel)
     ax.legend(loc="best", fontsize=8)
     return ax.figure

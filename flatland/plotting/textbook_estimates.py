@@ -26,10 +26,12 @@ from flatland.plotting.style import (
     METHOD_COLOURS,
     OTHER_COLOURS,
     REFERENCE_STYLE,
+    category_ticks,
     coverage_label,
     method_colour,
     new_axes,
     same_length,
+    symlog_axis,
 )
 
 __all__ = ["plot_estimates", "plot_histogram_vs_normal", "plot_kappa_tradeoff", "plot_variance"]
@@ -95,7 +97,7 @@ def plot_estimates(
                       color=method_colour(label), label=None if i == 0 else "_estimate")  # fmt: skip
     if reference is not None:
         ax.axhline(float(reference), label=reference_label, **REFERENCE_STYLE)
-    ax.set_xticks(positions, labels, rotation=20, ha="right")
+    category_ticks(ax, positions, labels)
     ax.set_xlim(-0.5, len(labels) - 0.5)
     ax.set_ylabel(ylabel or ("dI/dθ" if of == "derivative" else "I"))
     ax.legend(loc="best", fontsize=8)
@@ -178,7 +180,8 @@ def plot_kappa_tradeoff(
         Measured bias (estimate − closed form) and the half-width of its confidence
         interval. The bias axis is symmetric-logarithmic, linear within the
         smallest positive half-width of zero, so signs and orders of magnitude both
-        show.
+        show (:func:`~flatland.plotting.style.symlog_axis`: the linear part gets a
+        quarter of the axis, so the labels around zero do not pile up).
     std : array_like, shape (m,)
         Measured standard deviation of one sample's derivative ($\mathrm{stderr} · \sqrt{n}$).
     predicted_bias, predicted_std : (kappa_grid, values), optional
@@ -207,7 +210,8 @@ def plot_kappa_tradeoff(
     left.axhline(0.0, color="gray", linewidth=0.8)
     positive = halfwidth[halfwidth > 0]
     left.set_xscale("log")
-    left.set_yscale("symlog", linthresh=float(positive.min()) if positive.size else 1e-3)
+    symlog_axis(left, np.concatenate([bias - halfwidth, bias + halfwidth]),
+                float(positive.min()) if positive.size else 1e-3)  # fmt: skip
     left.set_xlabel("κ")
     left.set_ylabel("bias of dI/dθ")
     left.legend(loc="best", fontsize=8)

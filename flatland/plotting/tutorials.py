@@ -49,6 +49,7 @@ from flatland.plotting.style import (
     FIGSIZE,
     PRIMAL,
     REFERENCE_STYLE,
+    integer_ticks,
     method_colour,
     neutral_cycle,
     new_axes,
@@ -345,6 +346,7 @@ def plot_descent(
     right.set_xlabel("iteration")
     right.set_ylabel(param_label)
     for ax in (left, right):
+        integer_ticks(ax.xaxis)  # iterations are whole numbers
         ax.grid(True, which="both", alpha=0.3)
         if loss:
             ax.legend(loc="best", fontsize=8)

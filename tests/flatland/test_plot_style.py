@@ -9,13 +9,14 @@ picks its own colour, or a band whose legend does not say its coverage, fails he
 
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from matplotlib.colors import same_color
+from matplotlib.colors import rgb_to_hsv, same_color, to_rgb
 from matplotlib.container import ErrorbarContainer
 
 from flatland.__main__ import PACKAGE
@@ -42,8 +43,13 @@ SHARED = ("naive", "boundary", "reparam")
 
 
 def _line_colours(ax):
-    """Colour of each labelled curve on ``ax``, by the method its label names."""
-    return {method_of(line.get_label()): line.get_color() for line in ax.lines if method_of(line.get_label())}
+    """Colour of the first labelled curve of each method on ``ax`` (its first variant: the method's own
+    colour; further variants take shades of it)."""
+    colours = {}
+    for line in ax.lines:
+        if method_of(line.get_label()):
+            colours.setdefault(method_of(line.get_label()), line.get_color())
+    return colours
 
 
 def _errorbar_colours(ax):
@@ -201,11 +207,16 @@ def test05_limits_labels_and_variant_styles():
     assert symmetric_limit([sparse]) == 2.0
     assert coverage_label(0.99) == "99 % interval" and coverage_label(0.999) == "99.9 % interval"
     assert coverage_label(0.99999) == "99.999 % interval"
-    styles = series_styles(["reparam kappa=1", "reparam kappa=10", "naive", "uniform"])
-    assert (
-        styles["reparam kappa=1"]["color"] == styles["reparam kappa=10"]["color"] == METHOD_COLOURS["reparam"]
-    )
-    assert styles["reparam kappa=1"]["marker"] != styles["reparam kappa=10"]["marker"]
+    kappas = [f"reparam kappa={k}" for k in (1, 10, 100, 1000, 10000)]
+    styles = series_styles([*kappas, "naive", "uniform"])
+    assert styles["reparam kappa=1"]["color"] == METHOD_COLOURS["reparam"]  # the first variant: the colour
+    colours = [np.array(to_rgb(styles[k]["color"])) for k in kappas]
+    markers = [styles[k]["marker"] for k in kappas]
+    assert len(set(markers)) == len(kappas)  # every variant its own marker and its own shade of blue
+    assert min(np.abs(a - b).max() for a, b in itertools.combinations(colours, 2)) > 0.08
+    hue = rgb_to_hsv(np.array(to_rgb(METHOD_COLOURS["reparam"])))[0]
+    assert all(abs(rgb_to_hsv(c)[0] - hue) < 0.02 for c in colours)  # shades: the same hue
+    assert styles["naive"]["color"] == METHOD_COLOURS["naive"]
     assert styles["uniform"]["color"] == OTHER_COLOURS[0]
     lines = series_styles(["reparam", "reparam paired", "other"], vary="linestyle", others=False)
     assert lines["reparam"]["linestyle"] != lines["reparam paired"]["linestyle"] and lines["other"] == {}

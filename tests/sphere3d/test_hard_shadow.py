@@ -2,7 +2,7 @@
 
 The benchmark scenes (``hard_shadow``: icosphere occluder; ``hard_shadow_cube``) have
 a stored per-pixel reference derivative d/d ``occluder.translate.x``
-(``benchmarks/reference/*.npz``, Richardson-extrapolated central differences, see
+(``sphere3d/scenes/references/*.npz``, Richardson-extrapolated central differences, see
 :mod:`benchmarks.hard_shadow_reference`). The image is cut into regions by closed
 forms, not by the renderer:
 
@@ -49,7 +49,7 @@ from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
 from tests.sphere3d.helpers import REGIONS, over_batches, regions
 
-REFERENCE = Path(__file__).resolve().parents[2] / "benchmarks" / "reference"
+REFERENCE = Path(__file__).resolve().parents[2] / "sphere3d" / "scenes" / "references"
 SCENES = ("hard_shadow", "hard_shadow_cube")
 PARAM = "occluder.translate.x"
 ALPHA = 1e-3
