@@ -183,7 +183,9 @@ def _imports(path: Path, package: str) -> set[str]:
         if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == package:
             for alias in node.names:
                 full = f"{node.module}.{alias.name}"
-                out.add(full if importlib.util.find_spec(full.split(".")[0]) and _is_module(full) else node.module)
+                out.add(
+                    full if importlib.util.find_spec(full.split(".")[0]) and _is_module(full) else node.module
+                )
         elif isinstance(node, ast.Import):
             out.update(a.name for a in node.names if a.name.split(".")[0] == package)
     return out

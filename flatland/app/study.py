@@ -154,10 +154,11 @@ def run_study(
     finally:
         bar.close()
     t = config.trials  # tasks are ordered cell by cell, trial by trial
+    m = len(config.cells)  # the bias intervals are simultaneous over the cells
 
     def summarize(reference: Reference) -> list[CellResult]:
         return [
-            _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget)
+            _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget, m)
             for c, cell in enumerate(config.cells)
         ]
 

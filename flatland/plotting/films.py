@@ -3,8 +3,9 @@
 Gradient images use a diverging colormap centred on zero with one symmetric colour
 scale shared by every method in a figure, so equal colours mean equal derivatives.
 A 1D film is drawn as a strip (one row of pixels stretched vertically) and, in the
-panel, also as curves with ± 2 standard-error bands (their coverage, 95.45 %, in
-the legend), each method in its colour (:mod:`flatland.plotting.style`).
+panel, also as curves with bands of the project's one coverage,
+:data:`~flatland.core.stats.LEVEL` (± 2.58 standard errors, 99 %, in the legend), each method
+in its colour (:mod:`flatland.plotting.style`).
 
 Every function writes one PNG and returns its path. Given a ``sketch`` (a function that
 draws into a matplotlib Axes, e.g. a flatland scene with
@@ -25,11 +26,11 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.gridspec import GridSpecBase
 
+from flatland.core.stats import LEVEL
 from flatland.plotting.bands import draw_estimate
 from flatland.plotting.style import (
     DIVERGING,
     PRIMAL,
-    TWO_SIGMA,
     method_colour,
     neutral_cycle,
     radiance_norm,
@@ -97,17 +98,17 @@ def _film(ax: Any, array: np.ndarray, cmap: str, norm: Normalize, title: str = "
 
 
 def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, color: Any = None) -> None:
-    """A film as a curve over pixel centres with its ± 2 standard-error band (coverage 95.45 %)."""
+    """A film as a curve over pixel centres with its :data:`~flatland.core.stats.LEVEL` band."""
     x = np.arange(np.size(array)) + 0.5
-    halfwidth = None if stderr is None else 2 * stderr
-    draw_estimate(ax, x, array, halfwidth=halfwidth, level=TWO_SIGMA, label=label, color=color, lw=1.2)
+    draw_estimate(ax, x, array, stderr=stderr, level=LEVEL if stderr is not None else None, label=label,
+                  color=color, lw=1.2)  # fmt: skip
 
 
 def _strip_over_curve(
     fig: Figure, sketch: Sketch | None, values: np.ndarray, stderr: np.ndarray | None, cmap: str,
     norm: Normalize, title: str, ylabel: str,
 ) -> tuple[Any, Any, Any]:  # fmt: skip
-    """A 1D film's two panels: its strip over its curve (± 2 standard errors, legend naming the band), on
+    """A 1D film's two panels: its strip over its curve (its LEVEL band, legend naming it), on
     one pixel axis; returns the strip's and the curve's axes and the strip's image."""
     top, bottom = grid_beside(fig, sketch, 2, 1, height_ratios=(1, 2)).subplots(sharex=True)
     strip = _film(top, values, cmap, norm, title)
@@ -124,7 +125,7 @@ def image_figure(
     value: np.ndarray, stderr: np.ndarray | None, path: str | os.PathLike, title: str = "",
     sketch: Sketch | None = None,
 ) -> Path:  # fmt: skip
-    """A rendered image (1D: strip over a curve with ±2 standard errors; 2D: grey image), the
+    """A rendered image (1D: strip over a curve with its LEVEL band; 2D: grey image), the
     ``sketch`` (if given) on its left."""
     value = np.asarray(value)
     norm = radiance_norm(value)
@@ -171,7 +172,7 @@ def panel_figure(
     """The side-by-side panel: primal, then each method's derivative on one shared diverging scale.
 
     ``gradients`` maps a column title to ``(derivative, stderr)``. A 1D film gets a
-    second row with all derivatives as curves (± 2 standard errors) on one axis, each
+    second row with all derivatives as curves (LEVEL bands) on one axis, each
     in its method's colour when the title names one (``"finite differences"`` does).
     The ``sketch``, if given, draws a first column spanning both rows.
     """

@@ -18,7 +18,6 @@ inline backend stays as it is.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Iterable, Sequence
 from typing import Any
@@ -40,7 +39,6 @@ __all__ = [
     "PRIMAL",
     "REFERENCE_STYLE",
     "SKETCH_COLOURS",
-    "TWO_SIGMA",
     "coverage_label",
     "method_colour",
     "method_of",
@@ -84,8 +82,6 @@ FIGSIZE = (6.4, 3.6)
 """Default size of a one-panel figure, in inches."""
 REFERENCE_STYLE = {"color": METHOD_COLOURS["reference"], "linestyle": "--", "linewidth": 1.0}
 """How closed forms and references are drawn."""
-TWO_SIGMA = math.erf(2.0 / math.sqrt(2.0))
-"""Coverage of ± 2 standard errors under a normal law, 0.9545."""
 
 # a label names a method if it starts with one of these words (then a space, "_", "(" or the end)
 _NAMES = re.compile(
