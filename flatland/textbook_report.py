@@ -32,6 +32,7 @@ from flatland.app.table import (
     format_table,
     format_z,
 )
+from flatland.core import progress as _progress
 from flatland.core.bias import ErrorInterval, error_interval
 from flatland.core.dual import detach, variable
 from flatland.core.image import Options
@@ -115,34 +116,50 @@ def textbook_rows(
     seed: int = 0,
     methods: Sequence[tuple[str, Mapping[str, Any]]] = DEFAULT_METHODS,
     integrals: Sequence[str] | None = None,
+    progress: bool | None = None,
 ) -> tuple[TextbookRow, ...]:
-    """Run every method on every integral (at its default θ) with ``n`` samples and ``seed``."""
+    """Run every method on every integral (at its default θ) with ``n`` samples and ``seed``.
+
+    ``progress``: a progress bar per estimate (None: when stderr is a terminal,
+    :mod:`flatland.core.progress`).
+    """
     n = check_int("n", n)
     seed = check_seed("seed", seed)
     names = list(INTEGRALS if integrals is None else integrals)
     quantile = family_quantile(len(names) * len(methods))  # the table's rows judged together
     rows = []
-    for name in names:
-        integral = INTEGRALS[name]
-        theta = integral.default_theta
-        for method, options in methods:
-            e = estimate(integral, theta, method=method, n=n, seed=seed, **options)
-            rows.append(
-                TextbookRow(
-                    integral=integral.name,
-                    title=integral.title,
-                    theta=theta,
-                    method=method,
-                    options=options,
-                    derivative=e.derivative,
-                    stderr=e.derivative_stderr,
-                    closed_form=integral.derivative(theta),
-                    n=n,
-                    seed=seed,
-                    quantile=quantile,
-                )
-            )
+    with _progress.run("textbook table", progress, unit="estimate"):
+        _progress.start(len(names) * len(methods))
+        for name in names:
+            rows += _integral_rows(INTEGRALS[name], methods, n, seed, quantile)
     return tuple(rows)
+
+
+def _integral_rows(
+    integral: Any, methods: Sequence[tuple[str, Mapping[str, Any]]], n: int, seed: int, quantile: float
+) -> list[TextbookRow]:
+    """The rows of one integral, each estimate one step of the progress bar."""
+    theta = integral.default_theta
+    rows = []
+    for method, options in methods:
+        e = estimate(integral, theta, method=method, n=n, seed=seed, **options)
+        rows.append(
+            TextbookRow(
+                integral=integral.name,
+                title=integral.title,
+                theta=theta,
+                method=method,
+                options=options,
+                derivative=e.derivative,
+                stderr=e.derivative_stderr,
+                closed_form=integral.derivative(theta),
+                n=n,
+                seed=seed,
+                quantile=quantile,
+            )
+        )
+        _progress.advance()
+    return rows
 
 
 def _measured(row: TextbookRow) -> str:
@@ -195,9 +212,14 @@ def _jumps(integral: Any, theta: float) -> str:
     return f"jumps at {axis} = {at} move at {speed} per unit θ"
 
 
-def textbook_table(n: int = 20_000, seed: int = 0, rows: Sequence[TextbookRow] | None = None) -> str:
-    """The table as text: one block per integral, one line per method, a legend and one line per flag."""
-    rows = textbook_rows(n, seed) if rows is None else rows
+def textbook_table(
+    n: int = 20_000, seed: int = 0, rows: Sequence[TextbookRow] | None = None, progress: bool | None = None
+) -> str:
+    """The table as text: one block per integral, one line per method, a legend and one line per flag.
+
+    Without ``rows`` it runs :func:`textbook_rows` (``progress``: its progress bar).
+    """
+    rows = textbook_rows(n, seed, progress=progress) if rows is None else rows
     level = format_level(LEVEL)
     lines = []
     previous = None

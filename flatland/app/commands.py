@@ -82,6 +82,11 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     return options
 
 
+def _progress(args: argparse.Namespace) -> bool | None:
+    """``--quiet``: no progress bar; else one when stderr is a terminal (:mod:`flatland.core.progress`)."""
+    return False if getattr(args, "quiet", False) else None
+
+
 def _film(args: argparse.Namespace) -> dict[str, Any]:
     """``film=`` when ``--film`` was given (only packages with films have the option)."""
     return {} if getattr(args, "film", None) is None else {"film": args.film}
@@ -150,12 +155,15 @@ def verb_demo(pkg: Package, args: argparse.Namespace) -> int:
     )
     out = Path(args.out)
 
+    progress = _progress(args)
     start = time.perf_counter()
-    primal = pkg.render(scene, spp=spp, seed=seed)
+    primal = pkg.render(scene, spp=spp, seed=seed, progress=progress)
     gradients, seconds = {}, {}
     for method in methods:
         t0 = time.perf_counter()
-        gradients[method] = pkg.render_gradient(scene, pkg.demo_param, method=method, spp=spp, seed=seed)
+        gradients[method] = pkg.render_gradient(
+            scene, pkg.demo_param, method=method, spp=spp, seed=seed, progress=progress
+        )
         seconds[method] = time.perf_counter() - t0
     ref_spp = pkg.reference_factor * spp
     ref_options = dict(pkg.reference_options)
@@ -163,8 +171,9 @@ def verb_demo(pkg: Package, args: argparse.Namespace) -> int:
 
     def reference_at(count: int) -> Any:
         return pkg.render_gradient(
-            scene, pkg.demo_param, method=reference_method, spp=count, seed=seed + 1, **ref_options
-        )
+            scene, pkg.demo_param, method=reference_method, spp=count, seed=seed + 1, progress=progress,
+            **ref_options,
+        )  # fmt: skip
 
     reference, cap = reference_at(ref_spp), REFERENCE_GROWTH * ref_spp
     for _ in range(2):  # the reference must be 4 × more precise than the methods it judges
@@ -203,7 +212,9 @@ def verb_demo(pkg: Package, args: argparse.Namespace) -> int:
 def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     """``render SCENE``: the image as PNG and ``.npy``."""
     scene = _load_scene(pkg, args.scene)
-    image = pkg.render(scene, spp=args.spp, seed=args.seed, batches=args.batches, **_film(args))
+    image = pkg.render(
+        scene, spp=args.spp, seed=args.seed, batches=args.batches, progress=_progress(args), **_film(args)
+    )
     name = _stem(args.scene)
     out = Path(args.out)
     png = pkg.plot("image")(
@@ -222,7 +233,7 @@ def verb_gradient(pkg: Package, args: argparse.Namespace) -> int:
         raise UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
     g = pkg.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
-        **_film(args), **_options(args),
+        progress=_progress(args), **_film(args), **_options(args),
     )  # fmt: skip
     name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
     out = Path(args.out)
@@ -262,7 +273,7 @@ def verb_study(pkg: Package, args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         cache_dir=cache,
-        progress=False if args.quiet else None,
+        progress=_progress(args),
     )
     csv_path = result.to_csv(out / f"{config.name}.csv")
     figures = pkg.plot("study")(result, out)
