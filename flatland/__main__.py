@@ -27,7 +27,7 @@ __all__ = ["PACKAGE", "STUDIES", "main"]
 def _textbook_section(args: argparse.Namespace) -> str:
     from flatland.textbook_report import textbook_table
 
-    return textbook_table(seed=args.seed)
+    return textbook_table(seed=args.seed, progress=False if args.quiet else None)
 
 
 def _sketch(ax: Any, scene: Any, param: str | None = None) -> Any:

@@ -28,6 +28,10 @@ methods live in :data:`GRADIENT_METHODS` (one module each in
 Standard errors come from ``batches`` independent batches of ``spp / batches``
 samples per pixel (default: the largest divisor of ``spp`` up to 16,
 :func:`flatland.core.image.resolve_batches`).
+
+Every entry point takes ``progress``: a tqdm bar on standard error, advanced per chunk of
+samples, shown after a couple of seconds when stderr is a terminal (None, the default),
+always (True) or never (False); it changes no number (:mod:`flatland.core.progress`).
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from flatland import tasks
 from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
+from flatland.core.progress import run as _bar
 from flatland.core.validate import ValidationError, check_int, check_seed
 from flatland.methods import GRADIENT_METHODS
 from flatland.scene import Scene, check_direction, check_point, load_scene
@@ -84,8 +89,16 @@ def _gradient(
     return spec.func(task, **resolved), resolved
 
 
-def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int | None = None) -> Image:
+def render(
+    scene: Scene | str | dict,
+    spp: int = 64,
+    seed: int = 0,
+    batches: int | None = None,
+    progress: bool | None = None,
+) -> Image:
     """Render the scene's pixels: $I_j = ∫ k_j(t) L(t) dt$ with ``spp`` samples per pixel.
+
+    ``progress``: a progress bar per chunk (None: when stderr is a terminal; see the module docstring).
 
     Raises
     ------
@@ -94,7 +107,8 @@ def render(scene: Scene | str | dict, spp: int = 64, seed: int = 0, batches: int
     """
     task = _task(scene, None, spp, seed, batches)
     _check_budget(task, {})
-    result = task.evaluate(0.0)
+    with _bar(f"render {task.scene.name}", progress):
+        result = task.evaluate(0.0)
     return Image.from_batches(result.value, spp=task.spp, seed=task.seed, scene=task.scene.name)
 
 
@@ -105,6 +119,7 @@ def render_gradient(
     spp: int = 64,
     seed: int = 0,
     batches: int | None = None,
+    progress: bool | None = None,
     **options: Any,
 ) -> GradientImage:
     """Render the image and its derivative with respect to ``param`` (at offset θ = 0) by ``method``.
@@ -124,6 +139,9 @@ def render_gradient(
         image value equals the ``naive`` one bit for bit.
     batches : int, optional
         Independent batches behind the standard errors (must divide spp).
+    progress : bool, optional
+        A progress bar per chunk on stderr: None (default) when stderr is a terminal, True
+        always, False never (:mod:`flatland.core.progress`); it changes no number.
     **options
         Method options: ``h`` (finite_difference); ``kappa``, ``kappa_film``,
         ``probes``, ``spread``, ``refine``, ``paired`` (reparam, see
@@ -138,7 +156,8 @@ def render_gradient(
     if param is None:
         raise ValidationError("param", "is required (a parameter name like 'occluder.translate.x')")
     task = _task(scene, param, spp, seed, batches)
-    result, resolved = _gradient(task, method, options)
+    with _bar(f"{method} {task.scene.name}", progress):
+        result, resolved = _gradient(task, method, options)
     return GradientImage.from_batches(
         result.value,
         result.derivative,
@@ -160,6 +179,7 @@ def irradiance(
     n: int = 4096,
     seed: int = 0,
     batches: int | None = None,
+    progress: bool | None = None,
     **options: Any,
 ) -> Estimate:
     r"""Estimate $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$ at a fixed point and its derivative.
@@ -168,15 +188,16 @@ def irradiance(
     at a point that does not move with θ. Closed forms (theory/radiometry): a uniform emitter
     of radiance L between angles $φ_a < φ_b$ from the normal gives $L (\sin φ_b - \sin φ_a)$;
     the unoccluded sky of radiance 1 gives 2. With ``param=None`` only the value is
-    estimated (derivative 0).
+    estimated (derivative 0). ``progress``: a progress bar per chunk, as in :func:`render`.
     """
     point, normal = check_point("point", point), check_direction("normal", normal)
     task = _task(scene, param, n, seed, batches, point=point, normal=normal)
-    if param is None:
-        _check_budget(task, {})
-        result, resolved = task.evaluate(0.0), {}
-    else:
-        result, resolved = _gradient(task, method, options)
+    with _bar(f"irradiance {method if param is not None else ''}".rstrip(), progress):
+        if param is None:
+            _check_budget(task, {})
+            result, resolved = task.evaluate(0.0), {}
+        else:
+            result, resolved = _gradient(task, method, options)
     return Estimate.from_batches(
         result.value[:, 0], result.derivative[:, 0], task.n, method if param is not None else "", resolved
     )

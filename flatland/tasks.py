@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core import progress
 from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws
 from flatland.integrator import PRIMARY_UNIFORMS, Context, Identity, Transforms, pixel_samples, shade
@@ -131,13 +132,15 @@ def _sums(
     transforms: Transforms | None,
     estimate: Any,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-batch, per-pixel means of ``estimate(ctx, pixel, u, draws)`` (values and tangents)."""
+    """Per-batch, per-pixel means of ``estimate(ctx, pixel, u, draws)`` (values and tangents), one pass of
+    the call's progress bar (:mod:`flatland.core.progress`) advanced per chunk."""
     state0 = state.detached()
     ctx = Context(state, state0, Lights.of(state0), transforms or Identity())
     per_batch = spp // batches
     size = batches * pixels
     sums_v = np.zeros(size)
     sums_t = np.zeros(size)
+    progress.start(-(-pixels * spp // CHUNK))
     for index in _chunks(pixels * spp):
         pixel, j = np.divmod(index, spp)
         batch = j // per_batch
@@ -147,6 +150,7 @@ def _sums(
         key = batch * pixels + pixel
         sums_v += np.bincount(key, weights=detach(est), minlength=size)
         sums_t += np.bincount(key, weights=tangent(est), minlength=size)
+        progress.advance()
     value = (sums_v / per_batch).reshape(batches, pixels)
     deriv = (sums_t / per_batch).reshape(batches, pixels)
     return value, deriv

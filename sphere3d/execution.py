@@ -4,7 +4,8 @@ A task (:mod:`sphere3d.tasks`) splits its samples into memory chunks whose rando
 keyed on the samples' indices, so its result does not depend on how the chunks are run. This
 module runs them: :func:`map_chunks` on up to :data:`WORKERS` threads (numpy and Embree release
 the GIL), each in a copy of the caller's context, with the allocator tuned for the chunks'
-temporaries on glibc. Nothing here changes a number.
+temporaries on glibc, and reports each finished chunk to the call's progress bar
+(:mod:`flatland.core.progress`). Nothing here changes a number.
 
 :data:`WORKERS` defaults to every core (``os.cpu_count()``); the environment variable
 ``SPHERE3D_THREADS`` (read at import) or an assignment ``sphere3d.execution.WORKERS = n`` limits it.
@@ -21,6 +22,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
+from flatland.core import progress
 from flatland.core.validate import ValidationError
 
 __all__ = ["TRIM_DELAY", "WORKERS", "map_chunks", "workers"]
@@ -73,21 +75,25 @@ def _heap_for_temporaries() -> Any:
     return libc if done else None
 
 
-def map_chunks(func: Callable[[int], Any], items: range) -> list[Any]:
+def map_chunks(func: Callable[[int], Any], items: range, counted: bool = True) -> list[Any]:
     """``[func(i) for i in items]``, on up to :data:`WORKERS` threads (numpy and Embree release the GIL).
 
     Each chunk draws from its own named streams, so the result does not depend on
-    the number of threads or the order they finish in. The chunks' memory is handed back
-    :data:`TRIM_DELAY` seconds after the last task, not after each, and the threads are kept
-    (:func:`_pool`): trimmed after each, every task would page-fault its temporaries in again, in
-    every thread's heap.
+    the number of threads or the order they finish in. With ``counted`` (the sample
+    chunks; not the short gathers after them) the items are a pass of the call's progress
+    bar, advanced as their results arrive, in order (:mod:`flatland.core.progress`).
+    The chunks' memory is handed back :data:`TRIM_DELAY` seconds after the last task, not after
+    each, and the threads are kept (:func:`_pool`): trimmed after each, every task would
+    page-fault its temporaries in again, in every thread's heap.
     """
+    if counted:
+        progress.start(len(items))
     libc = _heap_for_temporaries()
     if libc is None:
-        return _map_threads(func, items)
+        return _map_threads(func, items, counted)
     _trim_later(libc, None)
     try:
-        return _map_threads(func, items)
+        return _map_threads(func, items, counted)
     finally:
         _trim_later(libc, TRIM_DELAY)
 
@@ -116,11 +122,19 @@ def _pool(workers: int, pid: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"sphere3d-{pid}")
 
 
-def _map_threads(func: Callable[[int], Any], items: range) -> list[Any]:
+def _map_threads(func: Callable[[int], Any], items: range, counted: bool = False) -> list[Any]:
     """Each task runs in a copy of the caller's context (one copy per task: a context is entered by one
-    thread at a time), so the caller's ``np.errstate``, a context variable, holds in the threads too."""
+    thread at a time), so the caller's ``np.errstate``, a context variable, holds in the threads too.
+    The progress bar advances in this thread, as each result arrives in order."""
     workers = WORKERS
     if workers <= 1 or len(items) <= 1:
-        return [func(i) for i in items]
-    caller = contextvars.copy_context()
-    return list(_pool(workers, os.getpid()).map(lambda i: caller.copy().run(func, i), items))
+        results = (func(i) for i in items)
+    else:
+        caller = contextvars.copy_context()
+        results = _pool(workers, os.getpid()).map(lambda i: caller.copy().run(func, i), items)
+    out = []
+    for result in results:
+        out.append(result)
+        if counted:
+            progress.advance()
+    return out

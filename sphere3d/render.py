@@ -5,6 +5,9 @@ filter times the radiance through the film (:mod:`sphere3d.integrator`); standar
 errors come from ``batches`` independent batches of ``spp / batches`` samples. The
 gradient methods are in :data:`GRADIENT_METHODS` (``naive``, ``finite_difference``,
 ``reparam``, ``boundary``); given the same seed they all see the same primary samples.
+Every entry point takes ``progress``: a tqdm bar on standard error, advanced per chunk of
+samples, shown after a couple of seconds when stderr is a terminal (None, the default),
+always (True) or never (False); it changes no number (:mod:`flatland.core.progress`).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from typing import Any
 from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
+from flatland.core.progress import run as _bar
 from flatland.core.validate import ValidationError, check_int, check_seed
 from sphere3d import tasks
 from sphere3d.methods import GRADIENT_METHODS
@@ -26,7 +30,12 @@ __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
 
 def render(
-    scene: Any, spp: int = 64, seed: int = 0, batches: int | None = None, film: str = "splat"
+    scene: Any,
+    spp: int = 64,
+    seed: int = 0,
+    batches: int | None = None,
+    film: str = "splat",
+    progress: bool | None = None,
 ) -> Image:
     """Render ``scene`` (a built-in name, a .json path, a dict or a Scene).
 
@@ -43,6 +52,9 @@ def render(
         ``"splat"`` (default): each sample counts in every pixel its filter covers, with
         multi-sample MIS weights over the pixels' samplers (:mod:`sphere3d.film`); ``"pixel"``:
         only in the pixel that drew it.
+    progress : bool, optional
+        A progress bar per chunk on stderr: None (default) when stderr is a terminal, True
+        always, False never (:mod:`flatland.core.progress`); it changes no number.
 
     Returns
     -------
@@ -55,7 +67,8 @@ def render(
     batches = resolve_batches(spp, batches)
     task = ImageTask(scene, None, spp, seed, batches, film=film)
     _check_budget(task, {})
-    tally = task.evaluate(0.0)
+    with _bar(f"render {scene.name}", progress):
+        tally = task.evaluate(0.0)
     return Image.from_batches(tally.value, spp=spp, seed=seed, scene=scene.name)
 
 
@@ -85,6 +98,7 @@ def render_gradient(
     seed: int = 0,
     batches: int | None = None,
     film: str = "splat",
+    progress: bool | None = None,
     **options: Any,
 ) -> GradientImage:
     """Render ``scene`` and its derivative with respect to ``param`` by ``method``.
@@ -94,7 +108,7 @@ def render_gradient(
     param : str
         A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
     method : {"naive", "finite_difference", "reparam", "boundary"}
-    spp, seed, batches, film
+    spp, seed, batches, film, progress
         As in :func:`render`; the film (default ``"splat"``) applies to every method alike (their
         values stay equal).
     **options
@@ -122,7 +136,8 @@ def render_gradient(
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    tally, resolved = _run(method, ImageTask(scene, param, spp, seed, batches, film=film), options)
+    with _bar(f"{method} {scene.name}", progress):
+        tally, resolved = _run(method, ImageTask(scene, param, spp, seed, batches, film=film), options)
     return GradientImage.from_batches(
         tally.value,
         tally.derivative,
@@ -144,6 +159,7 @@ def irradiance(
     n: int = 4096,
     seed: int = 0,
     batches: int | None = None,
+    progress: bool | None = None,
     **options: Any,
 ) -> Estimate:
     r"""Irradiance $E = ∫ L_i(ω) \cos θ\, dω$ at a fixed point and normal, and its derivative.
@@ -157,7 +173,8 @@ def irradiance(
     -------
     Estimate
         Value and derivative with standard errors over ``batches`` batches of ``n / batches``.
-        With ``param=None`` only the value is estimated (derivative 0).
+        With ``param=None`` only the value is estimated (derivative 0). ``progress``: a
+        progress bar per chunk, as in :func:`render`.
     """
     scene = load_scene(scene)
     param = scene.check_param(param) if param is not None else None
@@ -175,11 +192,12 @@ def irradiance(
     seed = check_seed("seed", seed)
     batches = resolve_batches(n, batches, "n")
     task = PointTask(scene, param, point, normal, n, seed, batches)
-    if param is None:
-        _check_budget(task, {})
-        tally, resolved = task.evaluate(0.0), {}
-    else:
-        tally, resolved = _run(method, task, options)
+    with _bar(f"irradiance {method if param is not None else ''}".rstrip(), progress):
+        if param is None:
+            _check_budget(task, {})
+            tally, resolved = task.evaluate(0.0), {}
+        else:
+            tally, resolved = _run(method, task, options)
     return Estimate.from_batches(
         tally.value, tally.derivative, n, method if param is not None else "", resolved
     )

@@ -260,7 +260,7 @@ class ImageTask:
                 value, deriv = value - mean[0] * sums[2], deriv - mean[0] * sums[3] - mean[1] * sums[2]
             return np.stack([value, deriv]).reshape(2, batches, len(rows), width)
 
-        image = np.concatenate(execution.map_chunks(band, range(-(-height // step))), axis=2)
+        image = np.concatenate(execution.map_chunks(band, range(-(-height // step)), counted=False), axis=2)
         return Tally(value=image[0], derivative=image[1])
 
 

@@ -69,8 +69,10 @@ class Package:
         source a :class:`ValidationError`); the built-in scene names; a scene's
         parameter names.
     render, render_gradient, irradiance : callable
-        The package's rendering API (``render(scene, spp=, seed=, batches=)``,
-        ``render_gradient(scene, param, method=, spp=, seed=, batches=, **options)``).
+        The package's rendering API (``render(scene, spp=, seed=, batches=, progress=)``,
+        ``render_gradient(scene, param, method=, spp=, seed=, batches=, progress=, **options)``;
+        ``progress`` as in :mod:`flatland.core.progress`: the command line passes False for
+        ``--quiet``, else None, a bar when stderr is a terminal).
     methods : MethodTable
         The gradient methods of ``render_gradient`` and their options.
     demo_scene, demo_param : str

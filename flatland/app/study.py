@@ -71,6 +71,7 @@ from flatland.app.study_reference import Reference, resolve_reference
 from flatland.app.study_result import CSV_COLUMNS, CellResult, StudyResult, _ranked, _summarize, read_csv
 from flatland.app.study_trials import _Calls, _execute, _run_one, _Task
 from flatland.core.bias import REFERENCE_RATIO, reference_spp_needed
+from flatland.core.progress import show, silenced
 from flatland.core.validate import ValidationError, check_int
 
 __all__ = ["CSV_COLUMNS", "load_config", "read_csv", "run_study"]
@@ -85,8 +86,7 @@ class _NoProgress:
 
 
 def _progress(total: int, desc: str, progress: bool | None) -> Any:
-    show = sys.stderr.isatty() if progress is None else progress
-    if not show:
+    if not show(progress):
         return _NoProgress()
     from tqdm import tqdm
 
@@ -118,7 +118,8 @@ def run_study(
     cache_dir : path, optional
         Where Monte Carlo references are cached; None computes them every time.
     progress : bool, optional
-        Show a tqdm progress bar over the trials; default: when stderr is a terminal.
+        Show tqdm progress bars (the reference's, then one over the trials; :mod:`flatland.core.progress`);
+        default: when stderr is a terminal.
     on_reference : callable, optional
         Called with the reference once it is known (e.g. to print it).
     grow_reference : bool
@@ -139,7 +140,7 @@ def run_study(
     scheduler = config.scheduler if scheduler is None else scheduler
     start = time.perf_counter()
     _preflight(config)
-    reference = resolve_reference(config, cache_dir)
+    reference = resolve_reference(config, cache_dir, progress)
     if on_reference is not None:
         on_reference(reference)
     calls = _Calls.of(config.package)
@@ -154,10 +155,11 @@ def run_study(
     finally:
         bar.close()
     t = config.trials  # tasks are ordered cell by cell, trial by trial
+    m = len(config.cells)  # the bias intervals are simultaneous over the cells
 
     def summarize(reference: Reference) -> list[CellResult]:
         return [
-            _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget)
+            _summarize(cell, runs[c * t : (c + 1) * t], reference, config.level, config.time_budget, m)
             for c, cell in enumerate(config.cells)
         ]
 
@@ -175,7 +177,7 @@ def run_study(
                 f" × the smallest standard error it judges ({judged:.3g}); give at least {needed}",
             )
         spec = replace(config.reference, n=needed)
-        reference = resolve_reference(replace(config, reference=spec), cache_dir)
+        reference = resolve_reference(replace(config, reference=spec), cache_dir, progress)
         rows = summarize(reference)
     return StudyResult(config, reference, _ranked(rows), time.perf_counter() - start)
 
@@ -195,6 +197,7 @@ def _preflight(config: StudyConfig) -> None:
     calls = _Calls.of(config.package)
     for cell in config.cells:
         try:
-            _run_one(calls, config.problem, replace(cell, n=min(cell.n, 2)), config.seed)
+            with silenced():
+                _run_one(calls, config.problem, replace(cell, n=min(cell.n, 2)), config.seed)
         except ValidationError as e:
             raise ValidationError(f"methods cell {cell.index} ({cell.label})", str(e)) from None

@@ -9,7 +9,7 @@ A configuration is a JSON object (or the same dict)::
      "n": 50000,            # samples per trial ("spp" for scenes); may be given or swept per method
      "trials": 20,          # independent trials per cell, >= 2
      "seed": 3,             # trial k of cell c runs with trial_seed(seed, c, k)
-     "level": 0.99,         # confidence level of the bias intervals
+     "level": 0.99,         # the bias intervals' level, simultaneous over the cells (default LEVEL)
      "workers": 1,          # worker processes (or "scheduler": a dask.distributed address)
      "time_budget": 1.0,    # seconds, for the equal-time RMSE column
      "reference": {"method": "boundary", "spp": 4096, "seed": 7, ...options}}
@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from flatland.app.table import method_label
+from flatland.core.stats import LEVEL
 from flatland.core.validate import (
     ValidationError,
     check_choice,
@@ -140,7 +141,7 @@ class StudyConfig:
     seed: int
     workers: int = 1
     scheduler: str | None = None
-    level: float = 0.95
+    level: float = LEVEL
     time_budget: float = 1.0
     reference: ReferenceSpec | None = None
 
@@ -176,7 +177,7 @@ class StudyConfig:
         scheduler = data.get("scheduler")
         if scheduler is not None and (not isinstance(scheduler, str) or not scheduler):
             raise ValidationError("scheduler", f"must be a scheduler address string, got {scheduler!r}")
-        level = check_finite("level", data.get("level", 0.95))
+        level = check_finite("level", data.get("level", LEVEL))
         if not 0.0 < level < 1.0:
             raise ValidationError("level", f"must lie in (0, 1), got {level!r}")
         time_budget = check_positive("time_budget", data.get("time_budget", 1.0))

@@ -26,6 +26,7 @@ import numpy as np
 from flatland.app.study_config import Cell, Problem, ReferenceSpec, StudyConfig
 from flatland.app.study_trials import _Calls, _functional, _load_scene, _run_one
 from flatland.app.table import method_label
+from flatland.core import progress as _progress
 
 if TYPE_CHECKING:
     from flatland.app.cli import Package
@@ -99,17 +100,24 @@ def _cache_key(package: Package, problem: Problem, spec: ReferenceSpec) -> str:
 
 
 def _compute_reference(
-    calls: _Calls, problem: Problem, spec: ReferenceSpec
+    calls: _Calls, problem: Problem, spec: ReferenceSpec, progress: bool | None = None
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """(derivative, derivative_stderr) arrays of one high-sample run and the standard error of the
-    scalar studied (:func:`~flatland.app.study_trials._functional_stderr`)."""
+    scalar studied (:func:`~flatland.app.study_trials._functional_stderr`), with its own progress bar
+    (:mod:`flatland.core.progress`)."""
     cell = Cell(-1, spec.method, spec.options, spec.n)
-    run = _run_one(calls, problem, cell, spec.seed)
+    with _progress.run(f"reference {cell.label}", progress):
+        run = _run_one(calls, problem, cell, spec.seed)
     return np.asarray(run.derivative_image), np.asarray(run.stderr_image), run.derivative_stderr
 
 
-def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None = None) -> Reference:
+def resolve_reference(
+    config: StudyConfig, cache_dir: str | os.PathLike | None = None, progress: bool | None = None
+) -> Reference:
     """The study's reference: the closed form, or a Monte Carlo run (read from / written to the cache).
+
+    ``progress``: a progress bar while a Monte Carlo reference is computed (None: when stderr is a
+    terminal, :mod:`flatland.core.progress`).
 
     The cache file is ``<cache_dir>/<hash>.npz`` where the hash covers the package's
     source code, the problem (scene file content included), the method, its options,
@@ -131,7 +139,9 @@ def resolve_reference(config: StudyConfig, cache_dir: str | os.PathLike | None =
             scalar_stderr = float(data["scalar_stderr"])
         label += " (cached)"
     else:
-        derivative, stderr, scalar_stderr = _compute_reference(_Calls.of(config.package), problem, spec)
+        derivative, stderr, scalar_stderr = _compute_reference(
+            _Calls.of(config.package), problem, spec, progress
+        )
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")

@@ -6,7 +6,10 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
     mean of the T trial estimates
 ``bias``
     mean - reference, with a Student-t interval (T - 1 degrees of freedom) of
-    half-width $t · \sqrt{s^2/T + s_\mathrm{ref}^2}$ (plus a floating-point allowance of
+    half-width $t · \sqrt{s^2/T + s_\mathrm{ref}^2}$, t at the per-cell coverage that makes the
+    intervals of the study's m cells simultaneous at the configuration's ``level`` (default
+    :data:`~flatland.core.stats.LEVEL`, :func:`~flatland.core.stats.family_quantile`), plus a
+    floating-point allowance of
     :func:`~flatland.core.stats.rounding_floor` ($64 ε$) of the larger of mean and
     reference; a spread of the trials below that counts as zero variance, the
     policy of :data:`flatland.core.stats.ROUNDING`)
@@ -19,8 +22,8 @@ Statistics per cell (T trials of ``samples`` integrand evaluations each)
     $\sqrt{\mathrm{mean}_k (d_k - \mathrm{reference})^2}$: the error of one trial
 ``bias_z``, ``biased``
     $z = \mathrm{bias} / \sqrt{\mathrm{stderr}^2 + \mathrm{reference\_stderr}^2}$ (0 within the floating-point
-    allowance, ±inf with no noise at all); ``biased`` when $|z| > 3.3$ (two-sided
-    99.9 %); for scenes the per-pixel test of the mean image over the
+    allowance, ±inf with no noise at all, printed "—"); ``biased`` exactly when the bias interval
+    excludes 0 (so |z| above the interval's t); for scenes the per-pixel test of the mean image over the
     trials flags it (:mod:`flatland.core.bias`: $|z_j|$ above the Student-t
     quantile with T - 1 degrees of freedom at the Sidak-corrected level
     $1 - 0.99^{1/m}$ over the m pixels, the stderr the larger of the trials' scatter
@@ -58,15 +61,31 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from flatland.app.study_config import Cell, StudyConfig
 from flatland.app.study_reference import Reference
 from flatland.app.study_trials import _Run
-from flatland.app.table import format_table, own_method_note
-from flatland.core.bias import REFERENCE_RATIO, Z_FLAG, PixelTest, pixel_test
+from flatland.app.table import (
+    format_exact,
+    format_interval,
+    format_level,
+    format_number,
+    format_table,
+    format_z,
+    own_method_note,
+)
+from flatland.core.bias import PIXEL_ALPHA, REFERENCE_RATIO, PixelTest, pixel_test
 from flatland.core.image import relative_error
-from flatland.core.stats import ROUNDING, rounding_floor, spread, z_score
+from flatland.core.stats import (
+    LEVEL,
+    ROUNDING,
+    family_level,
+    family_quantile,
+    normal_quantile,
+    rounding_floor,
+    spread,
+    z_score,
+)
 
 __all__ = ["CSV_COLUMNS", "CellResult", "StudyResult", "read_csv"]
 
@@ -119,10 +138,10 @@ class CellResult:
 
     @property
     def biased(self) -> bool:
-        """True if the bias is significant: |bias_z| > 3.3. The per-pixel test (``pixels``) is shown
-        but does not flag: with 8-16 trials its t law fails for heavy-tailed pixels (measured: a
-        finite-difference cell against a same-method reference exceeded)."""
-        return abs(self.bias_z) > Z_FLAG
+        """True if the bias interval excludes 0 (the table prints BIASED). The per-pixel test
+        (``pixels``) is shown but does not flag: with 8-16 trials its t law fails for heavy-tailed
+        pixels (a finite-difference cell against a same-method reference exceeded)."""
+        return not self.bias_contains_zero()
 
     @property
     def pixels_exceeding(self) -> int | None:
@@ -150,8 +169,9 @@ def _relative_error(run: _Run, reference: Reference) -> float:
 
 
 def _summarize(
-    cell: Cell, runs: Sequence[_Run], reference: Reference, level: float, budget: float
+    cell: Cell, runs: Sequence[_Run], reference: Reference, level: float, budget: float, cells: int = 1
 ) -> CellResult:
+    """One cell's statistics; its bias interval is one of ``cells`` simultaneous ones at ``level``."""
     d = np.array([r.derivative for r in runs])
     t = len(runs)
     samples = runs[0].samples
@@ -162,9 +182,7 @@ def _summarize(
     resolution = float(rounding_floor(scale))
     var = float(spread(math.sqrt(var), scale)) ** 2  # one rounding policy (flatland.core.stats.ROUNDING)
     stderr = math.sqrt(var / t)
-    half = (
-        float(stats.t.ppf(0.5 + 0.5 * level, t - 1)) * math.sqrt(var / t + reference.stderr**2) + resolution
-    )
+    half = family_quantile(cells, level, dof=t - 1) * math.sqrt(var / t + reference.stderr**2) + resolution
     bias = float(mean - reference.derivative)
     bias_z = z_score(mean, reference.derivative, math.hypot(stderr, reference.stderr), resolution)
     pixels = None
@@ -182,9 +200,9 @@ def _summarize(
     var_ps = var * samples
     sec_ps = sum(r.seconds for r in runs) / (t * samples)
     cost = var_ps * sec_ps
-    # efficiency ignores bias: defined only for a cell that passes both bias tests and whose interval
-    # contains 0 (infinite for a zero-variance estimator), never for a biased one
-    unbiased = abs(bias_z) <= Z_FLAG and bias - half <= 0 <= bias + half
+    # efficiency ignores bias: defined only for a cell whose interval contains 0 (infinite for a
+    # zero-variance estimator), never for a biased one
+    unbiased = bias - half <= 0 <= bias + half
     efficiency = (1.0 / cost if cost > 0.0 else math.inf) if unbiased else None
     return CellResult(
         cell=cell,
@@ -262,30 +280,31 @@ class StudyResult:
         return tuple(sorted(self.rows, key=lambda r: r.rank))
 
     def table(self) -> str:
-        """A fixed-width text table, best first; the bias columns lead, the footer states the tests."""
-        level = f"{self.config.level:.0%} CI"
+        """A fixed-width text table, best first; the bias columns lead, the legend under it says what
+        every column counts."""
+        level = format_level(self.config.level)
         scene = self.config.problem.is_scene
-        head = ("method", "rank", "bias z", "flag", *(("px |z|>t",) if scene else ()), f"bias [{level}]",
-                "efficiency", "rmse", "var/sample", "s/trial", "mean dI/dθ")  # fmt: skip
+        head = ("method", "rank", "bias z", "flag", *(("px |z|>t",) if scene else ()),
+                f"bias [{level} interval]", "efficiency", "rmse", "var/sample", "s/trial",
+                "mean dI/dθ")  # fmt: skip
         rows = [
             (
                 r.cell.label
                 + ("" if len(self.sample_counts) == 1 else f" {self.config.problem.count_name}={r.cell.n}"),
                 str(r.rank),
-                _format_z(r.bias_z),
+                format_z(r.bias_z),
                 "BIASED" if r.biased else "",
                 *((r.pixels.summary(),) if r.pixels is not None else ()),
-                f"{r.bias:+.3g} [{r.bias_low:+.3g}, {r.bias_high:+.3g}]",
+                _format_bias(r),
                 _format_efficiency(r),
                 f"{r.rmse:.3g}",
                 f"{r.variance_per_sample:.3g}",
                 f"{r.seconds_per_trial:.3g}",
-                f"{r.mean_derivative:.5g}",
+                _format_mean(r),
             )
             for r in self.ranking()
         ]
-        ref = self.reference
-        title = f"{self.config.problem.label}: reference dI/dθ = {ref.derivative:.6g} ± {ref.stderr:.2g}"
+        title = f"{self.config.problem.label}: reference dI/dθ = {_format_reference(self.reference)}"
         return format_table(head, rows, title) + "\n" + self.footer()
 
     @property
@@ -294,34 +313,66 @@ class StudyResult:
         return tuple(sorted({r.cell.n for r in self.rows}))
 
     def footer(self) -> str:
-        """What the bias columns mean and how the reference was made."""
+        """The legend: what every column counts, the tests behind the flag, how the reference was made."""
         ref = self.reference
         judged = [r.stderr for r in self.rows if not r.biased and r.stderr > 0.0]
         ratio = f"{ref.stderr / min(judged):.2f}" if judged else "n/a"
+        m, trials, level = len(self.rows), self.config.trials, self.config.level
+        q = family_quantile(m, level, dof=trials - 1)
+        count = "pixel samples (spp × pixels)" if self.config.problem.is_scene else "samples"
         lines = [
             f"reference: {ref.source}, stderr {ref.stderr:.2g} = {ratio} × the smallest unbiased-row stderr"
             f" (required <= {REFERENCE_RATIO:g})",
-            f"bias z = bias / sqrt(stderr² + stderr_ref²) of the studied scalar; |z| > {Z_FLAG}"
-            " (two-sided 99.9 %) flags BIASED",
+            f"bias [{format_level(level)} interval]: mean of the {trials} trials - reference, its interval"
+            f" simultaneous over the {m} rows: ± {q:.2f} sqrt(stderr² + stderr_ref²)",
+            f"  (Student-t, {trials - 1} dof, per row {family_level(m, level):.2%}); BIASED exactly when the"
+            " interval excludes 0; (σ = 0): every trial gave the same number",
+            "bias z: bias / sqrt(stderr² + stderr_ref²) (stderr of the mean of the trials); BIASED when"
+            f" |z| > {q:.2f}; — : no spread, no z",
         ]
         if self.config.problem.is_scene:
-            lines.append(
-                "px |z|>t: pixels of the mean image whose |z| exceeds the Student-t quantile (trials - 1 dof)"
-                " at the Sidak-corrected level 1-(1-0.01)^(1/m), m pixels; ~0.01 expected if unbiased"
-                " (shown, not a flag: heavy-tailed pixels break its t law at these trial counts)"
-            )
-        lines.append(
-            "efficiency = 1/(var/sample × s/sample), shown only for an unbiased row whose interval"
-            " contains 0; rank: those by efficiency, then the rest by equal-time RMSE"
-        )
+            lines += [
+                "px |z|>t: k/m, k the pixels of the mean image whose |z| exceeds t (Student-t, trials - 1"
+                f" dof, level 1-{1 - PIXEL_ALPHA:g}^(1/m)), m the pixels",
+                "  with a positive stderr (the others have no variance to test); about"
+                f" {PIXEL_ALPHA:g} expected if unbiased; shown, not a flag (heavy-tailed pixels)",
+            ]
+        lines += [
+            f"efficiency = 1/(var/sample × s/sample), unbiased rows only (σ²=0: no variance); var/sample: the"
+            f" trials' variance × {count} per trial",
+            "rmse: root mean square error of one trial (bias and noise); s/trial: seconds per trial;"
+            " mean dI/dθ: mean of the trials",
+            "rank: unbiased rows by efficiency, then the rest by equal-time RMSE",
+        ]
         if self.config.reference is not None:
             note = own_method_note((c.method for c in self.config.cells), self.config.reference.method)
             lines += [note] if note else []
         return "\n".join(lines)
 
 
-def _format_z(z: float) -> str:
-    return f"{z:+.1f}" if math.isfinite(z) else ("+inf" if z > 0 else "-inf") + " (σ=0)"
+def _format_reference(ref: Reference) -> str:
+    """The reference value: a closed form, or a Monte Carlo estimate with its LEVEL interval."""
+    if ref.n is None:
+        return f"{ref.derivative:+.6g} (closed form)"
+    if not ref.stderr > 0.0:
+        return format_exact(ref.derivative)
+    half = normal_quantile(LEVEL) * ref.stderr
+    interval = format_interval(ref.derivative, ref.derivative - half, ref.derivative + half)
+    return f"{interval} ({format_level(LEVEL)} interval)"
+
+
+def _format_bias(row: CellResult) -> str:
+    """The bias and its interval; a bias without any spread (trials and reference exact) is exact."""
+    if row.stderr > 0.0 or row.reference_stderr > 0.0:
+        return format_interval(row.bias, row.bias_low, row.bias_high)
+    return format_exact(row.bias)
+
+
+def _format_mean(row: CellResult) -> str:
+    """The mean of the trials to two significant digits of its standard error."""
+    if not row.stderr > 0.0:
+        return f"{row.mean_derivative:+.6g}"
+    return format_number(row.mean_derivative, row.stderr)
 
 
 def _format_efficiency(row: CellResult) -> str:

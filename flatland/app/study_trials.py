@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from flatland.app.study_config import Cell, Problem
+from flatland.core import progress as _progress
 from flatland.core.validate import ValidationError
 
 if TYPE_CHECKING:
@@ -122,9 +123,11 @@ def _run_one(calls: _Calls, problem: Problem, cell: Cell, seed: int) -> _Run:
 
 
 def _run_task(task: _Task) -> _Run:
-    """Worker entry point (module level, so processes and Dask can import it)."""
+    """Worker entry point (module level, so processes and Dask can import it). A trial shows no progress
+    bar of its own (the study's counts trials), in this process or a worker."""
     try:
-        return _run_one(task.calls, task.problem, task.cell, task.seed)
+        with _progress.silenced():
+            return _run_one(task.calls, task.problem, task.cell, task.seed)
     except ValidationError as e:  # named by its cell; pickles back from a worker (ValidationError.__reduce__)
         raise ValidationError(f"methods cell {task.cell.index} ({task.cell.label})", str(e)) from None
 

@@ -3,9 +3,13 @@ r"""Bias tests behind every error table: a method is flagged BIASED before its e
 Two tests, both against a reference with its own standard error:
 
 film sum (the studies' functional)
-    $z = (S - S_{ref}) / \sqrt{se^2 + se_{ref}^2}$, S the sum over the film (or the studied
-    scalar), computed by :func:`flatland.core.stats.z_score` (the project's one rounding
-    policy); flagged when |z| > :data:`Z_FLAG` = 3.3 (two-sided normal level 99.9 %). A film
+    The error $S - S_{ref}$ of the sum over the film (or of the studied scalar) with its
+    :data:`~flatland.core.stats.LEVEL` interval $± q \sqrt{se^2 + se_{ref}^2}$
+    (:func:`error_interval`), q the quantile of a row of a table of m rows
+    (:func:`~flatland.core.stats.family_quantile`: the m intervals cover together with
+    probability :data:`~flatland.core.stats.LEVEL`); flagged BIASED exactly when the
+    interval excludes 0, i.e. $|z| > q$ with $z = (S - S_{ref}) / \sqrt{se^2 + se_{ref}^2}$
+    (:func:`flatland.core.stats.z_score`, the project's one rounding policy). A film
     sum's se is the spread of the per-batch sums
     (:meth:`~flatland.core.image.GradientImage.film_sum`), not the pixels' standard errors in
     quadrature: a splatted film and the edge points of ``boundary`` correlate neighbouring pixels.
@@ -17,8 +21,8 @@ per pixel (image outputs)
     estimator that is exactly zero everywhere is caught by the film-sum test); a
     pixel exceeds when $|z_j|$ is above the two-sided Student-t quantile (``dof`` degrees of
     freedom: the method's batches or trials minus one, its variance dominating the
-    reference's) at the Sidak-corrected level $1 - (1 - α)^{1/m}$, α =
-    :data:`PIXEL_ALPHA` = 0.01. An unbiased method has no exceeding pixel with
+    reference's) at the Sidak-corrected level $1 - (1 - α)^{1/m}$, α = :data:`PIXEL_ALPHA`
+    = 1 - :data:`~flatland.core.stats.LEVEL`. An unbiased method has no exceeding pixel with
     probability $1 - α$, i.e. $m × level ≈ α = 0.01$ exceeding pixels are expected.
     The count is reported beside the film-sum flag but does not set it: the batch
     standard errors of pixels dominated by rare large samples (a finite difference
@@ -28,7 +32,8 @@ per pixel (image outputs)
     can see a per-pixel bias needs more batches than these outputs use.
 
 In both tests a difference within the floating-point allowance ``tolerance`` is no
-difference (z = 0); a film sum that differs with zero standard errors has z = ±inf.
+difference (z = 0); a film sum that differs with zero standard errors is flagged (its
+interval is the single point of its error; z is ±inf, printed by the tables as "—").
 :data:`PixelTest.flagged` says whether any pixel exceeded, for callers that test one
 image with enough batches.
 
@@ -46,23 +51,85 @@ import numpy as np
 from scipy import stats
 
 from flatland.core.image import DEFAULT_MAX_BATCHES
-from flatland.core.stats import sidak
+from flatland.core.stats import LEVEL, normal_quantile, rounding_floor, sidak, z_score
 
 __all__ = [
     "PIXEL_ALPHA",
     "REFERENCE_RATIO",
-    "Z_FLAG",
+    "ErrorInterval",
     "PixelTest",
+    "error_interval",
     "pixel_test",
     "reference_spp_needed",
 ]
 
-Z_FLAG = 3.3
-"""|z| above this flags a biased film sum (two-sided normal 99.9 %: 3.29)."""
-PIXEL_ALPHA = 0.01
-"""Family-wise level of the per-pixel test."""
+PIXEL_ALPHA = 1.0 - LEVEL
+"""Family-wise level of the per-pixel test: 1 - :data:`~flatland.core.stats.LEVEL`."""
 REFERENCE_RATIO = 0.25
 """Largest allowed reference stderr / smallest method stderr."""
+
+
+@dataclass(frozen=True)
+class ErrorInterval:
+    r"""An estimate's error against a reference, with its interval (see :func:`error_interval`).
+
+    Attributes
+    ----------
+    error : float
+        estimate - reference.
+    halfwidth : float
+        q × the combined standard error, plus the floating-point allowance.
+    z : float
+        error / combined standard error (0 within the allowance; ±inf with no spread).
+    spread : float
+        The combined standard error $\sqrt{se^2 + se_{ref}^2}$ (0: both exact).
+    """
+
+    error: float
+    halfwidth: float
+    z: float
+    spread: float
+
+    @property
+    def low(self) -> float:
+        """Lower end of the interval."""
+        return self.error - self.halfwidth
+
+    @property
+    def high(self) -> float:
+        """Upper end of the interval."""
+        return self.error + self.halfwidth
+
+    @property
+    def biased(self) -> bool:
+        """True if the interval excludes 0: the table prints BIASED."""
+        return not self.low <= 0.0 <= self.high
+
+
+def error_interval(
+    estimate: float,
+    reference: float,
+    stderr: float,
+    reference_stderr: float = 0.0,
+    quantile: float | None = None,
+    tolerance: float | None = None,
+) -> ErrorInterval:
+    r"""The error ``estimate - reference`` ± ``quantile`` × $\sqrt{se^2 + se_{ref}^2}$ + ``tolerance``.
+
+    ``quantile`` is the row's half-width in standard errors (default: one row at
+    :data:`~flatland.core.stats.LEVEL`; a table passes
+    :func:`~flatland.core.stats.family_quantile` of its row count); ``tolerance`` the
+    floating-point allowance (default :func:`~flatland.core.stats.rounding_floor` of the
+    larger magnitude), so an exact estimator that matches up to rounding is not flagged and
+    one that misses is (its interval is a point).
+    """
+    if tolerance is None:
+        tolerance = float(rounding_floor(max(abs(float(estimate)), abs(float(reference)))))
+    if quantile is None:
+        quantile = normal_quantile(LEVEL)
+    spread = math.hypot(float(stderr), float(reference_stderr))
+    z = z_score(estimate, reference, spread, tolerance)
+    return ErrorInterval(float(estimate) - float(reference), quantile * spread + tolerance, z, spread)
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.image import Options, check_finite_result, summarize_batches
-from flatland.core.stats import Interval, normal_quantile, z_score
+from flatland.core.stats import LEVEL, Interval, normal_quantile, z_score
 from flatland.core.validate import ValidationError, check_choice
 
 __all__ = ["Estimate", "MethodTable", "Option"]
@@ -91,7 +91,7 @@ class Estimate:
             return self.value, self.value_stderr
         return self.derivative, self.derivative_stderr
 
-    def interval(self, level: float = 0.99, of: str = "derivative") -> Interval:
+    def interval(self, level: float = LEVEL, of: str = "derivative") -> Interval:
         """Normal confidence interval for ``of`` ("value" or "derivative")."""
         mean, se = self._mean_stderr(of)
         z = normal_quantile(level)

@@ -5,6 +5,12 @@ standard error ``s`` agrees with a reference ``r`` when $|m - r| ≤ z s$ for a
 stated two-sided normal quantile ``z`` (:func:`normal_quantile`); samplers are
 checked with a chi-square goodness-of-fit test (:func:`chi2_gof`) at a level
 corrected for the number of tests run (:func:`sidak`).
+
+Every interval the command line, the studies and the tables print is a two-sided
+:data:`LEVEL` = 99 % interval; the m rows of one table are judged together
+(:func:`family_quantile`), so a table of unbiased estimators shows no flag with
+probability 99 %, and a row is flagged exactly when its interval excludes the
+reference.
 """
 
 from __future__ import annotations
@@ -25,6 +31,8 @@ __all__ = [
     "batch_interval",
     "chi2_gof",
     "chi2_gof_counts",
+    "family_level",
+    "family_quantile",
     "normal_quantile",
     "rounding_floor",
     "sidak",
@@ -32,6 +40,18 @@ __all__ = [
     "summarize",
     "z_score",
 ]
+
+LEVEL = 0.99
+"""The confidence level of every interval the project prints, two-sided.
+
+One policy for every output (the demo's tables, the studies, the command line, the
+figures' bands): an interval "[low, high]" covers the true value with probability
+:data:`LEVEL`. Where a table judges m rows at once, each row's interval is widened to
+the per-row level :func:`family_level` (Šidák), so the m intervals cover together with
+probability :data:`LEVEL`, and a row is flagged BIASED exactly when its interval
+excludes the reference. Other quantiles (the per-pixel test's α = 1 - LEVEL) derive
+from it.
+"""
 
 ROUNDING = 64 * np.finfo(np.float64).eps
 """Relative size of floating-point noise in a mean or standard deviation of many terms.
@@ -149,7 +169,30 @@ def sidak(alpha: float, m: int) -> float:
     return 1.0 - (1.0 - alpha) ** (1.0 / m)
 
 
-def batch_interval(batch_estimates: np.ndarray, level: float = 0.95) -> Interval:
+def family_level(m: int, level: float = LEVEL) -> float:
+    """Per-row coverage so that ``m`` independent intervals all cover with probability ``level``.
+
+    Šidák: ``level ** (1 / m)``, i.e. ``1 - sidak(1 - level, m)`` (0.99 over 4 rows: 0.9975 each).
+    """
+    if m < 1:
+        raise ValueError(f"m: must be >= 1, got {m}")
+    return 1.0 - sidak(1.0 - level, m)
+
+
+def family_quantile(m: int, level: float = LEVEL, dof: int | None = None) -> float:
+    """Half-width, in standard errors, of each of ``m`` simultaneous two-sided intervals at ``level``.
+
+    The two-sided normal quantile (``dof=None``) or Student-t quantile with ``dof`` degrees
+    of freedom at the per-row coverage :func:`family_level`: 2.58 for one normal row at
+    0.99, 3.02 for four.
+    """
+    per_row = family_level(m, level)
+    if dof is None:
+        return normal_quantile(per_row)
+    return float(stats.t.ppf(0.5 + 0.5 * per_row, max(int(dof), 1)))
+
+
+def batch_interval(batch_estimates: np.ndarray, level: float = LEVEL) -> Interval:
     """Student-t confidence interval for the mean from independent batch estimates."""
     b = np.asarray(batch_estimates, dtype=np.float64).ravel()
     if b.size < 2:

@@ -10,6 +10,7 @@ Not part of the paper: the reference the other methods are checked against.
 
 from __future__ import annotations
 
+from flatland.core import progress
 from flatland.core.contract import Option
 from flatland.core.translation import central_difference
 from flatland.core.validate import ValidationError, check_positive
@@ -57,6 +58,7 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
             f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r} "
             f"for {task.param.name!r}",
         )
+    progress.expect(3)  # three renders: the bar's total counts them all
     base = task.evaluate(0.0, Identity())
     # per-batch central difference: common random numbers cancel everything that did not move
     derivative = central_difference(lambda theta: task.evaluate(theta, Identity()).value, 0.0, h)

@@ -102,9 +102,10 @@ def _film(ax: Any, array: np.ndarray, cmap: str, norm: Normalize, title: str = "
 
 
 def _curve(ax: Any, array: np.ndarray, stderr: np.ndarray | None, label: str, color: Any = None) -> None:
-    """A film as a curve over pixel centres with its band at :data:`~flatland.core.stats.LEVEL`."""
+    """A film as a curve over pixel centres with its :data:`~flatland.core.stats.LEVEL` band."""
     x = np.arange(np.size(array)) + 0.5
-    draw_estimate(ax, x, array, stderr=stderr, level=LEVEL, label=label, color=color, lw=1.2)
+    draw_estimate(ax, x, array, stderr=stderr, level=LEVEL if stderr is not None else None, label=label,
+                  color=color, lw=1.2)  # fmt: skip
 
 
 def _strip_over_curve(

@@ -44,7 +44,6 @@ __all__ = [
     "REFERENCE_STYLE",
     "SHADES",
     "SKETCH_COLOURS",
-    "TWO_SIGMA",
     "category_ticks",
     "coverage_label",
     "integer_ticks",
@@ -97,8 +96,6 @@ REFERENCE_STYLE = {"color": METHOD_COLOURS["reference"], "linestyle": "--", "lin
 SHADES = (0.0, 0.45, -0.5, 0.7, -0.7, 0.25, -0.25, 0.85)
 """Shade of the k-th variant of one method (:func:`shade`): 0 the method's colour, > 0 toward black,
 < 0 toward white; alternating, so neighbouring variants differ most."""
-TWO_SIGMA = math.erf(2.0 / math.sqrt(2.0))
-"""Coverage of ± 2 standard errors under a normal law, 0.9545."""
 
 # a label names a method if it starts with one of these words (then a space, "_", "(" or the end)
 _NAMES = re.compile(

@@ -16,10 +16,11 @@ from flatland.core.dual import Dual, detach, variable
 from flatland.core.rng import stream
 from flatland.core.translation import paired_combine, translation_offset, unit_weight
 from flatland.core.validate import ValidationError, check_bool, check_positive
-from flatland.integrals import Discontinuity, Integrand
+from flatland.integrals import Circle, Discontinuity, Integrand
+from flatland.sampling import TWO_PI
 from flatland.textbook._common import METHODS, primary_samples, to_estimate
 
-__all__ = ["follow_nearest", "reparam"]
+__all__ = ["follow_nearest", "reparam", "translation_bias"]
 
 
 def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], points: np.ndarray) -> Dual:
@@ -37,6 +38,41 @@ def follow_nearest(domain: Any, discontinuities: tuple[Discontinuity, ...], poin
     chosen = locations[np.argmin(distance, axis=0)]  # gather: Dual, shape (n,)
     # T(y, θ) = y + c(θ) - c(θ0): value 0, tangent c'(θ)   (Loubet et al. 2019, Sec. 3.2)
     return translation_offset(chosen)
+
+
+def translation_bias(integrand: Integrand, theta: float) -> float:
+    r"""The expected bias of :func:`reparam` without a kernel: $Σ_m (c_{left}' - c_{right}') f(m)$.
+
+    Each sample follows the discontinuity nearest to it, so the samples between two
+    neighbouring discontinuities $c_{left} < c_{right}$ are split at their midpoint m (the
+    boundary of their Voronoi cells): left of m they move with $c_{left}'$, right of it with
+    $c_{right}'$. The estimator differentiates $∫_{R_k} f(x + Δ_k(θ), θ) dx$ over each
+    fixed cell $R_k$, i.e. the integral over the moved cell $R_k + Δ_k$, whose ends pick up
+    $± f(m) c_k'$ (Leibniz rule, theory/leibniz); summed over the cells, every midpoint m
+    contributes $(c_{left}' - c_{right}') f(m)$, 0 when both move at the same speed (Loubet
+    et al. 2019, Sec. 4.2: one transform cannot follow discontinuities that move
+    differently). On the line the outermost cells reach to ±∞, where f vanishes; on the
+    circle the last and first discontinuities are neighbours across 2π.
+    """
+    theta_d = variable(theta)
+    found = integrand.discontinuities(theta_d)
+    if len(found) < 2:
+        return 0.0
+    circle = integrand.domain is Circle
+    at = np.array([float(detach(d.location)) for d in found])
+    speed = np.array([float(d.location.tangent) for d in found])
+    if circle:
+        at = np.remainder(at, TWO_PI)
+    order = np.argsort(at, kind="stable")
+    at, speed = at[order], speed[order]
+    left, right = at[:-1], at[1:]
+    dl, dr = speed[:-1], speed[1:]
+    if circle:  # the pair across 2π: the last one and the first one, one turn on
+        left, right = np.append(left, at[-1]), np.append(right, at[0] + TWO_PI)
+        dl, dr = np.append(dl, speed[-1]), np.append(dr, speed[0])
+    middle = 0.5 * (left + right)
+    f = np.asarray(detach(integrand.f(middle, theta)), dtype=np.float64)
+    return float(np.sum((dl - dr) * f))
 
 
 @METHODS.register(

@@ -8,6 +8,7 @@ the derivative as the central difference per batch).
 
 from __future__ import annotations
 
+from flatland.core import progress
 from flatland.core.contract import Option
 from flatland.core.translation import central_difference
 from flatland.core.validate import ValidationError, check_positive
@@ -41,6 +42,7 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
         raise ValidationError(
             "h", f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r}"
         )
+    progress.expect(3)  # three renders: the bar's total counts them all
     value = task.evaluate(0.0, Identity())  # first: a scene refused at θ0 is reported without the offset
     # per-batch central difference: common random numbers cancel everything that did not move
     derivative = central_difference(lambda theta: task.evaluate(theta, Identity()).value, 0.0, h)

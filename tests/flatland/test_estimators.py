@@ -22,6 +22,7 @@ from scipy import special
 from flatland import estimate
 from flatland.core.stats import normal_quantile, sidak
 from flatland.integrals import INTEGRALS
+from flatland.textbook.reparam import translation_bias
 
 N = 200_000
 SEED = 20191117
@@ -75,6 +76,7 @@ def test04_reparam_without_kernel_is_unbiased_when_one_translation_follows_all(n
     ig = INTEGRALS[name]
     est = estimate(name, ig.default_theta, "reparam", n=N, seed=SEED)
     assert_within(est.derivative, est.derivative_stderr, ig.derivative(ig.default_theta), name)
+    assert translation_bias(ig, ig.default_theta) == 0.0  # one speed (or one jump): nothing to miss
 
 
 @pytest.mark.parametrize("name", ALL)
@@ -109,6 +111,9 @@ def test06_reparam_without_kernel_shows_the_predicted_bias_where_one_translation
     th = ig.default_theta
     est = estimate(name, th, "reparam", n=N, seed=SEED)
     predicted = PREDICTED_REPARAM_BIAS[name](th)
+    # the library's general formula (the textbook table quotes it) is the hand-derived one
+    for theta in (th, 0.8 * th):
+        assert translation_bias(ig, theta) == pytest.approx(PREDICTED_REPARAM_BIAS[name](theta), rel=1e-12)
     assert_within(est.derivative - ig.derivative(th), est.derivative_stderr, predicted, name)
     assert abs(predicted) > 20 * est.derivative_stderr
 

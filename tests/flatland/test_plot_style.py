@@ -168,7 +168,7 @@ def test03_bands_state_their_coverage_in_the_legend(tmp_path, monkeypatch, small
     saved = capture_figures(monkeypatch, films)
     films.plot_panel(_gradient(1 + x**2, "naive"), {"boundary": _gradient(x, "boundary")}, tmp_path / "p.png")
     curves = next(ax for ax in saved[-1].axes if ax.lines and not ax.images)
-    assert _legend_texts(curves) == ["boundary ± 95.45 % interval"]  # ± 2 standard errors
+    assert _legend_texts(curves) == ["boundary ± 99 % interval"]  # the one level, flatland.core.stats.LEVEL
 
     estimates = pt.plot_estimates({"naive": (1.0, 0.1)}, 1.0, level=0.999).axes[0]
     assert "estimate ± 99.9 % interval" in _legend_texts(estimates)
