@@ -23,6 +23,14 @@ A point is ruled out only beyond a margin of :data:`MARGIN` ray offsets (the pro
 planes (the icosphere of ``hard_shadow``: 118); at most :data:`PLANES` are kept, spread over their
 directions, which rules out a little less.
 
+The candidates are (edges of one hull) × (vertices of the other): on a fine mesh, every vertex of
+a sphere lies on its hull, and those products would grow with the square of the mesh. So a hull
+with more than :data:`HULL_VERTICES` vertices is replaced by a polytope of :data:`DIRECTIONS`
+fixed face directions that holds it (:func:`_outer`): a plane that separates the lights from a
+polytope holding the moving triangles separates them from the triangles too, so the cull stays
+conservative and leaves the umbra and penumbra volume of that polytope, a little larger than the
+mesh's. The planes are built once per state, in O(vertices) time and bounded memory.
+
 A speed-up only: a point ruled out could see no moving occluder, so the rotation its probes
 would choose follows a static point and has a zero derivative; the result is the same.
 """
@@ -34,7 +42,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, HalfspaceIntersection
 
 from flatland.core.dual import detach
 from sphere3d.live import triangles_change
@@ -42,6 +50,8 @@ from sphere3d.state import per_state
 from sphere3d.vector import dot, norm
 
 __all__ = [
+    "DIRECTIONS",
+    "HULL_VERTICES",
     "MARGIN",
     "PLANES",
     "SeparatingPlanes",
@@ -57,6 +67,16 @@ MARGIN = 4.0
 PLANES = 48
 """At most this many separating planes are kept (:func:`_spread`): fewer rule out fewer points, never a
 point they should keep."""
+HULL_VERTICES = 256
+"""Lights or moving occluders with more distinct vertices (or more than :data:`UNIQUE_LIMIT` triangle corners)
+are replaced by an outer polytope of :data:`DIRECTIONS` faces (:func:`_outer`): the candidate planes stay a
+bounded number whatever the mesh."""
+UNIQUE_LIMIT = 3 << 12
+"""Triangle corners up to which :func:`_outer` counts the distinct vertices (a sort) before choosing."""
+DIRECTIONS = 64
+"""Face directions of the outer polytope of :func:`_outer` (a discrete oriented polytope)."""
+PLANE_BLOCK = 1 << 20
+"""Candidate planes × hull vertices evaluated at once in :func:`separating_planes`."""
 
 
 def bounding_sphere(vertices: np.ndarray) -> tuple[np.ndarray, float]:
@@ -101,9 +121,50 @@ def _hull(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         i, j = np.triu_indices(len(points), k=1)
         faces = np.array(list(itertools.combinations(range(len(points)), 3)), dtype=np.intp)
         return points, np.column_stack([i, j]), faces.reshape(-1, 3)
-    faces = ConvexHull(points, qhull_options="QJ").simplices
+    hull = ConvexHull(points, qhull_options="QJ")
+    used = np.unique(hull.simplices)  # the hull's own vertices, renumbered
+    faces = np.searchsorted(used, hull.simplices)
     pairs = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    return points, np.unique(pairs, axis=0), faces
+    return points[used], np.unique(pairs, axis=0), faces
+
+
+def _directions(count: int) -> np.ndarray:
+    """``count`` >= 26 unit directions: the 26 of the cube's faces, edges and corners, then a Fibonacci
+    spiral over the sphere."""
+    cube = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
+    k = np.arange(count - len(cube)) + 0.5
+    z = 1.0 - 2.0 * k / (count - len(cube))
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    spiral = np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+    return np.concatenate([cube / norm(cube)[:, None], spiral])
+
+
+def _outer(points: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""A convex polytope holding ``points`` (k, 3), as :func:`_hull` gives it: their convex hull
+    itself if they are at most :data:`UNIQUE_LIMIT` with at most :data:`HULL_VERTICES` distinct ones,
+    else the polytope $\{p : n_j \cdot p \le h_j\}$ of the :data:`DIRECTIONS` fixed directions $n_j$
+    of :func:`_directions`, with
+    $h_j = \max_p n_j \cdot p + τ$, τ a rounding margin (a discrete oriented polytope). It holds the
+    points, so a plane that separates it from the other hull separates them too: the cull stays
+    conservative, only a little looser. Its vertices by Qhull's half-space intersection about the
+    points' mean (strictly inside, as τ > 0). Cost: (k × :data:`DIRECTIONS`) dot products, by blocks."""
+    if len(points) <= UNIQUE_LIMIT:
+        points = np.unique(points, axis=0)
+        if len(points) <= HULL_VERTICES:
+            return _hull(points)
+    normals = _directions(DIRECTIONS)
+    step = max(1, PLANE_BLOCK // DIRECTIONS)
+    offsets = np.max(
+        [
+            np.max(_sides(points[i : i + step], normals, np.zeros(DIRECTIONS)), axis=1)
+            for i in range(0, len(points), step)
+        ],
+        axis=0,
+    )
+    offsets += 1e-9 * scale
+    polytope = HalfspaceIntersection(np.column_stack([normals, -offsets]), points.mean(axis=0))
+    return _hull(polytope.intersections)
 
 
 def _planes(p: np.ndarray, q: np.ndarray, r: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -134,14 +195,21 @@ def separating_planes(state: Any) -> SeparatingPlanes | None:
     if not moving.any() or len(state.emitters) == 0:
         return None
     triangles = np.asarray(detach(state.triangles))
-    lights, movers = _hull(triangles[state.emitters].reshape(-1, 3)), _hull(triangles[moving].reshape(-1, 3))
-    scale = max(1.0, float(np.max(np.abs(np.concatenate([lights[0], movers[0]])))))
+    scale = max(
+        1.0, float(np.max(np.abs(triangles[state.emitters]))), float(np.max(np.abs(triangles[moving])))
+    )
+    lights = _outer(triangles[state.emitters].reshape(-1, 3), scale)
+    movers = _outer(triangles[moving].reshape(-1, 3), scale)
     (n1, d1), (n2, d2) = _candidates(lights, movers, scale), _candidates(movers, lights, scale)
     n, d = np.concatenate([n1, n2]), np.concatenate([d1, d2])
     tol = 1e-9 * scale  # a plane may touch both hulls
-    side_l, side_m = _sides(lights[0], n, d), _sides(movers[0], n, d)  # (planes, vertices)
-    up = (side_l.min(axis=1) >= -tol) & (side_m.max(axis=1) <= tol)
-    down = (side_l.max(axis=1) <= tol) & (side_m.min(axis=1) >= -tol)
+    up, down = np.empty(len(n), dtype=bool), np.empty(len(n), dtype=bool)
+    step = max(1, PLANE_BLOCK // (len(lights[0]) + len(movers[0])))
+    for lo in range(0, len(n), step):  # blocks of planes: (planes x vertices) stays bounded
+        block = slice(lo, lo + step)
+        side_l, side_m = _sides(lights[0], n[block], d[block]), _sides(movers[0], n[block], d[block])
+        up[block] = (side_l.min(axis=1) >= -tol) & (side_m.max(axis=1) <= tol)
+        down[block] = (side_l.max(axis=1) <= tol) & (side_m.min(axis=1) >= -tol)
     if not (up.any() or down.any()):
         return None  # the hulls overlap: no point is ruled out
     normals = np.concatenate([n[up], -n[down]])
@@ -172,6 +240,21 @@ def moving_occluders(state: Any) -> np.ndarray:
     return moving
 
 
+@per_state
+def _changing(state: Any) -> np.ndarray:
+    """:func:`~sphere3d.live.triangles_change`, once per state (read-only)."""
+    changing = triangles_change(state)
+    changing.flags.writeable = False
+    return changing
+
+
+@per_state
+def _spheres(state: Any) -> tuple[tuple[np.ndarray, float], tuple[np.ndarray, float]]:
+    """The bounding spheres of the changing triangles and of the emitters, once per state."""
+    triangles = np.asarray(detach(state.triangles))
+    return bounding_sphere(triangles[_changing(state)]), bounding_sphere(triangles[state.emitters])
+
+
 def cones_overlap(state: Any, x: np.ndarray) -> np.ndarray:
     r"""Rows of the points ``x`` (plain, (m, 3)) from which the cone around the emitters' bounding
     sphere and the one around the changing triangles' overlap (or that lie inside either sphere).
@@ -181,11 +264,7 @@ def cones_overlap(state: Any, x: np.ndarray) -> np.ndarray:
     emitters too, if they move) within $β_M$ of theirs, so the two cones must overlap,
     $α < β_L + β_M$, and the moving sphere must begin before the emitters' sphere ends.
     """
-    triangles = np.asarray(detach(state.triangles))
-    (c_m, r_m), (c_l, r_l) = (
-        bounding_sphere(triangles[triangles_change(state)]),
-        bounding_sphere(triangles[state.emitters]),
-    )
+    (c_m, r_m), (c_l, r_l) = _spheres(state)
     to_m, to_l = c_m - x, c_l - x
     d_m, d_l = norm(to_m), norm(to_l)
     inside = (d_m <= r_m) | (d_l <= r_l)
@@ -202,7 +281,7 @@ def may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
     Conservative: first by bounding spheres (:func:`cones_overlap`), then, of those, the points a
     separating plane rules out are dropped (:func:`separating_planes`).
     """
-    if not triangles_change(state).any():
+    if not _changing(state).any():
         return np.zeros(len(x), dtype=bool)
     kept = cones_overlap(state, x)
     planes = separating_planes(state)

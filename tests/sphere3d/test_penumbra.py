@@ -15,7 +15,13 @@ import numpy as np
 
 import sphere3d as s3
 from flatland.core.dual import variable
-from sphere3d.reparam.penumbra import cones_overlap, may_see_motion, separating_planes
+from sphere3d.reparam.penumbra import (
+    HULL_VERTICES,
+    cones_overlap,
+    may_see_motion,
+    moving_occluders,
+    separating_planes,
+)
 from sphere3d.state import build_state
 
 A = 0.15
@@ -100,3 +106,30 @@ def test03_no_plane_when_the_occluder_pierces_the_light():
     assert separating_planes(state) is None
     x = np.array([[0.0, 0.0, 0.0], [1.5, 0.0, 0.0], [0.3, -0.2, 0.5]])
     assert may_see_motion(state, x).tolist() == [True, True, True]
+
+
+def test04_a_fine_occluder_is_culled_through_an_outer_polytope():
+    """An icosphere of 642 vertices (more than HULL_VERTICES) is replaced by an outer polytope of
+    DIRECTIONS faces: the cull keeps every point whose segments to the light pass within 0.9 R of its
+    centre (they meet the mesh, whose faces lie farther than 0.99 R from it), and rules out every point
+    whose segments all pass farther than 2 R (the polytope lies within R / cos 35° of the centre, the
+    directions' covering angle being below 35°; the rest of the factor for the planes not kept)."""
+    radius = 0.15
+    occluder = {"name": "occluder", "type": "icosphere", "radius": radius, "subdivisions": 3,
+                "translate": [0.0, 0.0, 0.5], "albedo": 0.5}  # fmt: skip
+    state = _state(occluder)
+    moving = np.asarray(state.triangles.value)[moving_occluders(state)].reshape(-1, 3)
+    assert len(np.unique(moving, axis=0)) > HULL_VERTICES
+    assert len(separating_planes(state).normals) > 4
+    rng = np.random.default_rng(2)
+    z = rng.choice([-1.0, -0.2, 0.0, 0.25, 0.45], size=4000)
+    x = np.column_stack([rng.uniform(-2.5, 2.5, z.size), rng.uniform(-2.5, 2.5, z.size), z])
+    grid = (np.arange(24) + 0.5) / 24 - 0.5
+    light = np.array([[u, v, 1.0] for u in grid for v in grid])
+    centre = np.array([0.0, 0.0, 0.5])
+    d = light[None] - x[:, None]  # segments to the light: 4000 x 576
+    t = np.clip(np.sum((centre - x[:, None]) * d, axis=-1) / np.sum(d * d, axis=-1), 0.0, 1.0)
+    gap = np.min(np.linalg.norm(x[:, None] + t[..., None] * d - centre, axis=-1), axis=1)
+    kept = may_see_motion(state, x)
+    assert np.all(kept[gap < 0.9 * radius]) and (gap < 0.9 * radius).sum() > 200
+    assert not np.any(kept[gap > 2.0 * radius]) and (gap > 2.0 * radius).sum() > 1000
