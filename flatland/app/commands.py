@@ -220,8 +220,8 @@ def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     png = pkg.plot("image")(
         image, out / f"{name}.png", title=f"{name}, {args.spp} spp", **_sketch(pkg, scene)
     )
-    npy = _save_fields(out / f"{name}.npy", value=image.value, stderr=image.stderr)
-    print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
+    npy = _save_fields(out / f"{name}.npy", value=image.value, value_stderr=image.stderr)
+    print(f"wrote {png} and {npy} (fields value, value_stderr; film shape {image.shape})")
     return 0
 
 

@@ -84,7 +84,7 @@ def test03_render_writes_png_and_structured_npy(tmp_path, scene_file):
     assert (tmp_path / "small_shadow.png").stat().st_size > 5_000
     assert has_sketch(tmp_path / "small_shadow.png", moving=False)
     data = np.load(tmp_path / "small_shadow.npy")
-    assert data.shape == (24,) and data.dtype.names == ("value", "stderr")
+    assert data.shape == (24,) and data.dtype.names == ("value", "value_stderr")  # as gradient's .npy
     assert np.all(data["value"] >= 0.0) and np.any(data["value"] > 0.0)
 
 
