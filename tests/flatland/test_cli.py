@@ -170,7 +170,9 @@ def test08_builtin_study_by_name_with_overrides(tmp_path, capsys):
     assert main(["study", "kappa", "--spp", "500", "--seed", "4", "--out", str(tmp_path), "--quiet"]) == 0
     rows = read_csv(tmp_path / "kappa.csv")
     assert len(rows) == 14 and all(r["n"] == 500 and r["seed"] == 4 and r["trials"] == 20 for r in rows)
-    assert "reparam kappa=10000 paired" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "reparam kappa=10000 paired" in out
+    assert "What to see: The κ trade-off (reparam, n=500;" in out  # the paragraph under the table
 
 
 def test09_parameter_names_are_exactly_those_parse_parameter_accepts():
