@@ -84,8 +84,9 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    """The module's attributes and the public names not yet imported."""
-    return sorted(set(globals()) | set(__all__))
+    """The public names (and ``__version__``), imported or not: not the submodules or helpers (tab completion
+    offers what :data:`__all__` promises)."""
+    return sorted([*__all__, "__version__"])
 
 
 class _Flatland(types.ModuleType):

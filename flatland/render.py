@@ -83,7 +83,7 @@ def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
 def _gradient(
     task: ImageTask | PointTask, method: Any, options: dict[str, Any]
 ) -> tuple[Tally, dict[str, Any]]:
-    spec = GRADIENT_METHODS.get(method)
+    spec = GRADIENT_METHODS.lookup(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
     _check_budget(task, resolved)
     return spec.func(task, **resolved), resolved

@@ -33,3 +33,8 @@ __all__ = [
 ]
 
 __version__ = "0.1.0"
+
+
+def __dir__() -> list[str]:
+    """The public names (and ``__version__``): not the submodules, which stay importable by name."""
+    return sorted([*__all__, "__version__"])

@@ -84,7 +84,7 @@ def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
 
 
 def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
-    spec = GRADIENT_METHODS.get(method)
+    spec = GRADIENT_METHODS.lookup(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
     _check_budget(task, resolved)
     return spec.func(task, **resolved), resolved
@@ -107,7 +107,7 @@ def render_gradient(
     ----------
     param : str
         A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
-    method : {"naive", "finite_difference", "reparam", "boundary"}
+    method : {"naive", "finite_difference", "boundary", "reparam"}
     spp, seed, batches, film, progress
         As in :func:`render`; the film (default ``"splat"``) applies to every method alike (their
         values stay equal).
@@ -132,7 +132,7 @@ def render_gradient(
     """
     scene = load_scene(scene)
     param = scene.check_param(param)
-    GRADIENT_METHODS.get(method)
+    GRADIENT_METHODS.lookup(method)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)

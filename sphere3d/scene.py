@@ -12,7 +12,11 @@ A scene is a dict (or a JSON file of the same shape)::
                  "emission": 8.0, "fade": 0.25, "albedo": 0.0}, ...]}
 
 Every shape has ``translate`` (position of its centre), ``rotate`` (radians about x,
-then y, then z, acting about the centre), ``scale`` (uniform, about the centre),
+then y, then z, acting about the centre), ``scale`` (uniform, about the centre), the
+centre being the origin of the shape's own coordinates: the middle of every built-in
+shape, and of a mesh whose ``center`` is true (its bounding box's centre; the default
+for a mesh loaded from a file, whose own origin is arbitrary; inline ``vertices`` are
+kept as written unless ``"center": true``, so with them the centre is their origin),
 ``albedo`` (diffuse reflectance in [0, 1]), ``emission`` (radiance of its front side,
 the side its normals face), ``fade`` (emitter border fade, rectangle and disk
 only) and ``smooth`` (false, the default: shade with the face normals; true: with
@@ -86,7 +90,7 @@ SHAPE_KEYS: Mapping[str, tuple[str, ...]] = {
     "box": ("size",),
     "icosphere": ("radius", "subdivisions"),
     "disk": ("radius", "segments"),
-    "mesh": ("path", "vertices", "faces", "normals"),
+    "mesh": ("path", "vertices", "faces", "normals", "center"),
 }
 """Type-specific keys of each shape type (besides :data:`COMMON_KEYS`)."""
 DEFAULTS: Mapping[str, Any] = {

@@ -16,6 +16,11 @@ icosphere     ``radius``, ``subdivisions``              none
 mesh          OBJ / PLY file or inline arrays           none
 ============  ========================================  ==================================
 
+A mesh is re-centred (its bounding box's centre moved to the origin, :func:`mesh_geometry`)
+when its ``center`` key is true, the default for a file: a model's own origin is arbitrary,
+and the scene's ``rotate`` and ``scale`` act about the origin. Inline vertices are kept as
+written unless ``center`` is true (they are usually written where the shape belongs).
+
 Every mesh also has unit vertex normals, used for shading when the shape is
 ``smooth`` (:mod:`sphere3d.scene`): the exact sphere normal at an icosphere's
 vertices, +z on rectangles and disks, the file's normals (OBJ ``vn``, PLY
@@ -36,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.validate import ValidationError
+from flatland.core.validate import ValidationError, check_bool
 
 __all__ = [
     "FADE_NONE",
@@ -50,6 +55,7 @@ __all__ = [
     "icosphere",
     "load_mesh_file",
     "mesh_geometry",
+    "recentred",
     "rectangle",
     "vertex_normals",
 ]
@@ -227,7 +233,8 @@ def check_normals(field: str, normals: Any, count: int) -> np.ndarray:
 
 
 def load_mesh_file(field: str, path: Path) -> LocalMesh:
-    """A triangle mesh from an OBJ or PLY file (parsed by ``trimesh``), as stored: no re-centring.
+    """A triangle mesh from an OBJ or PLY file (parsed by ``trimesh``), as stored (:func:`mesh_geometry`
+    re-centres it).
 
     The file's vertex normals (OBJ ``vn``, PLY ``nx ny nz``) become the mesh's normals
     when it has them for every vertex; a zero one is refused (naming ``field``).
@@ -287,8 +294,26 @@ def mesh_geometry(field: str, d: Mapping[str, Any], base_dir: Path | None) -> tu
 
     The mesh comes from a file (``path``, relative to ``base_dir``) or inline ``vertices``,
     ``faces`` and optional per-vertex ``normals``; bad input raises one ValidationError
-    naming ``field``'s key.
+    naming ``field``'s key. With ``center`` (default: true for a file, false for inline
+    vertices) the mesh is moved so its bounding box's centre is the origin (:func:`recentred`);
+    the key is kept in the geometry only when given.
     """
+    geometry, mesh = _mesh_source(field, d, base_dir)
+    if "center" not in d:
+        return geometry, recentred(mesh) if "path" in d else mesh
+    center = check_bool(f"{field}.center", d["center"])
+    return (*geometry, ("center", center)), recentred(mesh) if center else mesh
+
+
+def recentred(mesh: LocalMesh) -> LocalMesh:
+    """``mesh`` moved so the centre of its bounding box (per axis, the mean of the least and the
+    largest coordinate) is the origin."""
+    centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
+    return LocalMesh(mesh.vertices - centre, mesh.faces, mesh.uv, mesh.fade_kind, mesh.normals)
+
+
+def _mesh_source(field: str, d: Mapping[str, Any], base_dir: Path | None) -> tuple[tuple, LocalMesh]:
+    """The file's or the inline arrays' keys and mesh, as given."""
     if "path" in d:
         if "vertices" in d or "faces" in d:
             raise ValidationError(f"{field}.path", "give either path or vertices/faces, not both")

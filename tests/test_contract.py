@@ -450,3 +450,52 @@ def test16_a_temporary_registration_survives_an_error_and_never_shadows_a_method
     assert table.names == before and table.get("naive") is naive
     with pytest.raises(KeyError, match="'temporary' is not registered"):
         table.unregister("temporary")
+
+
+def test17_the_method_table_is_a_read_only_mapping_in_one_order(package):
+    """``'boundary' in table``, iteration, ``table[name]`` as for any mapping; both packages and the
+    textbook estimators list naive, finite_difference, boundary, reparam; no item assignment."""
+    from collections.abc import Mapping
+
+    from flatland.core.contract import METHOD_ORDER
+    from flatland.textbook import METHODS
+
+    top = importlib.import_module(package)
+    table = top.GRADIENT_METHODS
+    assert isinstance(table, Mapping) and "boundary" in table and "magic" not in table and 3 not in table
+    assert list(table) == list(table.names) == list(METHOD_ORDER) == list(METHODS) and len(table) == 4
+    assert table["reparam"] is table.lookup("reparam") and table.get("magic") is None
+    assert dict(table.items())["naive"].name == "naive"
+    with pytest.raises(KeyError):
+        table["magic"]
+    with pytest.raises(ValidationError, match=r"^method: unknown gradient method 'magic'; choose from naive"):
+        table.lookup("magic")
+    with pytest.raises(TypeError):
+        table["magic"] = table["naive"]
+
+
+def test18_dir_lists_the_public_names_only(package):
+    top = importlib.import_module(package)
+    importlib.import_module(f"{package}.scene")  # a submodule imported: still not listed
+    assert dir(top) == sorted([*top.__all__, "__version__"])
+    assert all(getattr(top, name) is not None for name in top.__all__)
+
+
+def test19_help_states_every_options_default_and_no_verb_lists_the_verbs(package, capsys):
+    import argparse
+
+    from flatland.app.cli import _parser
+
+    entry = importlib.import_module(f"{package}.__main__")
+    verbs = next(a for a in _parser(entry.PACKAGE)._actions if isinstance(a, argparse._SubParsersAction))
+    for verb, parser in verbs.choices.items():
+        for action in parser._actions:
+            if action.option_strings and not isinstance(action, argparse._HelpAction):
+                assert "default" in action.help, (verb, action.option_strings, action.help)
+    assert entry.main([]) == 0
+    out = capsys.readouterr().out
+    assert all(f"\n    {verb} " in out for verb in VERBS) and "VERB --help" in out
+    words = " ".join(_help(entry.main, ["gradient"], capsys))
+    table = importlib.import_module(f"{package}.render").GRADIENT_METHODS
+    assert f"(default {table['reparam'].options['kappa'].default:g})" in words
+    assert f"(default {table['finite_difference'].options['h'].default:g})" in words

@@ -31,6 +31,8 @@
    and every ``flatland``/``sphere3d`` name or path it writes in backticks exists.
 10. Docstring maths written ``$...$`` reaches the API pages as ``:math:`` roles (typeset by
     MathJax), and no docstring keeps a stray dollar outside literals.
+11. The guide "How to write a study file" describes its template, ``docs/guides/example_study.json``:
+    the cells it counts, loadable by both packages, and it runs.
 """
 
 from __future__ import annotations
@@ -744,3 +746,33 @@ def test16_docstring_maths_in_dollars_becomes_math_roles_and_no_dollar_is_left()
     assert not stray, "dollars left as text (a formula split over lines, or a space inside):\n" + "\n".join(
         stray
     )
+
+
+# ------------------------------------------------------------------ the study-file guide
+STUDY_GUIDE = DOCS / "guides" / "study_files.md"
+EXAMPLE_STUDY = DOCS / "guides" / "example_study.json"
+
+
+def test17_the_guides_study_template_has_the_cells_it_describes_and_runs(tmp_path):
+    """The guide counts 7 cells; the same file loads in both packages; it runs (its counts made small)."""
+    from flatland.__main__ import PACKAGE
+    from flatland.app.study import load_config, run_study
+
+    config = load_config(EXAMPLE_STUDY, package=PACKAGE)
+    labels = [(c.label, c.n) for c in config.cells]
+    assert labels == [
+        ("naive", 16), ("finite_difference h=0.01", 16), ("boundary", 4), ("boundary", 16),
+        ("reparam kappa=100", 16), ("reparam kappa=1000", 16), ("reparam kappa=10000", 16),
+    ]  # fmt: skip
+    assert "1 + 1 + 2 + 3 = 7 cells" in STUDY_GUIDE.read_text(encoding="utf-8")
+    assert "guides/study_files" in (DOCS / "index.md").read_text(encoding="utf-8")  # in the toctree
+    if importlib.util.find_spec("embreex") is not None:
+        assert (
+            len(
+                load_config(EXAMPLE_STUDY, package=importlib.import_module("sphere3d.__main__").PACKAGE).cells
+            )
+            == 7
+        )
+    small = load_config(EXAMPLE_STUDY, package=PACKAGE, samples=2)  # boundary's two counts become one cell
+    result = run_study(small, progress=False, cache_dir=tmp_path)
+    assert len(small.cells) == len(result.rows) == 6 and result.row("naive").biased

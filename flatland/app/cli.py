@@ -8,16 +8,18 @@ Verbs (the same in both packages; implemented in :mod:`flatland.app.commands`):
     to ``--out``, and a table of each method's error against a reference; packages
     may append further sections (flatland: the textbook table).
 ``render SCENE``
-    The image as PNG and ``.npy``.
+    The image as PNG and ``.npy`` (structured array with fields ``value``, ``value_stderr``).
 ``gradient SCENE --param P --method M``
     The derivative image as PNG and ``.npy`` (structured array with fields
-    ``value``, ``value_stderr``, ``derivative``, ``derivative_stderr``). Without
-    ``--param`` it names the scene's parameters.
+    ``value``, ``value_stderr``, ``derivative``, ``derivative_stderr``, as render's
+    ``value``, ``value_stderr``). Without ``--param`` it names the scene's parameters.
 ``study CONFIG``
     A study (:mod:`flatland.app.study`): CSV and figures in ``--out``.
 
 ``SCENE`` is a built-in scene name (listed by ``render --help``) or a JSON file;
-``--method`` offers the methods of the package's method table.
+``--method`` offers the methods of the package's method table. Without a verb the
+command prints its help, the verbs with one line each (status 0); ``VERB --help``
+lists the verb's options, each with its default.
 
 Two kinds of failure, told apart by the exit status:
 
@@ -179,23 +181,34 @@ def _parser(pkg: Package) -> _Parser:
         prog=f"python -m {pkg.name}",
         description=f"{pkg.name}: differentiable rendering of discontinuous integrands "
         "(Loubet, Holzschuch, Jakob 2019). Errors print one line and exit with status 2.",
+        epilog=f"python -m {pkg.name} VERB --help lists a verb's options and their defaults.",
     )
-    verbs = parser.add_subparsers(dest="verb", required=True, metavar="VERB", parser_class=_Parser)
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
 
     def common(
         p: argparse.ArgumentParser, spp_help: str, spp_default: int | None, seed: int | None = 0
     ) -> None:
-        seed_help = "random seed (default 0)" if seed is not None else "replace the configuration's seed"
+        seed_help = (
+            "random seed (default 0)"
+            if seed is not None
+            else "replace the configuration's seed (default: keep it)"
+        )
         p.add_argument("--seed", type=int, default=seed, help=seed_help)
         p.add_argument("--spp", type=int, default=spp_default, help=spp_help)
         p.add_argument("--out", default="out", help="output folder (default ./out)")
-        p.add_argument("--quiet", action="store_true", help="no progress bar")
+        p.add_argument(
+            "--quiet", action="store_true", help="no progress bar (default: a bar when stderr is a terminal)"
+        )
 
     scenes = ", ".join(pkg.list_scenes())
 
     def scene_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument("scene", metavar="SCENE", help=f"a JSON scene file or a built-in scene: {scenes}")
-        p.add_argument("--batches", type=int, default=None, help="independent batches behind the stderr")
+        p.add_argument(
+            "--batches", type=int, default=None,
+            help="independent batches behind the standard errors (default: the largest divisor of --spp"
+            " up to 16)",
+        )  # fmt: skip
         if pkg.films:
             choices = " or ".join(pkg.films)
             p.add_argument("--film", default=None, help=f"{choices} (default {pkg.films[0]})")
@@ -212,34 +225,60 @@ def _parser(pkg: Package) -> _Parser:
     gradient = verbs.add_parser("gradient", help="derivative image of SCENE w.r.t. --param, PNG and .npy")
     scene_arg(gradient)
     gradient.add_argument(
-        "--param", default=None, help="scene parameter, e.g. occluder.translate.x (omit it to list them)"
-    )
+        "--param", default=None,
+        help="scene parameter, e.g. occluder.translate.x (no default: omit it to list the scene's)",
+    )  # fmt: skip
     methods = pkg.methods.names
     gradient.add_argument(
         "--method", default="reparam", choices=methods, help="gradient method (default reparam)"
     )
     gradient.add_argument(
-        "--kappa", type=float, default=None, help="reparam: convolution kernel concentration"
-    )
-    gradient.add_argument("--probes", type=int, default=None, help="reparam: probe rays")
+        "--kappa", type=float, default=None,
+        help=f"reparam: convolution kernel concentration (default {_default(pkg, 'reparam', 'kappa')})",
+    )  # fmt: skip
+    gradient.add_argument(
+        "--probes", type=int, default=None,
+        help=f"reparam: probe rays per kernel (default {_default(pkg, 'reparam', 'probes')})",
+    )  # fmt: skip
     gradient.add_argument(
         "--paired",
         action="store_true",
-        help="reparam: paired samples sharing one transform (see docs/theory/kernels.md)",
+        help="reparam: paired samples sharing one transform (default off; see docs/theory/kernels.md)",
     )
-    gradient.add_argument("--h", type=float, default=None, help="finite_difference: step")
+    gradient.add_argument(
+        "--h", type=float, default=None,
+        help=f"finite_difference: step (default {_default(pkg, 'finite_difference', 'h')})",
+    )  # fmt: skip
     common(gradient, "samples per pixel (default 64)", 64)
     gradient.set_defaults(func=verb_gradient)
 
     study = verbs.add_parser("study", help="run a study CONFIG (JSON file or built-in name): CSV and figures")
     builtin = f"; built-in: {', '.join(pkg.studies)}" if pkg.studies else ""
     study.add_argument("config", metavar="CONFIG", help=f"study configuration: a JSON file{builtin}")
-    study.add_argument("--workers", type=int, default=None, help="worker processes")
-    study.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    study.add_argument(
+        "--workers", type=int, default=None, help="worker processes (default: the configuration's, else 1)"
+    )
+    study.add_argument(
+        "--scheduler", default=None,
+        help="dask.distributed scheduler address (default: none, the trials run on this machine)",
+    )  # fmt: skip
     study.add_argument("--cache-dir", default=None, help="reference cache (default OUT/.cache/reparam-lab)")
-    common(study, "replace every cell's samples per trial (n or spp)", None, seed=None)
+    common(study, "replace every cell's samples per trial, n or spp (default: keep them)", None, seed=None)
     study.set_defaults(func=verb_study)
     return parser
+
+
+def _default(pkg: Package, method: str, option: str) -> str:
+    """A method option's default as ``--help`` states it: its ``default_text``, else its value."""
+    spec = pkg.methods.get(method)
+    if spec is None or option not in spec.options:
+        return "none"
+    if spec.options[option].default_text:
+        return spec.options[option].default_text
+    value = spec.options[option].default
+    if value is None:
+        return "chosen by the method"
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def _one_line(error: BaseException) -> str:
@@ -258,7 +297,11 @@ def main(package: Package, argv: Sequence[str] | None = None) -> int:
     traceback and an ``internal error`` line and returns :data:`EXIT_INTERNAL`.
     """
     try:
-        args = _parser(package).parse_args(argv)
+        parser = _parser(package)
+        args = parser.parse_args(argv)
+        if args.verb is None:  # no verb: what there is to do
+            parser.print_help()
+            return 0
         _check_counts(args)
         return args.func(package, args)
     except UsageError as e:

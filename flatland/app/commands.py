@@ -220,8 +220,8 @@ def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     png = pkg.plot("image")(
         image, out / f"{name}.png", title=f"{name}, {args.spp} spp", **_sketch(pkg, scene)
     )
-    npy = _save_fields(out / f"{name}.npy", value=image.value, stderr=image.stderr)
-    print(f"wrote {png} and {npy} (fields value, stderr; film shape {image.shape})")
+    npy = _save_fields(out / f"{name}.npy", value=image.value, value_stderr=image.stderr)
+    print(f"wrote {png} and {npy} (fields value, value_stderr; film shape {image.shape})")
     return 0
 
 
@@ -255,6 +255,7 @@ def verb_study(pkg: Package, args: argparse.Namespace) -> int:
     """``study CONFIG``: run a study; CSV and figures in ``--out``."""
     from flatland.app.study import run_study
     from flatland.app.study_config import load_config
+    from flatland.app.study_reading import reading
 
     source: Any = args.config
     if not Path(source).exists():
@@ -278,5 +279,6 @@ def verb_study(pkg: Package, args: argparse.Namespace) -> int:
     csv_path = result.to_csv(out / f"{config.name}.csv")
     figures = pkg.plot("study")(result, out)
     print(result.table())
+    print("\n" + reading(result))
     print(f"\nwrote {csv_path}" + "".join(f", {f}" for f in figures) + f"  ({result.seconds:.1f} s)")
     return 0

@@ -291,7 +291,7 @@ def _method_table(package: Package, problem: Problem) -> Any:
 def _resolve(table: Any, where: str, method: Any, options: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
     """Method name and validated options, errors re-labelled with the config path ``where``."""
     try:
-        spec = table.get(method)
+        spec = table.lookup(method)
         return spec.name, table.resolve_options(spec.name, options)
     except ValidationError as e:
         message = str(e)[len(e.field) + 2 :] if e.field else str(e)

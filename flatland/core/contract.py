@@ -28,7 +28,7 @@ How to add an estimator
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,7 +39,12 @@ from flatland.core.image import Options, check_finite_result, summarize_batches
 from flatland.core.stats import LEVEL, Interval, normal_quantile, z_score
 from flatland.core.validate import ValidationError, check_choice
 
-__all__ = ["Estimate", "MethodTable", "Option"]
+__all__ = ["METHOD_ORDER", "Estimate", "MethodTable", "Option"]
+
+METHOD_ORDER = ("naive", "finite_difference", "boundary", "reparam")
+"""The order both packages (and the textbook estimators) list their methods in: the baseline, the
+classic check, the Leibniz rule's jump term, then the paper's reparameterization. A method not named
+here follows them in registration order."""
 
 
 @dataclass(frozen=True)
@@ -105,11 +110,16 @@ class Estimate:
 
 @dataclass(frozen=True)
 class Option:
-    """A keyword option of a method: its default and a validator that names it in errors."""
+    """A keyword option of a method: its default and a validator that names it in errors.
+
+    ``default_text`` says what the default means where the value alone does not (None chosen per
+    variant, say); the command line's ``--help`` shows it, else the default itself.
+    """
 
     name: str
     default: Any
     check: Callable[[str, Any], Any]
+    default_text: str = ""
 
     def validate(self, value: Any) -> Any:
         """The checked value (``None`` passes through when it is the default)."""
@@ -127,17 +137,38 @@ class Method:
     options: Mapping[str, Option]
 
 
-class MethodTable:
-    """Methods of one package by name, with option validation.
+class MethodTable(Mapping[str, Method]):
+    """Methods of one package by name, with option validation: a read-only mapping name -> :class:`Method`.
 
+    ``"boundary" in table``, ``list(table)`` (the names in :data:`METHOD_ORDER`, then any
+    other in registration order, also :attr:`names`), ``table["reparam"]`` (KeyError if
+    unknown) and ``table.get(name)`` behave as for any mapping; :meth:`lookup` is the
+    validating lookup (one :class:`ValidationError` naming ``method`` and the choices).
     ``table.run("reparam", problem, theta, kappa=100.0)`` checks the method name and
     every option (unknown ones included) and calls the estimator with the defaults
-    filled in.
+    filled in. Methods are added only through :meth:`register` (and removed by
+    :meth:`unregister`), never by item assignment.
     """
 
-    def __init__(self, kind: str) -> None:
+    def __init__(self, kind: str, order: Sequence[str] = METHOD_ORDER) -> None:
         self.kind = kind
+        self.order = tuple(order)
         self._methods: dict[str, Method] = {}
+
+    def __getitem__(self, name: str) -> Method:
+        return self._methods[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names)
+
+    def __len__(self) -> int:
+        return len(self._methods)
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and name in self._methods
+
+    def __repr__(self) -> str:
+        return f"MethodTable({self.kind!r}: {', '.join(self.names)})"
 
     def register(self, name: str, *options: Option) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
         """Decorator registering ``func`` as method ``name`` with ``options``."""
@@ -174,11 +205,12 @@ class MethodTable:
 
     @property
     def names(self) -> tuple[str, ...]:
-        """Registered method names, in registration order."""
-        return tuple(self._methods)
+        """Registered method names: those of ``order`` first, in that order, then the others as registered."""
+        first = [n for n in self.order if n in self._methods]
+        return (*first, *(n for n in self._methods if n not in first))
 
-    def get(self, name: Any) -> Method:
-        """The method called ``name``; ValueError naming it if unknown."""
+    def lookup(self, name: Any) -> Method:
+        """The method called ``name``; a ValidationError naming ``method`` and the choices if unknown."""
         if not isinstance(name, str) or name not in self._methods:
             raise ValidationError(
                 "method", f"unknown {self.kind} {name!r}; choose from {', '.join(self.names)}"
@@ -187,7 +219,7 @@ class MethodTable:
 
     def resolve_options(self, name: str, options: Mapping[str, Any]) -> dict[str, Any]:
         """All options of ``name`` with defaults filled in, each validated."""
-        method = self.get(name)
+        method = self.lookup(name)
         unknown = sorted(set(options) - set(method.options))
         if unknown:
             known = ", ".join(method.options) or "none"
@@ -196,5 +228,5 @@ class MethodTable:
 
     def run(self, name: str, *args: Any, **options: Any) -> Any:
         """Validate and call method ``name``."""
-        method = self.get(name)
+        method = self.lookup(name)
         return method.func(*args, **self.resolve_options(name, options))

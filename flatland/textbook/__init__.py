@@ -65,7 +65,7 @@ def estimate(
         out-of-range ``theta``, ``kappa <= 0``, ``h <= 0``.
     """
     integrand = get_integral(integrand)
-    method_spec = METHODS.get(method)
+    method_spec = METHODS.lookup(method)
     n = check_int("n", n)
     seed = check_seed("seed", seed)
     theta = integrand.check_theta(theta)

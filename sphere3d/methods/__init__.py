@@ -13,18 +13,18 @@ module's docstring says which of these it changes; the guide
 ``naive``                 differentiate the renderer (biased at moving edges)
 ``finite_difference``     central difference of renders, common random numbers,
                           option ``h``
-``reparam``               rotations chosen by probe rays, vMF convolution;
-                          options ``kappa``, ``probes``, ``spread``,
-                          ``refine``, ``paired``
 ``boundary``              edge sampling (Li et al. 2018): naive plus the
                           boundary terms of the pixel integrals
                           (:mod:`sphere3d.boundary.camera`) and of the shading
                           integrals (:mod:`sphere3d.boundary.shading`); option
                           ``rate``
+``reparam``               rotations chosen by probe rays, vMF convolution;
+                          options ``kappa``, ``probes``, ``spread``,
+                          ``refine``, ``paired``
 ========================  =====================================================
 """
 
-# registration order is the order methods are listed in: naive, finite_difference, reparam, boundary
+# importing registers the method; the table lists them in flatland.core.contract.METHOD_ORDER
 from sphere3d.methods import naive as _naive  # noqa: F401, I001  (importing registers the method)
 from sphere3d.methods import finite_difference as _finite_difference  # noqa: F401
 from sphere3d.methods import reparam as _reparam  # noqa: F401

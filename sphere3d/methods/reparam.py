@@ -59,7 +59,7 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("variant", "default", partial(check_choice, choices=VARIANTS)),
     Option("kappa", 1000.0, _check_kappa),
     Option("kappa_film", KAPPA_FILM, check_kappa_film),
-    Option("probes", None, check_int),  # an integer >= 1; None: the variant's (PROBES)
+    Option("probes", None, check_int, "7; 4 for variant 'paper'"),  # an integer >= 1; None: PROBES[variant]
     Option("emitter_probes", EMITTER_PROBES, check_int),
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("refine", REFINE, partial(check_int, minimum=0)),

@@ -84,7 +84,7 @@ def test03_render_writes_png_and_structured_npy(tmp_path, scene_file):
     assert (tmp_path / "small_shadow.png").stat().st_size > 5_000
     assert has_sketch(tmp_path / "small_shadow.png", moving=False)
     data = np.load(tmp_path / "small_shadow.npy")
-    assert data.shape == (24,) and data.dtype.names == ("value", "stderr")
+    assert data.shape == (24,) and data.dtype.names == ("value", "value_stderr")  # as gradient's .npy
     assert np.all(data["value"] >= 0.0) and np.any(data["value"] > 0.0)
 
 
@@ -170,7 +170,9 @@ def test08_builtin_study_by_name_with_overrides(tmp_path, capsys):
     assert main(["study", "kappa", "--spp", "500", "--seed", "4", "--out", str(tmp_path), "--quiet"]) == 0
     rows = read_csv(tmp_path / "kappa.csv")
     assert len(rows) == 14 and all(r["n"] == 500 and r["seed"] == 4 and r["trials"] == 20 for r in rows)
-    assert "reparam kappa=10000 paired" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "reparam kappa=10000 paired" in out
+    assert "What to see: The κ trade-off (reparam, n=500;" in out  # the paragraph under the table
 
 
 def test09_parameter_names_are_exactly_those_parse_parameter_accepts():

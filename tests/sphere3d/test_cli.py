@@ -58,7 +58,7 @@ def test02_render_and_gradient_write_png_and_npy(tmp_path, scene_file):
     result = run("render", scene_file, "--spp", 4, "--out", tmp_path)
     assert result.returncode == 0, result.stderr
     image = np.load(tmp_path / "small_shadow.npy")
-    assert image.shape == (H, W) and image.dtype.names == ("value", "stderr")
+    assert image.shape == (H, W) and image.dtype.names == ("value", "value_stderr")  # as gradient's .npy
     assert (tmp_path / "small_shadow.png").stat().st_size > 3_000
     argv = ["gradient", str(scene_file), "--param", "occluder.translate.x", "--method", "finite_difference"]
     assert main([*argv, "--h", "0.05", "--spp", "4", "--out", str(tmp_path)]) == 0  # in-process
@@ -100,13 +100,13 @@ def test03_study_on_a_scene_pixel(tmp_path, scene_file):
 def test04_help_offers_the_sphere3d_methods_and_an_unknown_one_is_a_usage_error(tmp_path, capsys):
     """The help offers sphere3d's methods (boundary among them); argparse refuses others, naming them."""
     assert main(["gradient", "--help"]) == 0
-    assert "--method {naive,finite_difference,reparam,boundary}" in capsys.readouterr().out
+    assert "--method {naive,finite_difference,boundary,reparam}" in capsys.readouterr().out
     argv = ["gradient", "shadow", "--param", "occluder.translate.x", "--method", "textbook"]
     assert main([*argv, "--out", str(tmp_path)]) == 2
     captured = capsys.readouterr()
     assert captured.err == (
         "error: gradient: argument --method: invalid choice: 'textbook' "
-        "(choose from 'naive', 'finite_difference', 'reparam', 'boundary')\n"
+        "(choose from 'naive', 'finite_difference', 'boundary', 'reparam')\n"
     )
 
 

@@ -26,7 +26,7 @@ def _small(name: str, size: int = 12, **camera) -> dict:
 
 
 def test01_api_exports_and_methods():
-    assert s3.GRADIENT_METHODS.names == ("naive", "finite_difference", "reparam", "boundary")
+    assert s3.GRADIENT_METHODS.names == ("naive", "finite_difference", "boundary", "reparam")
     for name in ("Dual", "detach", "variable", "Image", "GradientImage", "Estimate", "relative_error"):
         assert hasattr(s3, name)
     image = s3.render(_small("shadow"), spp=4, seed=3)
@@ -115,7 +115,7 @@ def test06_finite_difference_agrees_with_naive_where_nothing_is_discontinuous():
 
 
 BAD = [
-    (dict(method="textbook"), "'textbook'; choose from naive, finite_difference, reparam, boundary"),
+    (dict(method="textbook"), "'textbook'; choose from naive, finite_difference, boundary, reparam"),
     (dict(kappa=0.0), "kappa: must be > 0, got 0.0"),
     (dict(kappa=float("nan")), "kappa: must be finite"),
     (dict(kappa_film=0.0), "kappa_film: must be > 0, got 0.0"),

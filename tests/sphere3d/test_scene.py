@@ -100,15 +100,21 @@ def test04_json_files_and_mesh_files_load(tmp_path):
             "vertices": [[0, 0, 2], [1, 0, 2], [0, 1, 2]],
             "faces": [[0, 1, 2]],
         },
+        {"name": "plyraw", "type": "mesh", "path": "tri.ply", "center": False},
     ]
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(d))
     scene = load_scene(str(path))
-    assert [len(s.mesh.faces) for s in scene.shapes[-3:]] == [2, 1, 1]
-    assert scene.shapes[-3].to_dict()["path"] == str((tmp_path / "tri.obj").resolve())
+    assert [len(s.mesh.faces) for s in scene.shapes[-4:]] == [2, 1, 1, 1]
+    assert scene.shapes[-4].to_dict()["path"] == str((tmp_path / "tri.obj").resolve())
     assert load_scene(scene.to_dict()) == scene
     state = build_state(scene)
-    np.testing.assert_allclose(state.triangles[state.shape_of == 4][0, 0], [0.0, 0.0, 1.5])
+    # a file's mesh is re-centred on its bounding box's centre (0.5, 0.5, 1), then translated
+    np.testing.assert_allclose(state.triangles[state.shape_of == 4][0, 0], [-0.5, -0.5, 0.5])
+    np.testing.assert_allclose(state.triangles[state.shape_of == 6][0, 0], [0.0, 0.0, 1.0])  # as stored
+    np.testing.assert_allclose(
+        state.triangles[state.shape_of == 5][0, 0], [0.0, 0.0, 2.0]
+    )  # inline: as written
 
 
 def test05_parameters_move_what_they_name():
@@ -355,3 +361,47 @@ def test09_mesh_vertex_normals_from_files_inline_and_faces(tmp_path):
     )
     assert load_scene(inline.to_dict()) == inline
     np.testing.assert_allclose(inline.shapes[0].mesh.normals[0], [0, 0, 1])
+
+
+@pytest.mark.parametrize(("source", "center"), [("file", None), ("file", True), ("inline", True)])
+def test10_a_recentred_mesh_turns_and_scales_about_its_centre(tmp_path, source, center):
+    """A box far from its file's origin: re-centred, rotate and scale keep its bounding box's centre at
+    ``translate`` (the scene docstring's promise); with ``"center": false`` it swings about the file's
+    origin instead, as stored. The key round-trips when given."""
+    corners = np.array([[x, y, z] for x in (4.0, 6.0) for y in (9.0, 10.0) for z in (-3.0, -2.0)])
+    faces = [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6]]
+    (tmp_path / "box.obj").write_text(
+        "".join(f"v {x} {y} {z}\n" for x, y, z in corners)
+        + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+    )
+    mesh = (
+        {"path": str(tmp_path / "box.obj")}
+        if source == "file"
+        else {"vertices": corners.tolist(), "faces": faces}
+    )
+    base = {"name": "b", "camera": load_scene("shadow").to_dict()["camera"]}
+
+    def centre(**transform):
+        shape = {"name": "box", "type": "mesh", **mesh, **transform}
+        if center is not None:
+            shape["center"] = center
+        scene = load_scene(base | {"shapes": [shape]})
+        assert load_scene(scene.to_dict()) == scene and ("center" in scene.shapes[0].to_dict()) == (
+            center is not None
+        )
+        v = np.asarray(detach(build_state(scene).triangles)).reshape(-1, 3)
+        return 0.5 * (v.min(axis=0) + v.max(axis=0))
+
+    move = [1.0, 2.0, 3.0]
+    for transform in (
+        {},
+        {"rotate": [0.3, -1.1, 2.0]},
+        {"scale": 2.5},
+        {"rotate": [0.0, 0.0, 1.57], "scale": 0.5},
+    ):
+        # the box is symmetric about its centre: its bounding box's centre stays where the centre goes
+        np.testing.assert_allclose(centre(translate=move, **transform), move, atol=1e-12)
+    if source == "file" and center is None:  # kept as stored when asked: it swings about the file's origin
+        raw = {"name": "box", "type": "mesh", **mesh, "center": False, "rotate": [0.0, 0.0, np.pi]}
+        v = np.asarray(detach(build_state(load_scene(base | {"shapes": [raw]})).triangles)).reshape(-1, 3)
+        np.testing.assert_allclose(0.5 * (v.min(axis=0) + v.max(axis=0)), [-5.0, -9.5, -2.5], atol=1e-12)
