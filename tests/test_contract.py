@@ -382,20 +382,22 @@ def _naive_scaled(package):
 
         return naive_scaled
 
+    from flatland.core.dual import Dual
     from sphere3d.film import FilmTransform
-    from sphere3d.integrator import Identity
+    from sphere3d.integrator import EmitterChange, Identity, Members
     from sphere3d.rotation import Rotation
     from sphere3d.tasks import Tally
 
-    class PassThroughTransforms:  # the identity, as a new method's transforms start out
+    class PassThroughTransforms(Identity):  # the identity, as a new method's transforms start out
         def camera(self, state, x, y, draws):
             return FilmTransform.identity(x.shape)
 
-        def emitter(self, shading):
-            return Rotation.identity((len(shading),))
+        def emitter(self, shading, visible):
+            rows = np.flatnonzero(visible)
+            return EmitterChange(Rotation.identity((len(rows),)), rows)
 
-        def bsdf(self, shading, mu, pdf):
-            return Identity().bsdf(shading, mu, pdf)
+        def bsdf(self, shading, mu, hits):
+            return Members(Dual(mu) if shading.state.dual else mu)
 
     def naive_scaled(task, scale):
         tally = task.evaluate(variable(0.0), PassThroughTransforms())
