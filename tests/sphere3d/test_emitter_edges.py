@@ -28,8 +28,8 @@ import numpy as np
 import sphere3d as s3
 from flatland.core.dual import Dual, tangent, variable
 from flatland.core.stats import normal_quantile
-from sphere3d.boundary.emitters import edge_table
-from sphere3d.integrator import Identity
+from sphere3d.boundary.emitters import edge_table, emitter_edge_term
+from sphere3d.integrator import EmitterChange, Identity
 from sphere3d.rotation import Rotation
 from sphere3d.scene import load_scene
 from sphere3d.state import build_state
@@ -55,14 +55,18 @@ def _scene(fade=0.0):
 
 
 class Spin(Identity):
-    """The emitter strategy turned by the forced rotation; the cosine strategy as ``naive``."""
+    """The emitter strategy turned by the forced rotation at every point, with the emitter edges'
+    boundary term (:func:`~sphere3d.boundary.emitters.emitter_edge_term`) or without; the cosine
+    strategy as ``naive``."""
 
     def __init__(self, emitter_edges: bool) -> None:
         self.emitter_edges = emitter_edges
 
-    def emitter(self, shading):
+    def emitter(self, shading, visible):
         m = len(shading)
-        return Rotation.following(Dual(np.tile(A, (m, 1)), np.tile(A_DOT, (m, 1))))
+        rotation = Rotation.following(Dual(np.tile(A, (m, 1)), np.tile(A_DOT, (m, 1))))
+        extra = emitter_edge_term(shading.state, shading, rotation) if self.emitter_edges else None
+        return EmitterChange(rotation, np.arange(m), extra)
 
 
 @functools.cache
