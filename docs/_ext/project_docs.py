@@ -276,6 +276,15 @@ Every module:
 """
 
 
+def _export(package: str, name: str) -> str:
+    """One exported name: a link for a class or function (documented on its package's page), else
+    the name itself (a table or constant, documented in its module's docstring)."""
+    obj = getattr(sys.modules[package], name)
+    if inspect.isclass(obj) or inspect.isroutine(obj):
+        return f":py:obj:`~{package}.{name}`"
+    return f"``{name}``"
+
+
 def write_api_index(path: Path, packages: Iterable[str]) -> list[str]:
     """Write the API index listing the importable ``packages``; returns them.
 
@@ -292,7 +301,7 @@ def write_api_index(path: Path, packages: Iterable[str]) -> list[str]:
             continue  # an empty folder imports as a namespace package: nothing to document
         found.append(name)
     exports = "\n\n".join(
-        f"``{name}``: " + ", ".join(f":py:obj:`~{name}.{n}`" for n in sorted(sys.modules[name].__all__))
+        f"``{name}``: " + ", ".join(_export(name, n) for n in sorted(sys.modules[name].__all__))
         for name in found
         if hasattr(sys.modules[name], "__all__")
     )
