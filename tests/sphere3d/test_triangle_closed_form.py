@@ -400,10 +400,10 @@ ORIGIN, UP = (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)
 SHADING_PARAMS = ["tri.translate.x", "tri.translate.z", "tri.scale", "tri.rotate.x", "tri.rotate.y"]
 
 
-def _area_quadrature(vertices, point, normal, nodes=48):
-    """Φ = ∫_T (n·d) |m·d| / |d|⁴ dA (d = y - x, m the unit normal of T): cos θ_x cos θ_y / r² over the
-    area, by Gauss–Legendre on the Duffy map of the unit square onto the triangle (y = a + u (b - a)
-    + u v (c - b), dA = 2 |T| u du dv), independent of Lambert's edge formula."""
+def _duffy(vertices, nodes):
+    """Gauss–Legendre nodes on the Duffy map of the unit square onto the triangle (y = a + u (b - a)
+    + u v (c - b), dA = 2 |T| u du dv): the points y (nodes, nodes, 3), their area weights dA and the
+    triangle's unit normal m."""
     g, w = np.polynomial.legendre.leggauss(nodes)
     t, wt = 0.5 * (g + 1.0), 0.5 * w
     u, v = np.meshgrid(t, t, indexing="ij")
@@ -411,10 +411,17 @@ def _area_quadrature(vertices, point, normal, nodes=48):
     y = a + u[..., None] * (b - a) + (u * v)[..., None] * (c - b)
     cross = np.cross(b - a, c - a)
     area2 = np.linalg.norm(cross)
+    return y, u * np.outer(wt, wt) * area2, cross / area2
+
+
+def _area_quadrature(vertices, point, normal, nodes=48):
+    """Φ = ∫_T (n·d) |m·d| / |d|⁴ dA (d = y - x, m the unit normal of T): cos θ_x cos θ_y / r² over the
+    area, by :func:`_duffy`, independent of Lambert's edge formula."""
+    y, area, m = _duffy(vertices, nodes)
     d = y - point
     r2 = np.sum(d * d, axis=-1)
-    f = (d @ normal) * np.abs(d @ (cross / area2)) / (r2 * r2)
-    return float(np.sum(f * u * np.outer(wt, wt)) * area2)
+    f = (d @ normal) * np.abs(d @ m) / (r2 * r2)
+    return float(np.sum(f * area))
 
 
 def test12_lamberts_formula_matches_an_area_quadrature_and_respects_orientation():
@@ -473,17 +480,11 @@ def test14_irradiance_value_naive_and_finite_difference_against_lambert():
 
 
 def _solid_angle_moment(vertices, nodes=64):
-    """m_T = ∫_T ω dω over the triangle seen from the origin: Gauss–Legendre on the Duffy map of the unit
-    square (as :func:`_area_quadrature`), dω = |m·y| / |y|³ dA."""
-    g, w = np.polynomial.legendre.leggauss(nodes)
-    t, wt = 0.5 * (g + 1.0), 0.5 * w
-    u, v = np.meshgrid(t, t, indexing="ij")
-    a, b, c = vertices
-    y = a + u[..., None] * (b - a) + (u * v)[..., None] * (c - b)
-    cross = np.cross(b - a, c - a)
-    area2 = np.linalg.norm(cross)
+    """m_T = ∫_T ω dω over the triangle seen from the origin, by :func:`_duffy`: dω = |m·y| / |y|³ dA.
+    Returns m_T and the nodes y (n, 3)."""
+    y, area, m = _duffy(vertices, nodes)
     r = np.linalg.norm(y, axis=-1)
-    d_omega = np.abs(y @ (cross / area2)) / r**3 * u * np.outer(wt, wt) * area2
+    d_omega = np.abs(y @ m) / r**3 * area
     return np.einsum("uvi,uv->i", y / r[..., None], d_omega), y.reshape(-1, 3)
 
 
