@@ -36,7 +36,9 @@ def test02_a_constant_offset_has_squared_bias_offset_squared_and_no_spread():
     b2, se = squared_bias(batches, REF)
     assert abs(b2 - 0.09) < 1e-12 and se == 0.0
     mean, pixel_se = mean_se(batches)
-    assert np.allclose(mean, REF + 0.3) and np.all(pixel_se == 0.0)
+    # identical batches: their mean is the value to a few ulps (summation order), so the spread is
+    # rounding, not exactly 0 on every CPU
+    assert np.allclose(mean, REF + 0.3) and np.all(pixel_se <= 4.0 * np.finfo(float).eps * np.abs(mean))
 
 
 def test03_noise_alone_gives_a_squared_bias_within_t_standard_errors_of_zero():

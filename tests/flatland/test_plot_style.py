@@ -60,7 +60,10 @@ def _errorbar_colours(ax):
 
 
 def _legend_texts(ax):
-    return [t.get_text() for t in ax.get_legend().get_texts()]
+    """The texts of the legend of ``ax``, or of its figure's legend when the figure holds it (outside
+    the Axes)."""
+    legend = ax.get_legend() or (ax.figure.legends[0] if ax.figure.legends else None)
+    return [t.get_text() for t in legend.get_texts()]
 
 
 def _gradient(derivative, method):
@@ -155,6 +158,8 @@ def test02_a_method_has_the_same_colour_in_demo_study_textbook_and_tutorial_figu
 
     for figure, colours in seen.items():
         for method in SHARED:
+            if figure == "study error/time" and method == "boundary":
+                continue  # exact on the textbook step: its RMSE 0 has no place on log axes, left out
             assert method in colours, (figure, method)
             assert same_color(colours[method], METHOD_COLOURS[method]), (figure, method, colours[method])
     assert "finite_difference" in seen["demo panel"]
