@@ -111,7 +111,7 @@ def test05_study_figures_kappa_and_efficiency(tmp_path):
     assert [p.name for p in paths] == ["fig_error_time.png", "fig_kappa.png", "fig_efficiency.png"]
     for p in paths:
         rgb = _pixels(p)
-        ink = 0.02 if p.name.endswith("error_time.png") else 0.05  # a line plot: less ink than bars
+        ink = 0.05 if p.name.endswith("efficiency.png") else 0.02  # line plots: less ink than bars
         assert p.stat().st_size > 20_000 and min(rgb.shape[:2]) > 300 and _not_blank(rgb) > ink
     flat = {"name": "flat", "problem": {"integral": "step"}, "n": 500, "trials": 3}
     flat["methods"] = [{"method": "naive"}, {"method": "reparam"}]
