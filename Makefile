@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench lint format docs clean
+.PHONY: demo test test-all bench lint format docs clean
 
 # an editable install maps the packages that exist when it runs: reinstall when one appears
 $(STAMP): pyproject.toml $(wildcard */__init__.py)
@@ -18,8 +18,15 @@ demo: $(STAMP)
 	$(BIN)/python -m flatland demo --out out/flatland
 	$(BIN)/python -m sphere3d demo --out out/sphere3d
 
+# the suite on every core (pytest-xdist), one test file per worker at a time: a file's module
+# fixtures are built once, and the tutorials run one after another.
+# test: all but the cases marked slow (tests/tiers.py); test-all: every test
+WORKERS ?= auto
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile -m "not slow"
+
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 from flatland.core.dual import detach
 from flatland.core.validate import ValidationError, check_positive
@@ -188,7 +188,9 @@ def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.
     if not np.all(np.isfinite(mu)):
         raise ValidationError("mu", f"must be finite, got {mu!r}")
     u = np.asarray(u, dtype=np.float64)
-    dist = stats.vonmises(kappa)
+    from scipy.stats import vonmises  # here, not at module level: scipy.stats is slow to import
+
+    dist = vonmises(kappa)
     # start from the Gaussian approximation (exact as κ → ∞), clipped into the bracket
     phi = np.clip(special.ndtri(u) / np.sqrt(kappa), -np.pi, np.pi)
     lo = np.full(u.shape, -np.pi)

@@ -11,6 +11,11 @@ and finally run it in a fresh Jupyter kernel: a cell that raises, including a fa
 Execution happens in a subprocess (nbclient driving an ipykernel), so the test
 process's ``filterwarnings = error`` applies to neither the Jupyter client machinery
 nor the notebook's own kernel.
+
+A notebook that passes is handed to the docs build: ``make docs`` executes the same
+notebooks through myst-nb's cache (``docs/_build/.jupyter_cache``, keyed by the code
+cells' sources), so it finds this run's outputs there and does not execute them again.
+A notebook changed since, or a docs build without a test run before it, executes as usual.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 TUTORIALS = ROOT / "tutorials"
+DOCS_CACHE = ROOT / "docs" / "_build" / ".jupyter_cache"  # docs/conf.py: nb_execution_cache_path
 NOTEBOOKS = sorted(TUTORIALS.glob("[0-9][0-9]_*.ipynb"))
 SCRIPTS = sorted(TUTORIALS.glob("[0-9][0-9]_*.py"))
 IDS = [nb.stem for nb in NOTEBOOKS]
@@ -180,3 +186,25 @@ def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
             assert not (out.output_type == "stream" and out.name == "stderr"), (
                 f"{path.name} cell {i} wrote to stderr:\n{text}"
             )
+    _hand_to_the_docs_build(executed, ROOT / "docs" / "tutorials" / path.name, report["seconds"])
+
+
+def _hand_to_the_docs_build(executed: Path, docs_path: Path, seconds: float) -> None:
+    """Store the executed notebook in the docs build's myst-nb cache (module docstring), as myst-nb
+    itself stores a notebook it executed. Without jupyter-cache (no docs extras) there is nothing to do."""
+    try:
+        from jupyter_cache import get_cache
+        from jupyter_cache.base import CacheBundleIn
+    except ImportError:
+        return
+    cache = get_cache(DOCS_CACHE)
+    nb = read_notebook(executed)
+    cache.cache_notebook_bundle(
+        CacheBundleIn(nb, str(docs_path), data={"execution_seconds": seconds}),
+        check_validity=False,
+        overwrite=True,
+    )
+    try:  # what myst-nb looks up: the docs copy of the source notebook, byte for byte the same
+        cache.match_cache_notebook(read_notebook(TUTORIALS / executed.name))
+    except KeyError:
+        pytest.fail(f"{executed.name}: the docs build would not find these outputs (another cache key)")

@@ -26,7 +26,7 @@ import textwrap
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from scipy import stats
+from scipy import special
 
 from flatland.app.table import format_interval, format_level
 
@@ -62,8 +62,9 @@ def variance_ratio(low: CellResult, high: CellResult, level: float) -> tuple[flo
     if not (low.variance_per_sample > 0.0 and low.samples == high.samples):
         return math.nan, math.nan, math.nan
     ratio = high.variance_per_sample / low.variance_per_sample
-    f = stats.f(high.trials - 1, low.trials - 1)
-    return ratio, ratio / f.ppf(0.5 + level / 2), ratio / f.ppf(0.5 - level / 2)
+    dfn, dfd = high.trials - 1, low.trials - 1  # F law quantiles: special.fdtri(dfn, dfd, q)
+    upper, lower = special.fdtri(dfn, dfd, 0.5 + level / 2), special.fdtri(dfn, dfd, 0.5 - level / 2)
+    return ratio, ratio / upper, ratio / lower
 
 
 def _two(x: float) -> str:

@@ -48,7 +48,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from flatland.core.image import DEFAULT_MAX_BATCHES
 from flatland.core.stats import LEVEL, normal_quantile, rounding_floor, sidak, z_score
@@ -199,7 +199,8 @@ def pixel_test(
     if m == 0:
         return PixelTest(0, math.inf, 0, 0.0, 0.0)
     level = sidak(alpha, m)  # per-pixel two-sided level
-    threshold = float(stats.t.isf(0.5 * level, max(int(dof), 1)))
+    # upper Student t quantile: t.isf(q) = -t.ppf(q) = -stdtrit(dof, q)
+    threshold = float(-special.stdtrit(max(int(dof), 1), 0.5 * level))
     abs_z = np.where(np.abs(diff) <= tolerance, 0.0, np.abs(diff) / noise)  # noise > 0 on tested pixels
     return PixelTest(m, threshold, int(np.count_nonzero(abs_z > threshold)), m * level, float(abs_z.max()))
 

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from flatland.core.stats import sidak
 from flatland.core.validate import ValidationError
@@ -39,7 +39,7 @@ def sidak_t(alpha: float, comparisons: int, dof: int) -> float:
     Šidák-corrected over ``comparisons``: each comparison at $1 - (1 - α)^{1/m}$."""
     if dof < 1:
         raise ValidationError("dof", f"must be >= 1, got {dof!r}")
-    return float(stats.t.ppf(1.0 - sidak(alpha, comparisons) / 2.0, dof))
+    return float(special.stdtrit(dof, 1.0 - sidak(alpha, comparisons) / 2.0))  # Student t quantile
 
 
 def _batches(batches: Any) -> np.ndarray:

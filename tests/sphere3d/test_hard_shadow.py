@@ -48,6 +48,7 @@ from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
 from tests.sphere3d.helpers import REGIONS, over_batches, regions
+from tests.tiers import sweep
 
 REFERENCE = Path(__file__).resolve().parents[2] / "sphere3d" / "scenes" / "references"
 SCENES = ("hard_shadow", "hard_shadow_cube")
@@ -158,7 +159,7 @@ EVENTS = 30
 """Per-pixel z-scores are taken where the test expects at least this many samples to see a change."""
 
 
-@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("name", sweep(SCENES, ["hard_shadow_cube"]))
 def test03_finite_differences_match_the_reference_in_every_region(name, masks):
     # The reference's own estimator at 256 spp with another seed. Its per-sample variance v is
     # known per pixel from the reference's passes (stderr² · passes · spp per pass). Finite

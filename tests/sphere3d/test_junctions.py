@@ -28,6 +28,7 @@ from sphere3d import closed_form as cf
 from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.tasks import ImageTask
 from tests.sphere3d.helpers import over_batches
+from tests.tiers import sweep
 
 ALPHA = 1e-3
 BATCHES = 16
@@ -76,7 +77,7 @@ def _render(motion, junctions, spp=SPP, seed=1):
     return task.evaluate(variable(0.0), ReparamTransforms(film_junctions=junctions)).derivative
 
 
-@pytest.mark.parametrize("motion", list(MOTIONS))
+@pytest.mark.parametrize("motion", sweep(MOTIONS, ["sideways"]))
 def test03_reparam_matches_the_junction_closed_form_in_every_pixel(motion):
     # every pixel with spread within its Šidák-corrected Student-t interval (15 dof) of the exact
     # derivative; pixels without spread (no sample's kernel saw the moving triangle) exactly 0, and so
@@ -93,7 +94,7 @@ def test03_reparam_matches_the_junction_closed_form_in_every_pixel(motion):
     assert np.all(mean[~live] == 0.0) and np.abs(exact[~live]).max() < 1e-9
 
 
-@pytest.mark.parametrize("motion", list(MOTIONS))
+@pytest.mark.parametrize("motion", sweep(MOTIONS, ["sideways"]))
 def test04_without_junctions_significantly_more_of_the_derivative_is_lost(motion):
     # Following the junction's crossing moves the kernel's film point with the silhouette's normal
     # speed and along the static edge: both edges held (test03). Without it, a kernel at a junction

@@ -1,0 +1,27 @@
+"""The suite's two tiers.
+
+``make test`` runs every test but those marked ``slow``: each property is checked, each statistical
+sweep on representative cases. ``make test-all`` adds the ``slow`` ones: the remaining cases of the
+sweeps (more scenes, parameters, sizes at the same statistical level), and the long runs (the
+tutorials executed in a kernel, which ``make docs`` executes too). A case is marked slow when it
+costs several times its sweep's representative case and checks the same code path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import pytest
+
+SLOW = pytest.mark.slow
+
+
+def sweep(cases: Iterable[Any], fast: Sequence[Any]) -> list[Any]:
+    """``cases`` for ``pytest.mark.parametrize``; those not in ``fast`` are marked slow."""
+    cases = list(cases)
+    missing = [c for c in fast if c not in cases]
+    assert not missing, f"fast cases not in the sweep: {missing}"
+    return [
+        c if c in fast else pytest.param(*(c if isinstance(c, tuple) else (c,)), marks=SLOW) for c in cases
+    ]
