@@ -150,7 +150,6 @@ def _kernel_environment() -> dict[str, str]:
     return env
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
 def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
     executed = tmp_path / path.name

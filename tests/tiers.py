@@ -2,9 +2,9 @@
 
 ``make test`` runs every test but those marked ``slow``: each property is checked, each statistical
 sweep on representative cases. ``make test-all`` adds the ``slow`` ones: the remaining cases of the
-sweeps (more scenes, parameters, sizes at the same statistical level), and the long runs (the
-tutorials executed in a kernel, which ``make docs`` executes too). A case is marked slow when it
-costs several times its sweep's representative case and checks the same code path.
+sweeps (more scenes, parameters, sizes at the same statistical level) and the long runs. A case is
+marked slow when it costs several times its sweep's representative case and checks the same code
+path. The tutorials run in ``make test``, and hand their outputs to ``make docs``.
 """
 
 from __future__ import annotations
