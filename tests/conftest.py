@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 
 import matplotlib
-import pytest
 from hypothesis import HealthCheck, settings
 
 matplotlib.use("Agg")
@@ -24,8 +23,3 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev"))
 
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tutorials first: one file, run in one worker, that takes longest; started last, it would
-    leave the other workers idle at the end (longest job first)."""
-    items.sort(key=lambda item: item.path.name != "test_tutorials.py")
