@@ -196,8 +196,14 @@ def _hand_to_the_docs_build(executed: Path, docs_path: Path, seconds: float) -> 
         from jupyter_cache.base import CacheBundleIn
     except ImportError:
         return
+    # the cache key hashes the code cells with their metadata, to which nbclient adds execution
+    # times: the source notebook (what myst-nb looks up) is cached, with the executed outputs
+    nb, ran = read_notebook(TUTORIALS / executed.name), read_notebook(executed)
+    for cell, done in zip(nb.cells, ran.cells, strict=True):
+        if cell.cell_type == "code":
+            cell.outputs, cell.execution_count = done.outputs, done.execution_count
+    nb.metadata["language_info"] = ran.metadata.get("language_info", {})
     cache = get_cache(DOCS_CACHE)
-    nb = read_notebook(executed)
     cache.cache_notebook_bundle(
         CacheBundleIn(nb, str(docs_path), data={"execution_seconds": seconds}),
         check_validity=False,
