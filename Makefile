@@ -22,15 +22,15 @@ demo: $(STAMP)
 	$(BIN)/python -m flatland demo --out out/flatland
 	$(BIN)/python -m sphere3d demo --out out/sphere3d
 
-# the suite on every core (pytest-xdist), one test file per worker at a time: a file's module
-# fixtures are built once, and the tutorials run one after another.
+# the suite on every core (pytest-xdist), one test module or class per worker at a time: a module's
+# fixtures are built once; each tutorial notebook is a class of its own (tests/test_tutorials.py).
 # test: all but the cases marked slow (tests/tiers.py); test-all: every test
 WORKERS ?= auto
 test: $(STAMP)
-	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile -m "not slow"
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadscope -m "not slow"
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadscope
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

@@ -150,8 +150,25 @@ def _kernel_environment() -> dict[str, str]:
     return env
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
-def test05_notebook_runs_top_to_bottom_and_every_check_passes(path, tmp_path):
+def _notebook_runs(path: Path) -> type:
+    """A test class of its own per notebook: ``make test`` hands out work by class and module
+    (pytest-xdist ``--dist loadscope``), so the notebooks, the suite's longest tests, are shared
+    among the workers instead of queueing on one."""
+
+    def test05_notebook_runs_top_to_bottom_and_every_check_passes(self, tmp_path):
+        _run_notebook(path, tmp_path)
+
+    test = test05_notebook_runs_top_to_bottom_and_every_check_passes
+    name = "TestNotebook" + path.stem.title().replace("_", "")  # 01_leibniz_rule: TestNotebook01LeibnizRule
+    return type(name, (), {test.__name__: test})
+
+
+for _path in NOTEBOOKS:
+    _cls = _notebook_runs(_path)
+    globals()[_cls.__name__] = _cls
+
+
+def _run_notebook(path: Path, tmp_path: Path) -> None:
     executed = tmp_path / path.name
     sockets = tmp_path / "kernel"
     run = subprocess.run(
