@@ -12,11 +12,11 @@ matplotlib.use("Agg")
 # deadline=None: forward-mode rules on arrays have no meaningful per-example time budget.
 settings.register_profile("dev", deadline=None, max_examples=60)
 # CI: fixed examples (derandomized), fewer of them: the forward-mode rules of test_dual alone are
-# 83 properties, and CI has 2 cores for the whole suite; `HYPOTHESIS_PROFILE=dev` runs 60 anywhere.
+# 83 properties, and CI has 2 slow cores for the whole suite; `HYPOTHESIS_PROFILE=dev` runs 60.
 settings.register_profile(
     "ci",
     deadline=None,
-    max_examples=20,
+    max_examples=10,
     derandomize=True,
     print_blob=True,
     suppress_health_check=[HealthCheck.too_slow],
