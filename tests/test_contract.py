@@ -27,6 +27,7 @@ from flatland.app.study import load_config
 from flatland.core.contract import MethodTable, Option
 from flatland.core.image import GradientImage, Image
 from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_positive
+from tests.tiers import HANG
 
 PACKAGES = [
     "flatland",
@@ -199,7 +200,7 @@ def error_runs(request, tmp_path_factory):
     }
     results = {}
     for name, proc in procs.items():
-        out, err = proc.communicate(timeout=180)
+        out, err = proc.communicate(timeout=HANG)
         results[name] = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
     return results
 

@@ -16,6 +16,10 @@ import pytest
 
 SLOW = pytest.mark.slow
 
+HANG = 1800
+"""Seconds after which a test's subprocess (a CLI command, a notebook cell) counts as hung: a guard,
+not a speed requirement (speed is measured by ``make bench``), wide enough for slow shared machines."""
+
 
 def sweep(cases: Iterable[Any], fast: Sequence[Any]) -> list[Any]:
     """``cases`` for ``pytest.mark.parametrize``; those not in ``fast`` are marked slow."""

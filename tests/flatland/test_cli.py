@@ -26,6 +26,7 @@ from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_depth
 from flatland.plotting.style import SKETCH_COLOURS
 from flatland.scene import load_scene, parameter_names
 from flatland.state import parse_parameter
+from tests.tiers import HANG
 
 
 def run(*args, cwd=None):
@@ -33,7 +34,7 @@ def run(*args, cwd=None):
         [sys.executable, "-m", "flatland", *map(str, args)],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=HANG,
         cwd=cwd,
     )
 
@@ -269,7 +270,7 @@ def test14_a_real_internal_error_exits_1_with_its_traceback(tmp_path):
         "from flatland.__main__ import main\n"
         f"sys.exit(main(['render', 'shadow', '--out', {str(tmp_path)!r}]))\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 1 and lines[0] == "Traceback (most recent call last):", result.stderr
     assert lines[-1].startswith("internal error: ValueError in python -m flatland: operands could not")

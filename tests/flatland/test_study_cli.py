@@ -22,6 +22,7 @@ import pytest
 from scipy import stats
 
 from flatland.app.study import read_csv
+from tests.tiers import HANG
 
 KAPPAS = (1, 10, 100, 1000, 10000)
 CONFIG = {
@@ -45,7 +46,7 @@ def kappa_study(tmp_path_factory):
         [sys.executable, "-m", "flatland", "study", str(config), "--out", str(out), "--quiet"],
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=HANG,
     )
     assert run.returncode == 0, run.stderr
     rows = read_csv(out / "kappa_two_steps.csv")

@@ -17,13 +17,14 @@ pytest.importorskip("embreex")
 
 from sphere3d.__main__ import PACKAGE, main
 from sphere3d.scene import load_scene, parameter_names
+from tests.tiers import HANG
 
 W, H = 16, 12
 
 
 def run(*args):
     return subprocess.run(
-        [sys.executable, "-m", "sphere3d", *map(str, args)], capture_output=True, text=True, timeout=180
+        [sys.executable, "-m", "sphere3d", *map(str, args)], capture_output=True, text=True, timeout=HANG
     )
 
 
