@@ -8,14 +8,16 @@ STAMP  := $(VENV)/.installed
 
 # Bytecode: pip installs without compiling the environment's thousands of modules (most are never
 # imported), and Python compiles what is imported, once, and keeps it (even where the environment
-# asks for no bytecode files). The venv's own pip (Python 3.11 ships >= 22.3) installs editables.
+# asks for no bytecode files). The venv gets no pip of its own (ensurepip compiles pip and
+# setuptools: minutes on a slow machine); the system's pip installs into it (`--python`, pip >= 22.3,
+# as Python 3.11 ships). To add a package: python3 -m pip --python .venv/bin/python install NAME
 export PYTHONDONTWRITEBYTECODE :=
 
 # an editable install maps the packages that exist when it runs: reinstall when one appears
 $(STAMP): pyproject.toml $(wildcard */__init__.py)
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "Python >= 3.11 is required (PYTHON=$(PYTHON))")'
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --no-compile -e '.[dev,docs]'
+	$(PYTHON) -m venv --without-pip $(VENV)
+	$(PYTHON) -m pip --python $(BIN)/python install --quiet --no-compile -e '.[dev,docs]'
 	touch $(STAMP)
 
 demo: $(STAMP)

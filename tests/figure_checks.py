@@ -251,7 +251,8 @@ def install_notebook_check(dump: str | None = None) -> None:
     The check wraps the PNG formatter of :class:`~matplotlib.figure.Figure`, which
     ``%matplotlib inline`` installs in a notebook's first cell: after every cell the wrapper is
     put back if the formatter was replaced. With ``dump`` (a folder), every displayed figure is
-    also written there as ``figNN.png``, in order.
+    also written there as ``figNN.png``, in order. Called again in the same kernel (the next
+    notebook), it replaces the previous check and starts counting at 1 again.
     """
     from pathlib import Path
 
@@ -271,15 +272,20 @@ def install_notebook_check(dump: str | None = None) -> None:
                 print(f"figure {number}: layout defects:\n  " + "\n  ".join(defects), file=sys.stderr)
             return original(fig, *args, **kwargs)
 
-        png.checks_layout = True
+        png.installed_by = ensure
+        png.original = original
         return png
 
     def ensure(*_: Any) -> None:
         formatter = shell.display_formatter.formatters["image/png"]
         current = formatter.type_printers.get(Figure)
-        if current is not None and not getattr(current, "checks_layout", False):
-            formatter.for_type(Figure, checked(current))
+        if current is not None and getattr(current, "installed_by", None) is not ensure:
+            formatter.for_type(Figure, checked(getattr(current, "original", current)))
 
+    previous = getattr(shell, "figure_check", None)  # a previous notebook's, in a shared kernel
+    if previous is not None:
+        shell.events.unregister("post_run_cell", previous)
+    shell.figure_check = ensure
     shell.events.register("post_run_cell", ensure)
 
 

@@ -29,6 +29,7 @@ import pytest
 
 import flatland
 import flatland.core
+from tests.tiers import SLOW
 
 ROOT = Path(__file__).resolve().parent.parent
 RENDERER = (
@@ -72,6 +73,7 @@ def test02_import_flatland_imports_a_renderer_module_only_when_a_name_is_used():
     assert _loaded(used, APP) == []
 
 
+@SLOW
 def test03_flatland_core_imports_no_matplotlib_no_argparse_no_app():
     """At run time (every core module imported) and in the sources: scipy.special itself imports
     argparse, so argparse is checked in the sources (no core module imports it) and at run time as
@@ -105,6 +107,7 @@ def test04_every_public_name_resolves_and_is_listed_by_dir():
     assert callable(flatland.render) and callable(flatland.render_gradient)
 
 
+@SLOW
 def test05_importing_the_render_module_does_not_shadow_the_render_function():
     """``import flatland.render`` sets the package attribute ``render`` to the module; it stays the
     function, as when ``flatland/__init__`` imported it eagerly."""

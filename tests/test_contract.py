@@ -27,7 +27,7 @@ from flatland.app.study import load_config
 from flatland.core.contract import MethodTable, Option
 from flatland.core.image import GradientImage, Image
 from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_positive
-from tests.tiers import HANG
+from tests.tiers import HANG, SLOW
 
 PACKAGES = [
     "flatland",
@@ -216,6 +216,7 @@ def error_runs(request, tmp_path_factory):
         ("deep study", ["config file", "deep.json", TOO_DEEP]),
     ],
 )
+@SLOW
 def test06_real_commands_fail_with_one_line_and_status_2(error_runs, case, fragments):
     result = error_runs[case]
     lines = result.stderr.strip().splitlines()

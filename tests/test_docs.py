@@ -54,6 +54,7 @@ from flatland import estimate
 from flatland.core.dual import tangent, variable
 from flatland.core.stats import normal_quantile, sidak
 from flatland.integrals import INTEGRALS
+from tests.tiers import SLOW
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -355,6 +356,7 @@ def build_tiny_site(tmp_path, page: str) -> str:
     return warnings.getvalue(), (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
 
 
+@SLOW
 def test07_the_implements_directive_links_good_names_and_warns_about_bad_ones(tmp_path):
     page = "\n".join(
         [
@@ -530,6 +532,7 @@ def _documented(package: str):
 
 
 @pytest.mark.parametrize("package", AVAILABLE)
+@SLOW
 def test10_every_rendered_docstring_is_valid_restructuredtext(package):
     """What ``make docs`` would report as a docutils warning (an error under -W), found without Sphinx."""
     import io

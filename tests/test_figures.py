@@ -32,6 +32,7 @@ from flatland.plotting import probe_rays as prb
 from flatland.plotting import textbook as pt
 from flatland.plotting import tutorials as ptu
 from tests.figure_checks import figure_defects
+from tests.tiers import sweep
 
 RNG = np.random.default_rng(20191117)
 METHOD_TITLES = {
@@ -545,7 +546,7 @@ def test01_the_checks_find_each_defect_they_name():
     assert isinstance(colorbar, Axes)
 
 
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", sweep(CASES, ["tutorials_probes"]))
 def test02_no_figure_has_overlapping_labels_or_a_legend_over_data(
     case, tmp_path, monkeypatch, flatland_films
 ):

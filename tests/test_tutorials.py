@@ -4,13 +4,15 @@ Each tutorial is a pair ``tutorials/NN_name.ipynb`` (committed without outputs, 
 student opens) and ``tutorials/NN_name.py`` (jupytext percent format, what a reviewer
 diffs). The tests check that the pair agrees cell for cell, that the notebook carries
 no outputs, that it follows the course's cell conventions (docs/guides/tutorials.md),
-and finally run it in a fresh Jupyter kernel: a cell that raises, including a failing
-``assert`` in a check cell, fails the test, and so does anything written to stderr
-(warnings included), which the docs build would also reject.
+and finally run it top to bottom: a cell that raises, including a failing ``assert`` in a
+check cell, fails the test, and so does anything written to stderr (warnings included),
+which the docs build would also reject.
 
-Execution happens in a subprocess (nbclient driving an ipykernel), so the test
-process's ``filterwarnings = error`` applies to neither the Jupyter client machinery
-nor the notebook's own kernel.
+The notebooks a test process runs share one Jupyter kernel (a process of its own, driven by
+nbclient), its namespace reset (``%reset -f``), figures closed and matplotlib's settings
+restored before each notebook: a name a notebook uses without defining it fails as in a
+fresh kernel, and the kernel's start and the imports (minutes on a slow shared machine) are
+paid once per process instead of once per notebook.
 
 A notebook that passes is handed to the docs build: ``make docs`` executes the same
 notebooks through myst-nb's cache (``docs/_build/.jupyter_cache``, keyed by the code
@@ -20,11 +22,12 @@ A notebook changed since, or a docs build without a test run before it, executes
 
 from __future__ import annotations
 
-import json
+import atexit
 import os
 import re
-import subprocess
-import sys
+import tempfile
+import time
+import warnings
 from pathlib import Path
 
 import jupytext
@@ -44,34 +47,18 @@ CELL_TIMEOUT = HANG  # seconds per cell: a guard against a hung kernel, not a sp
 PLOT_CALL = re.compile(r"\bplot_[a-z_]+\(")
 ANSI = re.compile(r"\x1b\[[0-9;]*m")  # colour codes in IPython tracebacks
 
-RUNNER = r"""
-import json, sys, time
-import nbformat
-from jupyter_client.manager import KernelManager
-from nbclient import NotebookClient
-from nbclient.exceptions import CellExecutionError
-
-source, target, workdir, sockets, timeout, root, dump = sys.argv[1:8]
-nb = nbformat.read(source, as_version=4)
-# a first cell, taken out again below: every figure a cell returns is checked for layout defects
-# (tests/figure_checks.py), which are written to stderr
-check = f"import sys; sys.path.insert(0, {root!r})\n"
-check += f"from tests.figure_checks import install_notebook_check; install_notebook_check({dump or None!r})"
-nb.cells.insert(0, nbformat.v4.new_code_cell(check))
-# IPC sockets in a private folder: no TCP ports to race for with other processes on the machine
-kernel = KernelManager(kernel_name="python3", transport="ipc", ip=sockets)
-client = NotebookClient(nb, km=kernel, timeout=int(timeout), resources={"metadata": {"path": workdir}})
-start = time.perf_counter()
-status, error = 0, ""
-try:
-    client.execute()
-except CellExecutionError as exc:
-    status, error = 1, str(exc)
-nb.cells.pop(0)
-nbformat.write(nb, target)
-print(json.dumps({"seconds": time.perf_counter() - start, "error": error}))
-sys.exit(status)
+PREFIX = """\
+get_ipython().run_line_magic("reset", "-f")  # the previous notebook's names are gone
+import matplotlib as _mpl, matplotlib.pyplot as _plt, os as _os, sys as _sys
+_plt.close("all"); _mpl.rcdefaults(); _os.chdir({workdir!r})
+if {root!r} not in _sys.path: _sys.path.insert(0, {root!r})
+from tests.figure_checks import install_notebook_check
+install_notebook_check({dump!r})
+del _mpl, _plt, _os, _sys, install_notebook_check
+get_ipython().execution_count = 0  # the notebook's first cell is [1], as in a fresh kernel
 """
+"""The first cell of every run, taken out again after it: a clean namespace, figures and rc settings,
+and every figure a cell returns checked for layout defects (tests/figure_checks.py, written to stderr)."""
 
 
 def read_notebook(path: Path) -> nbformat.NotebookNode:
@@ -170,31 +157,54 @@ for _path in NOTEBOOKS:
     globals()[_cls.__name__] = _cls
 
 
+class _Kernel:
+    """One IPython kernel per test process, shared by the notebooks that process runs (module
+    docstring), started on first use, started again if a notebook killed it."""
+
+    manager = None
+
+    @classmethod
+    def get(cls, sockets: Path):
+        from jupyter_client.manager import KernelManager
+
+        if cls.manager is None or not cls.manager.is_alive():
+            if cls.manager is not None:
+                cls.manager.shutdown_kernel(now=True)
+            sockets.mkdir(parents=True, exist_ok=True)
+            # IPC sockets in a private folder: no TCP ports to race for with other processes
+            cls.manager = KernelManager(kernel_name="python3", transport="ipc", ip=str(sockets / "kernel"))
+            cls.manager.start_kernel(env=_kernel_environment(), cwd=str(TUTORIALS))
+            atexit.register(cls.manager.shutdown_kernel, now=True)
+        return cls.manager
+
+
 def _run_notebook(path: Path, tmp_path: Path) -> None:
+    from nbclient import NotebookClient
+    from nbclient.exceptions import CellExecutionError
+
+    nb = read_notebook(path)
+    dump = os.environ.get("FIGURE_DUMP", "") and str(Path(os.environ["FIGURE_DUMP"]) / path.stem)
+    prefix = PREFIX.format(workdir=str(TUTORIALS), root=str(ROOT), dump=dump or None)
+    nb.cells.insert(0, nbformat.v4.new_code_cell(prefix))
+    manager = _Kernel.get(Path(tempfile.gettempdir()) / f"tutorial-kernel-{os.getpid()}")
+    client = NotebookClient(nb, km=manager, timeout=CELL_TIMEOUT)
+    start, error = time.perf_counter(), ""
+    # the client machinery's own deprecation notices are not the notebook's: the kernel is a
+    # process of its own, and what the notebook writes to stderr is checked below
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            client.execute()
+        except CellExecutionError as exc:
+            error = str(exc)
+        finally:
+            if client.kc is not None:  # the client's channels; the kernel stays for the next notebook
+                client.kc.stop_channels()
+    seconds = time.perf_counter() - start
+    assert not error, ANSI.sub("", error)
+    nb.cells.pop(0)
     executed = tmp_path / path.name
-    sockets = tmp_path / "kernel"
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            RUNNER,
-            str(path),
-            str(executed),
-            str(TUTORIALS),
-            str(sockets),
-            str(CELL_TIMEOUT),
-            str(ROOT),
-            os.environ.get("FIGURE_DUMP", "") and str(Path(os.environ["FIGURE_DUMP"]) / path.stem),
-        ],
-        capture_output=True,
-        text=True,
-        env=_kernel_environment(),
-        timeout=10 * CELL_TIMEOUT,
-        check=False,
-    )
-    report = json.loads(run.stdout.strip().splitlines()[-1]) if run.stdout.strip() else {}
-    assert run.returncode == 0, ANSI.sub("", report.get("error") or run.stderr[-4000:])
-    nb = read_notebook(executed)
+    nbformat.write(nb, executed)
     for i, cell in code_cells(nb):
         for out in cell.outputs:
             assert out.output_type != "error", (
@@ -204,7 +214,7 @@ def _run_notebook(path: Path, tmp_path: Path) -> None:
             assert not (out.output_type == "stream" and out.name == "stderr"), (
                 f"{path.name} cell {i} wrote to stderr:\n{text}"
             )
-    _hand_to_the_docs_build(executed, ROOT / "docs" / "tutorials" / path.name, report["seconds"])
+    _hand_to_the_docs_build(executed, ROOT / "docs" / "tutorials" / path.name, seconds)
 
 
 def _hand_to_the_docs_build(executed: Path, docs_path: Path, seconds: float) -> None:

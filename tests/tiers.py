@@ -1,10 +1,13 @@
 """The suite's two tiers.
 
-``make test`` runs every test but those marked ``slow``: each property is checked, each statistical
-sweep on representative cases. ``make test-all`` adds the ``slow`` ones: the remaining cases of the
-sweeps (more scenes, parameters, sizes at the same statistical level) and the long runs. A case is
-marked slow when it costs several times its sweep's representative case and checks the same code
-path. The tutorials run in ``make test``, and hand their outputs to ``make docs``.
+``make test`` runs every test but those marked ``slow``; ``make test-all`` runs them all. ``make test``
+is what CI runs, on 2 shared cores that can be 20-40 times slower than a desk machine, within a
+fixed time that also pays for the install and the docs build, so it is a budget: each statistical
+sweep keeps representative cases (the rest of the sweep, more scenes, parameters, sizes at the same
+statistical level, is slow), and a check that costs minutes there (a whole CLI run in a subprocess,
+a reference image, a second estimator on the same closed form) is slow when a cheaper test in
+``make test`` runs the same code path. The tutorials run in ``make test``, and hand their outputs
+to ``make docs``.
 """
 
 from __future__ import annotations

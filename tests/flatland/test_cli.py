@@ -26,7 +26,7 @@ from flatland.core.validate import MAX_JSON_DEPTH, ValidationError, check_depth
 from flatland.plotting.style import SKETCH_COLOURS
 from flatland.scene import load_scene, parameter_names
 from flatland.state import parse_parameter
-from tests.tiers import HANG
+from tests.tiers import HANG, SLOW
 
 
 def run(*args, cwd=None):
@@ -79,6 +79,7 @@ def test02_demo_writes_the_panel_and_prints_both_tables(tmp_path):
     assert "relative error" in out and "Textbook integrals" in out and "two_steps" in out
 
 
+@SLOW
 def test03_render_writes_png_and_structured_npy(tmp_path, scene_file):
     result = run("render", scene_file, "--spp", 8, "--seed", 3, "--out", tmp_path)
     assert result.returncode == 0, result.stderr
@@ -89,6 +90,7 @@ def test03_render_writes_png_and_structured_npy(tmp_path, scene_file):
     assert np.all(data["value"] >= 0.0) and np.any(data["value"] > 0.0)
 
 
+@SLOW
 def test04_gradient_writes_value_derivative_and_standard_errors(tmp_path, scene_file):
     result = run(
         "gradient", scene_file, "--param", "occluder.translate.x", "--method", "reparam", "--kappa", 500,
@@ -106,6 +108,7 @@ def test04_gradient_writes_value_derivative_and_standard_errors(tmp_path, scene_
     assert "Σ dI/dθ" in result.stdout
 
 
+@SLOW
 def test05_study_on_a_scene_writes_csv_and_figures(tmp_path, scene_file):
     config = {
         "name": "scene_study",
@@ -167,6 +170,7 @@ def test07_bad_study_configuration_names_the_field(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: methods[0].kappa: must be > 0")
 
 
+@SLOW
 def test08_builtin_study_by_name_with_overrides(tmp_path, capsys):
     assert main(["study", "kappa", "--spp", "500", "--seed", "4", "--out", str(tmp_path), "--quiet"]) == 0
     rows = read_csv(tmp_path / "kappa.csv")
@@ -259,6 +263,7 @@ def test13_validation_errors_cross_process_boundaries_as_themselves():
     assert str(error) == "methods[0].kappa: must be > 0, got -2"
 
 
+@SLOW
 def test14_a_real_internal_error_exits_1_with_its_traceback(tmp_path):
     """As a real process: a ValueError from inside render (a bug) is not reported as a usage error."""
     code = (

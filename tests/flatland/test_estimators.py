@@ -23,6 +23,7 @@ from flatland import estimate
 from flatland.core.stats import normal_quantile, sidak
 from flatland.integrals import INTEGRALS
 from flatland.textbook.reparam import translation_bias
+from tests.tiers import SLOW
 
 N = 200_000
 SEED = 20191117
@@ -129,6 +130,7 @@ def two_steps_kernel_bias(theta, kappa):
     return -special.ndtr(-0.5 * theta * np.sqrt(kappa)) * (K(theta) + K(2 * theta))
 
 
+@SLOW
 def test07_kernel_trade_off_bias_falls_and_variance_rises_with_kappa():
     """Loubet et al. 2019, Sec. 4.2, on the two-step integral, N = 1 000 000 per κ.
 

@@ -87,7 +87,7 @@ def test00_the_cases_cover_every_scene_and_parameter_kind():
 
 @pytest.mark.parametrize(
     ("name", "param", "h"),
-    sweep(FD_CASES, [("shadow", "occluder.translate.x", H), ("penumbra", "camera.translate.x", H)]),
+    sweep(FD_CASES, [("shadow", "occluder.translate.x", H)]),
 )
 def test01_boundary_agrees_with_finite_differences(name, param, h):
     b = _boundary(name, param)
@@ -152,7 +152,7 @@ def _bias_seen(z: np.ndarray) -> tuple[bool, bool]:
 
 @pytest.mark.parametrize(
     ("name", "param"),
-    sweep(sorted(UNBIASED), [("shadow", "camera.translate.y"), ("polygon", "polygon.vertex.1.y")]),
+    sweep(sorted(UNBIASED), [("shadow", "camera.translate.y")]),
 )
 def test02a_reparam_is_unbiased_per_pixel_where_the_heuristic_holds(name, param):
     """Neither test of :func:`_bias_seen` rejects: reparam agrees with boundary pixel by pixel.

@@ -14,6 +14,7 @@ from flatland.core.image import Image
 from flatland.plotting import films, study, style
 from tests.flatland.helpers import capture_figures
 from tests.flatland.helpers import gradient_image as _grad
+from tests.tiers import SLOW, sweep
 
 W = 48
 
@@ -37,7 +38,7 @@ def _not_blank(rgb):
     return float(np.mean(np.any(rgb < 0.9, axis=-1)))
 
 
-@pytest.mark.parametrize("shape", [(W,), (24, 32)], ids=["film1d", "film2d"])
+@pytest.mark.parametrize("shape", sweep([(W,), (24, 32)], [(24, 32)]), ids=["film1d", "film2d"])
 def test01_image_and_gradient_figures_are_written_and_not_blank(tmp_path, shape):
     x = np.linspace(-1.0, 1.0, int(np.prod(shape))).reshape(shape)
     image = Image(
@@ -73,7 +74,7 @@ def test03_symmetric_limit_is_shared_and_ignores_a_few_outliers():
     assert style.symmetric_limit([np.zeros(5)]) == 1.0
 
 
-@pytest.mark.parametrize("shape", [(W,), (24, 32)], ids=["film1d", "film2d"])
+@pytest.mark.parametrize("shape", sweep([(W,), (24, 32)], [(24, 32)]), ids=["film1d", "film2d"])
 def test04_panel_has_one_column_per_method(tmp_path, shape):
     x = np.linspace(-1.0, 1.0, int(np.prod(shape))).reshape(shape)
     primal = Image(value=1.0 + x**2, stderr=np.full(shape, 0.01), spp=16, seed=0, batches=4, scene="t")
@@ -91,6 +92,7 @@ def test04_panel_has_one_column_per_method(tmp_path, shape):
     assert _not_blank(rgb) > 0.1 and _red(rgb).sum() > 1000
 
 
+@SLOW
 def test05_study_figures_kappa_and_efficiency(tmp_path):
     config = StudyConfig.from_dict(
         {
@@ -144,7 +146,8 @@ def test06_error_time_figure_is_log_log_with_one_line_per_method(tmp_path, monke
     assert methods == ["naive (BIASED)", "reparam"] and "∝ 1/√t (guide)" in labels
 
 
-@pytest.mark.parametrize("shape", [(W,), (24, 32)], ids=["film1d", "film2d"])
+@pytest.mark.parametrize("shape", sweep([(W,), (24, 32)], [(24, 32)]), ids=["film1d", "film2d"])
+@SLOW
 def test07_a_sketch_gets_a_left_panel_spanning_every_row_of_each_film_figure(tmp_path, shape, monkeypatch):
     x = np.linspace(-1.0, 1.0, int(np.prod(shape))).reshape(shape)
     image = Image(value=1.0 + x**2, stderr=np.full(shape, 0.01), spp=16, seed=0, batches=4, scene="t")

@@ -26,6 +26,7 @@ from flatland.plotting.sketch import draw_scene, plot_scene
 from flatland.plotting.style import METHOD_COLOURS, SKETCH_COLOURS
 from flatland.scene import list_scenes, load_scene, parameter_names
 from flatland.state import build_state, parse_parameter
+from tests.tiers import sweep
 
 KINDS = {"segment": LineCollection, "polyline": LineCollection, "polygon": Polygon, "circle": Circle}
 
@@ -97,7 +98,7 @@ def test03_a_rotation_moves_every_vertex_perpendicular_to_its_radius():
     assert np.allclose(uv, 0.1 * np.stack([-radius[:, 1], radius[:, 0]], axis=1), rtol=0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("name", list_scenes())
+@pytest.mark.parametrize("name", sweep(list_scenes(), ["polygon"]))
 def test04_every_builtin_scene_and_every_parameter_marks_exactly_its_part(name):
     scene = load_scene(name)
     fig = Figure()

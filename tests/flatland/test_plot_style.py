@@ -36,6 +36,7 @@ from flatland.plotting.style import (
 )
 from tests.flatland.helpers import capture_figures
 from tests.flatland.helpers import gradient_image as _grad
+from tests.tiers import SLOW
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ("naive", "boundary", "reparam")
@@ -120,6 +121,7 @@ def _has_embree():
     return True
 
 
+@SLOW
 def test02_a_method_has_the_same_colour_in_demo_study_textbook_and_tutorial_figures(
     tmp_path, monkeypatch, small_study
 ):
@@ -165,6 +167,7 @@ def test02_a_method_has_the_same_colour_in_demo_study_textbook_and_tutorial_figu
     assert "finite_difference" in seen["demo panel"]
 
 
+@SLOW
 def test03_bands_state_their_coverage_in_the_legend(tmp_path, monkeypatch, small_study):
     x = np.linspace(-1.0, 1.0, 16)
     film = ptu.plot_film({"reparam": (x, np.full(16, 0.1)), "bare": x}, level=0.99).axes[0]
@@ -187,6 +190,7 @@ def test03_bands_state_their_coverage_in_the_legend(tmp_path, monkeypatch, small
     assert texts and all(text.endswith(f"± {level}") for text in texts), texts
 
 
+@SLOW
 def test04_importing_the_plotting_modules_leaves_the_backend_alone():
     """A notebook's backend must survive ``import flatland.plotting...``: run in a fresh interpreter
     with the svg backend selected, import every figure module, and read the backend back."""

@@ -22,6 +22,7 @@ from flatland.core.validate import ValidationError
 from flatland.plotting import probe_rays as prb
 from flatland.plotting import tutorials as ptu
 from flatland.plotting.style import METHOD_COLOURS
+from tests.tiers import SLOW
 
 RNG = np.random.default_rng(20191117)
 
@@ -169,6 +170,7 @@ def test10_plot_descent_draws_loss_and_parameter_per_iteration_with_the_target()
         ptu.plot_descent(loss, {"reparam": theta["reparam"], "naive": [0.0]})
 
 
+@SLOW
 def test11_figures_render_to_non_blank_pngs():
     film = np.sin(np.linspace(0, 3, 16))
     figs = [

@@ -35,6 +35,7 @@ from flatland.core.stats import normal_quantile, sidak
 from flatland.core.validate import ValidationError
 from flatland.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from flatland.scene import load_scene
+from tests.tiers import SLOW
 
 ALPHA = 1e-3
 FLOOR = 1e-4
@@ -185,6 +186,7 @@ SKY = {
 }
 
 
+@SLOW
 def test06_sky_irradiance_under_a_segment():
     a, b = -0.5, 1.5
     value, deriv = 2.0 - (_s(b) - _s(a)), -(_ds(b) - _ds(a))
@@ -214,6 +216,7 @@ def _emitters(second: bool) -> dict:
     }
 
 
+@SLOW
 def test07_segment_emitter_irradiance():
     a, b, radiance = -0.2, 0.9, 2.0
     value, deriv = radiance * (_s(b) - _s(a)), radiance * (_ds(b) - _ds(a))

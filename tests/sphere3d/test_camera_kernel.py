@@ -27,6 +27,7 @@ from sphere3d.scene import load_scene
 from sphere3d.state import build_state
 from sphere3d.tracing import attached_points
 from sphere3d.vector import normalize
+from tests.tiers import sweep
 
 
 def _state(param="tri.translate.x"):
@@ -80,7 +81,7 @@ def test03_the_options_checks():
         assert str(info.value).startswith("kappa_film")
 
 
-@pytest.mark.parametrize("scene", ["hard_shadow", "hard_shadow_cube"])
+@pytest.mark.parametrize("scene", sweep(["hard_shadow", "hard_shadow_cube"], ["hard_shadow_cube"]))
 def test04_rings_skipped_by_the_film_hull_cannot_see_the_moving_occluder(scene):
     """:func:`sphere3d.reparam.film_kernel._reaching_motion` is conservative: of 20000 film centres, every one
     whose centre or any of 64 points on its ring (radius 1.5 px) sees a moving triangle is kept; and

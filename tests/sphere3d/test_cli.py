@@ -17,7 +17,7 @@ pytest.importorskip("embreex")
 
 from sphere3d.__main__ import PACKAGE, main
 from sphere3d.scene import load_scene, parameter_names
-from tests.tiers import HANG
+from tests.tiers import HANG, SLOW
 
 W, H = 16, 12
 
@@ -38,6 +38,7 @@ def scene_file(tmp_path_factory):
     return path
 
 
+@SLOW
 def test01_demo_writes_the_panel_and_the_error_table(tmp_path):
     result = run("demo", "--spp", 4, "--out", tmp_path, "--quiet")
     assert result.returncode == 0, result.stderr
@@ -54,6 +55,7 @@ def test01_demo_writes_the_panel_and_the_error_table(tmp_path):
     assert "boundary is the reference's own method" in result.stdout
 
 
+@SLOW
 def test02_render_and_gradient_write_png_and_npy(tmp_path, scene_file):
     """render in a subprocess, gradient in-process (the same command code)."""
     result = run("render", scene_file, "--spp", 4, "--out", tmp_path)
@@ -75,6 +77,7 @@ def test02_render_and_gradient_write_png_and_npy(tmp_path, scene_file):
     assert np.any(data["derivative"] != 0.0) and png.stat().st_size > 3_000
 
 
+@SLOW
 def test03_study_on_a_scene_pixel(tmp_path, scene_file):
     """A study's default reference is finite differences (its ``h`` is accepted), not the demo's
     boundary: on one pixel boundary's reference grew to 314,352 spp (5.5 minutes). No ``naive`` cell:

@@ -36,6 +36,7 @@ from tests.sphere3d.helpers import (
     triangle_exact,
     triangle_scene,
 )
+from tests.tiers import SLOW
 
 LEVEL = 0.9999
 Z = normal_quantile(LEVEL)
@@ -70,6 +71,7 @@ def test03_black_triangle_naive_derivative_is_zero(axis):
     assert naive.derivative == 0.0
 
 
+@SLOW
 def test04_black_triangle_reparam_is_biased_low_less_with_more_probes_and_a_narrower_kernel():
     """The bias of the convolution (Sec. 4.2) with probe rays (Sec. 4.3), shown rather than bounded.
 
@@ -102,6 +104,7 @@ def test05_rectangle_light_value_is_radiance_times_lambert():
     assert abs(faded.value - detach(light_exact(0.25))) <= Z * faded.value_stderr
 
 
+@SLOW
 def test06_faded_light_moving_derivative_matches_quadrature():
     """A light whose radiance fades to 0 at its border has no moving edge: naive and reparam both
     agree with the quadrature. Measured (2^20 samples): exact -0.23497; naive -0.2326 ± 0.0025;
@@ -115,6 +118,7 @@ def test06_faded_light_moving_derivative_matches_quadrature():
         assert abs(e.derivative - exact) <= Z * e.derivative_stderr, method
 
 
+@SLOW
 def test07_unfaded_light_moving_keeps_its_edge_term():
     """Without a fade the light's border is a discontinuity of large support. One rotation per
     shading point (the authors' emitter rule) moves the whole light like its mean point, which
@@ -137,6 +141,7 @@ def test07_unfaded_light_moving_keeps_its_edge_term():
     assert 0.6 < 1.0 - dragged.derivative / exact < 0.85
 
 
+@SLOW
 def test08_paired_kernel_keeps_the_value_unbiased_at_the_horizon():
     """With ``paired=True`` the kernel centres are cosine samples, confined to the hemisphere, so a
     wide kernel loses the mass it puts below the horizon (for κ = 3 the uncorrected value would be

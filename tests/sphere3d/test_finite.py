@@ -18,6 +18,7 @@ from flatland.core.validate import ValidationError
 from sphere3d.methods.reparam import KAPPA_MAX
 from sphere3d.reparam.film_kernel import KAPPA_FILM_MAX
 from sphere3d.state import COORD_MAX
+from tests.tiers import sweep
 
 OPTIONS = [
     ("naive", {}),
@@ -46,7 +47,7 @@ def _finite(*arrays) -> bool:
     return all(np.all(np.isfinite(a)) for a in arrays)
 
 
-@pytest.mark.parametrize("scene", s3.list_scenes())
+@pytest.mark.parametrize("scene", sweep(s3.list_scenes(), ["silhouette"]))
 def test01_renders_and_gradients_at_the_option_edges_are_finite(scene):
     d = _small(scene)
     image = s3.render(d, spp=2)

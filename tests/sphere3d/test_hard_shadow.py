@@ -48,7 +48,7 @@ from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 from sphere3d.tracing import face_normals
 from tests.sphere3d.helpers import REGIONS, over_batches, regions
-from tests.tiers import sweep
+from tests.tiers import SLOW, sweep
 
 REFERENCE = Path(__file__).resolve().parents[2] / "sphere3d" / "scenes" / "references"
 SCENES = ("hard_shadow", "hard_shadow_cube")
@@ -112,6 +112,7 @@ def masks():
     return {name: regions(name) for name in SCENES}
 
 
+@SLOW
 def test02_regions_cover_the_image_and_the_reference_is_zero_where_nothing_moves(masks):
     for name in SCENES:
         m = masks[name]
@@ -160,6 +161,7 @@ EVENTS = 30
 
 
 @pytest.mark.parametrize("name", sweep(SCENES, ["hard_shadow_cube"]))
+@SLOW
 def test03_finite_differences_match_the_reference_in_every_region(name, masks):
     # The reference's own estimator at 256 spp with another seed. Its per-sample variance v is
     # known per pixel from the reference's passes (stderr² · passes · spp per pass). Finite
@@ -223,6 +225,7 @@ PENUMBRA_SPP = 16
 
 
 @pytest.mark.parametrize("name", SCENES)
+@SLOW
 def test04_the_paper_variant_drags_the_lights_edges_and_the_default_keeps_the_penumbra(name, masks):
     # Where the occluder hides part of the sharp light, an emitter rotation that follows the occluder
     # moves the light's visible edges with it in the sample frame: their boundary term cancels the

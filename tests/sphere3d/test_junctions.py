@@ -28,7 +28,7 @@ from sphere3d import closed_form as cf
 from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.tasks import ImageTask
 from tests.sphere3d.helpers import over_batches
-from tests.tiers import sweep
+from tests.tiers import SLOW, sweep
 
 ALPHA = 1e-3
 BATCHES = 16
@@ -78,6 +78,7 @@ def _render(motion, junctions, spp=SPP, seed=1):
 
 
 @pytest.mark.parametrize("motion", sweep(MOTIONS, ["sideways"]))
+@SLOW
 def test03_reparam_matches_the_junction_closed_form_in_every_pixel(motion):
     # every pixel with spread within its Šidák-corrected Student-t interval (15 dof) of the exact
     # derivative; pixels without spread (no sample's kernel saw the moving triangle) exactly 0, and so
@@ -95,6 +96,7 @@ def test03_reparam_matches_the_junction_closed_form_in_every_pixel(motion):
 
 
 @pytest.mark.parametrize("motion", sweep(MOTIONS, ["sideways"]))
+@SLOW
 def test04_without_junctions_significantly_more_of_the_derivative_is_lost(motion):
     # Following the junction's crossing moves the kernel's film point with the silhouette's normal
     # speed and along the static edge: both edges held (test03). Without it, a kernel at a junction

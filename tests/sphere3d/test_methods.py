@@ -17,6 +17,7 @@ from flatland.core.validate import ValidationError
 from sphere3d import execution, tasks
 from sphere3d.reparam.film_kernel import KAPPA_FILM
 from tests.sphere3d.helpers import over_batches
+from tests.tiers import sweep
 
 
 def _small(name: str, size: int = 12, **camera) -> dict:
@@ -183,7 +184,8 @@ def test09_paired_and_kernel_free_variants_run_on_images():
 
 
 @pytest.mark.parametrize(
-    ("method", "options"), [("naive", {}), ("reparam", {}), ("reparam", {"paired": True, "kappa": 100.0})]
+    ("method", "options"),
+    sweep([("naive", {}), ("reparam", {}), ("reparam", {"paired": True, "kappa": 100.0})], [("naive", {})]),
 )
 def test10_results_do_not_depend_on_memory_chunks(monkeypatch, method, options):
     """Every draw is keyed on the sample's index: chunks of 2^15, 7 × spp and spp samples agree.

@@ -24,6 +24,7 @@ from sphere3d.tracing import (
     make_tracer,
 )
 from sphere3d.vector import cross, normalize
+from tests.tiers import SLOW
 
 
 def _scene():
@@ -61,6 +62,7 @@ def test01_embree_agrees_with_brute_force():
     assert np.array_equal(a.shape[both], shape_of[a.triangle[both]])
 
 
+@SLOW
 def test02_occlusion_queries_agree_with_intersection():
     tri, shape_of = _scene()
     o, d = _rays(20_000, 2)

@@ -49,7 +49,7 @@ from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.sampling import filter_value, pdf_filter
 from sphere3d.tasks import ImageTask, PointTask
 from tests.sphere3d.helpers import rotation_loss
-from tests.tiers import sweep
+from tests.tiers import SLOW, sweep
 
 ALPHA = 1e-3
 BATCHES = 16
@@ -275,7 +275,7 @@ FD_STEP = {"sideways": 0.01, "depth": 0.25}  # world units: 0.1 px sideways; 6 %
 FLIPS = 16
 
 
-@pytest.mark.parametrize("motion", MOTIONS)
+@pytest.mark.parametrize("motion", sweep(MOTIONS, ["depth"]))
 @pytest.mark.parametrize("size, width", sweep([(2, 8), (8, 16)], [(2, 8)]), ids=["2px", "8px"])
 def test08_finite_difference_expects_the_closed_forms_own_central_difference(size, width, motion):
     """FD = [Î(h) - Î(-h)] / 2h with common samples: its expectation is exactly [I(h) - I(-h)] / 2h.
@@ -342,6 +342,7 @@ def _film_lost(size, motion, **options):
 
 
 @pytest.mark.parametrize("motion", sweep(MOTIONS, ["depth"]))
+@SLOW
 def test10_the_film_kernel_loses_part_of_a_small_silhouette_and_less_as_it_grows(motion):
     """The film kernel's bias (Sec. 4.2, 4.3) on a triangle about as small as its probes' spacing.
 
