@@ -15,13 +15,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from flatland.core.budget import Request, check_request, rays_per_sample
+from flatland.core.budget import IMAGE_BYTES_PER_PIXEL, Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.progress import run as _bar
 from flatland.core.validate import ValidationError, check_int, check_seed
 from sphere3d import tasks
 from sphere3d.methods import GRADIENT_METHODS
+from sphere3d.methods._common import MEMORY_MODELS
 from sphere3d.scene import check_vector, load_scene
 from sphere3d.state import COORD_MAX
 from sphere3d.tasks import ImageTask, PointTask, Tally
@@ -72,21 +73,33 @@ def render(
     return Image.from_batches(tally.value, spp=spp, seed=seed, scene=scene.name)
 
 
-def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
-    """Refuse a request too large for memory or time (:mod:`flatland.core.budget`) before it starts."""
+def _request(task: ImageTask | PointTask, options: dict[str, Any], method: str | None = None) -> Request:
+    """What the call will hold and trace (:class:`~flatland.core.budget.Request`): the image and its film
+    (:meth:`~sphere3d.tasks.ImageTask.pixel_bytes`), the rays, and what the method's options add (its
+    memory model, :data:`~sphere3d.methods._common.MEMORY_MODELS`)."""
+    model = MEMORY_MODELS.get(method or "")
+    terms = model(task, options) if model else ()
+    rays = 3 if model else rays_per_sample(options)  # a model counts its options' rays itself
     if isinstance(task, ImageTask):
         pixels, spp, field = task.scene.camera.width * task.scene.camera.height, task.spp, "spp"
-        chunk = max(tasks.CHUNK, task.spp)  # a chunk holds whole pixels: all of a pixel's samples at once
+        chunk, pixel_bytes = task.chunk_pixels * task.spp, task.pixel_bytes()
     else:
-        pixels, spp, field, chunk = 1, task.n, "n", tasks.CHUNK
-    rays = rays_per_sample(options)
-    check_request(Request(pixels, spp, task.batches, rays, chunk, "camera.width", field))
+        pixels, spp, field, chunk, pixel_bytes = 1, task.n, "n", tasks.CHUNK, IMAGE_BYTES_PER_PIXEL
+    large = field if chunk > tasks.CHUNK else ""  # a chunk holds a whole pixel: all its samples at once
+    return Request(
+        pixels, spp, task.batches, rays, chunk, "camera.width", field, "probes", pixel_bytes, terms, large
+    )
+
+
+def _check_budget(task: ImageTask | PointTask, options: dict[str, Any], method: str | None = None) -> None:
+    """Refuse a request too large for memory or time (:mod:`flatland.core.budget`) before it starts."""
+    check_request(_request(task, options, method))
 
 
 def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
     spec = GRADIENT_METHODS.lookup(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
-    _check_budget(task, resolved)
+    _check_budget(task, resolved, spec.name)
     return spec.func(task, **resolved), resolved
 
 

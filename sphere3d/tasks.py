@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core.budget import IMAGE_BYTES_PER_PIXEL
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import control_variate
@@ -158,7 +159,7 @@ class ImageTask:
         batches, per_batch = self.batches, self.spp // self.batches
         pixels = np.arange(height * width)
         rows_all, cols_all = np.divmod(pixels, width)
-        chunk_pixels = max(1, CHUNK // self.spp)
+        chunk_pixels = self.chunk_pixels
 
         splat = self._splat_buffers(batches, per_batch) if self.film == "splat" else None
 
@@ -185,6 +186,29 @@ class ImageTask:
             tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
         extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
         return tally if extra is None else Tally(tally.value, tally.derivative + extra)
+
+    @property
+    def chunk_pixels(self) -> int:
+        """Pixels per memory chunk: all samples of :data:`CHUNK` // spp pixels (at least one) at once."""
+        return max(1, CHUNK // self.spp)
+
+    def pixel_bytes(self) -> float:
+        r"""Memory model of the image: bytes held per pixel and batch until the image is made.
+
+        :data:`~flatland.core.budget.IMAGE_BYTES_PER_PIXEL` for the per-batch images; with the splat
+        film also its stencils (:meth:`_splat_buffers`), $Q (2h + 1)^2$ float64 per batch (Q = 4
+        quantities with the control variate, else 2; h from :func:`~sphere3d.film.reach`), and with
+        the control variate the radiance totals, 2 float64 per pixel (per batch with
+        ``cv_scope="batch"``).
+        """
+        if self.film != "splat":
+            return IMAGE_BYTES_PER_PIXEL
+        per_batch = self.spp // self.batches
+        cv = self._cv_samples(self.batches, per_batch) > 0
+        _, h = reach(self.scene.camera.filter)
+        stencils = (4 if cv else 2) * (2 * h + 1) ** 2 * 8
+        totals = 2 * 8 * (1 if self.cv_scope == "pixel" else self.batches) / self.batches if cv else 0.0
+        return IMAGE_BYTES_PER_PIXEL + stencils + totals
 
     def _splat_buffers(self, batches: int, per_batch: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The chunks' outputs for :meth:`_splat_chunk`: stencils (quantities, batches, slots, pixels),

@@ -39,6 +39,7 @@ shading, and where two curves come within δ of each other).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,12 +52,28 @@ from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["EPS_FILM", "camera_edge_term"]
+__all__ = [
+    "EPS_FILM",
+    "POINT_BYTES",
+    "POINT_CHUNK",
+    "FilmEdges",
+    "camera_edge_term",
+    "film_edges",
+    "point_bytes",
+    "point_count",
+]
 
 EPS_FILM = 1e-3
 """Offset (pixels) of the two camera rays traced beside an edge point, along the edge's film normal."""
 SHADING_UNIFORMS = 5
 """Uniforms of the shading at a side point (3 emitter + 2 cosine), the same on both sides."""
+POINT_CHUNK = 1 << 16
+"""Edge points per memory chunk of :func:`camera_edge_term`: its memory is bounded whatever ``rate``."""
+POINT_BYTES = 4096
+"""Bytes per edge point of a chunk at most: its film and 3D positions (Duals), two side rays with their
+hits and shading, the shadow ray and the splat's temporaries."""
+POINT_RAYS = 7
+"""Rays per edge point: the shadow ray to it, the two side rays, and each side's two shading rays."""
 
 
 def _liang_barsky(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -127,6 +144,74 @@ def camera_candidates(state: SceneState, edges: Edges) -> np.ndarray:
     return edges.silhouette(origin) | shading_jump
 
 
+@dataclass(frozen=True)
+class FilmEdges:
+    """The candidate edges (:func:`camera_candidates`) clipped to depth > ε, and their film images
+    clipped to the film widened by the filter radius: 3D parameters ``s0``, ``s1`` of the clipped
+    ends ``p3a``, ``p3b``, their film points ``fa``, ``fb``, the film fractions ``t0``, ``t1`` inside the
+    widened film and the projected ``length`` there (pixels); ``total`` is Λ, their sum."""
+
+    edges: Edges
+    s0: np.ndarray
+    s1: np.ndarray
+    p3a: np.ndarray
+    p3b: np.ndarray
+    fa: np.ndarray
+    fb: np.ndarray
+    t0: np.ndarray
+    t1: np.ndarray
+    length: np.ndarray
+
+    @property
+    def total(self) -> float:
+        return float(self.length.sum())
+
+
+def film_edges(state: SceneState, plain: SceneState, edges: Edges) -> FilmEdges:
+    """The film images of the edges that may carry a jump (:class:`FilmEdges`); Λ = 0 if there are none."""
+    cam = state.camera
+    edges = edges.take(np.flatnonzero(camera_candidates(state, edges)))
+    o0 = plain.camera.origin
+    # clip each edge in 3D to depth > ε (depth is linear in the edge parameter s)
+    za, zb = dot(edges.a - o0, cam.forward), dot(edges.b - o0, cam.forward)
+    near = plain.epsilon
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_cross = (near - za) / (zb - za)
+    s0 = np.where(za >= near, 0.0, np.where(zb > za, s_cross, 1.0))
+    s1 = np.where(zb >= near, 1.0, np.where(za > zb, s_cross, 0.0))
+    front = s1 > s0
+    edges, s0, s1 = edges.take(front), s0[front], s1[front]
+    p3a = edges.a + s0[:, None] * (edges.b - edges.a)
+    p3b = edges.a + s1[:, None] * (edges.b - edges.a)
+    fa = np.stack(cam.film(p3a - o0), axis=-1).reshape(-1, 2)
+    fb = np.stack(cam.film(p3b - o0), axis=-1).reshape(-1, 2)
+    r = filter_radius(cam.filter)
+    t0, t1 = _liang_barsky(fa, fb, np.array([-r, -r]), np.array([cam.width + r, cam.height + r]))
+    length = norm(fb - fa) * np.maximum(t1 - t0, 0.0)
+    return FilmEdges(edges, s0, s1, p3a, p3b, fa, fb, t0, t1, length)
+
+
+def point_count(points_per_pixel: float, total: float) -> int:
+    r"""Edge points of one batch, $N = \lceil \mathrm{points\_per\_pixel} · Λ \rceil$ (at least one);
+    none if Λ = 0."""
+    return max(1, math.ceil(points_per_pixel * total)) if total > 0.0 else 0
+
+
+def point_bytes(n: int) -> int:
+    r"""Memory model of :func:`camera_edge_term`: the bytes its points take at once for N points per batch,
+    $\min(N, \mathrm{POINT\_CHUNK}) · b$ ($b$ = :data:`POINT_BYTES`): bounded by :data:`POINT_CHUNK`
+    whatever ``rate``, the image and the batch's samples (the image it adds to is the task's)."""
+    return min(n, POINT_CHUNK) * POINT_BYTES
+
+
+def _uniforms(seed: int, batch: int, skip: int, shape: tuple[int, ...]) -> np.ndarray:
+    """Uniforms ``skip`` draws into the batch's sequential stream: the numbers a single draw of them all
+    would give there (PCG64 draws one 64-bit word per float64), so chunks see the same numbers."""
+    rng = stream(seed, "boundary.camera", batch)
+    rng.bit_generator.advance(skip)
+    return rng.random(shape)
+
+
 def camera_edge_term(
     state: SceneState, plain: SceneState, edges: Edges, seed: int, batch: int, points_per_pixel: float
 ) -> np.ndarray:
@@ -140,57 +225,61 @@ def camera_edge_term(
     edges : Edges
         The scene's edges (:func:`~sphere3d.boundary.edges.mesh_edges`).
     seed, batch : int
-        The batch's points come from ``stream(seed, "boundary.camera", batch)``.
+        The batch's points come from ``stream(seed, "boundary.camera", batch)``: first the N
+        stratification offsets, then N × :data:`SHADING_UNIFORMS` shading uniforms.
     points_per_pixel : float
         Expected edge points per pixel of projected edge length.
+
+    The points are processed :data:`POINT_CHUNK` at a time (:func:`point_bytes`), each chunk with
+    its own part of the batch's stream: the same numbers as all at once, the splat's sums in chunk order.
     """
     cam = state.camera
+    out = np.zeros(cam.height * cam.width)
+    seg = film_edges(state, plain, edges)
+    n = point_count(points_per_pixel, seg.total)
+    for lo in range(0, n, POINT_CHUNK):
+        _splat_points(out, state, plain, seg, (seed, batch), n, range(lo, min(n, lo + POINT_CHUNK)))
+    return out.reshape(cam.height, cam.width)
+
+
+def _splat_points(
+    out: np.ndarray,
+    state: SceneState,
+    plain: SceneState,
+    seg: FilmEdges,
+    key: tuple[int, int],
+    n: int,
+    points: range,
+) -> None:
+    """Add the contributions of the batch's edge points ``points`` (of n) to ``out`` (module docstring)."""
+    cam = state.camera
     height, width = cam.height, cam.width
-    out = np.zeros(height * width)
-    edges = edges.take(np.flatnonzero(camera_candidates(state, edges)))
-    if len(edges) == 0:
-        return out.reshape(height, width)
+    edges, total, count = seg.edges, seg.total, len(points)
     o0 = plain.camera.origin
-    # clip each edge in 3D to depth > ε (depth is linear in the edge parameter s)
-    za, zb = dot(edges.a - o0, cam.forward), dot(edges.b - o0, cam.forward)
-    near = plain.epsilon
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s_cross = (near - za) / (zb - za)
-    s0 = np.where(za >= near, 0.0, np.where(zb > za, s_cross, 1.0))
-    s1 = np.where(zb >= near, 1.0, np.where(za > zb, s_cross, 0.0))
-    front = s1 > s0
-    edges, s0, s1 = edges.take(front), s0[front], s1[front]
-    p3a = edges.a + s0[:, None] * (edges.b - edges.a)
-    p3b = edges.a + s1[:, None] * (edges.b - edges.a)
-    fa = np.stack(cam.film(p3a - o0), axis=-1)
-    fb = np.stack(cam.film(p3b - o0), axis=-1)
-    r = filter_radius(cam.filter)
-    t0, t1 = _liang_barsky(fa, fb, np.array([-r, -r]), np.array([width + r, height + r]))
-    length = norm(fb - fa) * np.maximum(t1 - t0, 0.0)
-    total = float(length.sum())
-    if total <= 0.0:
-        return out.reshape(height, width)
-    n = max(1, math.ceil(points_per_pixel * total))
-    rng = stream(seed, "boundary.camera", batch)
     # stratified along the concatenated projected lengths: point i in [i, i + 1) Λ / N
-    at = (np.arange(n) + rng.random(n)) * (total / n)
-    cdf = np.cumsum(length)
+    at = (np.arange(points.start, points.stop) + _uniforms(*key, points.start, (count,))) * (total / n)
+    length, cdf = seg.length, np.cumsum(seg.length)
     k = np.minimum(np.searchsorted(cdf, at, side="right"), len(length) - 1)
-    t = t0[k] + (at - (cdf[k] - length[k])) / np.where(length[k] > 0.0, length[k], 1.0) * (t1[k] - t0[k])
+    t = seg.t0[k] + (at - (cdf[k] - length[k])) / np.where(length[k] > 0.0, length[k], 1.0) * (
+        seg.t1[k] - seg.t0[k]
+    )
     t = np.clip(t, 0.0, 1.0)
     # film fraction t -> fraction σ of the clipped 3D segment (perspective: x = lerp weighted by depth)
-    da, db = dot(p3a[k] - o0, cam.forward), dot(p3b[k] - o0, cam.forward)
+    da, db = dot(seg.p3a[k] - o0, cam.forward), dot(seg.p3b[k] - o0, cam.forward)
     sigma = t * da / ((1.0 - t) * db + t * da)
-    s = s0[k] + sigma * (s1[k] - s0[k])
+    s = seg.s0[k] + sigma * (seg.s1[k] - seg.s0[k])
     a, b = edges.endpoints(state.triangles)
     point = a[k] + s[:, None] * (b[k] - a[k])  # Dual: moves with θ at fixed s
     fx, fy = cam.film(point - cam.origin)
     x = np.stack([detach(fx), detach(fy)], axis=-1)
     v = np.stack([tangent(fx), tangent(fy)], axis=-1)
-    seg = fb[k] - fa[k]
-    seg_length = norm(seg)
+    seg_film = seg.fb[k] - seg.fa[k]
+    seg_length = norm(seg_film)
     # a zero-length image is never drawn (rounding aside: its weight is then 0, not 0/0)
-    normal = np.stack([-seg[:, 1], seg[:, 0]], axis=-1) / np.where(seg_length > 0.0, seg_length, 1.0)[:, None]
+    normal = (
+        np.stack([-seg_film[:, 1], seg_film[:, 0]], axis=-1)
+        / np.where(seg_length > 0.0, seg_length, 1.0)[:, None]
+    )
     # the edge point itself must be the camera's first hit (up to 2ε before it)
     p0 = edges.a[k] + s[:, None] * (edges.b[k] - edges.a[k])
     to = p0 - o0
@@ -199,14 +288,14 @@ def camera_edge_term(
     # radiance just beside the curve, the same shading uniforms on both sides
     side = np.concatenate([x - EPS_FILM * normal, x + EPS_FILM * normal])
     d = cam.directions(side[:, 0], side[:, 1])
-    u = rng.random((n, SHADING_UNIFORMS))
-    draws = Draws.of(seed, np.arange(n)).tile(2)
+    u = _uniforms(*key, n + SHADING_UNIFORMS * points.start, (count, SHADING_UNIFORMS))
+    draws = Draws.of(key[0], np.arange(points.start, points.stop)).tile(2)
     hits = _side_hits(plain, edges.take(k), d)
     radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits))
-    jump = radiance[:n] - radiance[n:]
+    jump = radiance[:count] - radiance[count:]
     # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2)
     weight = jump * np.sum(v * normal, axis=1) * (total / n) * seen
-    reach = math.ceil(r + 0.5)
+    reach = math.ceil(filter_radius(cam.filter) + 0.5)
     base = np.floor(x).astype(np.int64)
     for dy in range(-reach, reach + 1):  # splat to every pixel whose filter support covers x
         for dx in range(-reach, reach + 1):
@@ -214,4 +303,3 @@ def camera_edge_term(
             inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
             kx = filter_value(np.stack([x[:, 0] - col - 0.5, x[:, 1] - row - 0.5], axis=-1), cam.filter)
             np.add.at(out, (row * width + col)[inside], (kx * weight)[inside])
-    return out.reshape(height, width)

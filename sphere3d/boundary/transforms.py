@@ -20,7 +20,28 @@ from sphere3d.boundary.shading import shading_edge_term
 from sphere3d.integrator import Identity, Shading
 from sphere3d.state import SceneState, build_state
 
-__all__ = ["BoundaryTransforms"]
+__all__ = ["DRAW_BYTES", "DRAW_CHUNK", "BoundaryTransforms", "draw_bytes", "draw_points"]
+
+DRAW_CHUNK = 1 << 18
+"""Edge samples of shading points per slice of :meth:`BoundaryTransforms.shading_extra` (``secondary``
+per point): its memory is bounded whatever ``secondary``, down to one point's draws."""
+DRAW_BYTES = 1024
+"""Bytes per edge sample of a slice at most: its uniforms, its sub-arc's choice and ends, the point on
+the edge (a Dual), the two rays beside the arc and their hits."""
+
+
+def draw_points(secondary: int) -> int:
+    """Shading points per slice: as many as :data:`DRAW_CHUNK` edge samples hold, at least one."""
+    return max(1, DRAW_CHUNK // secondary)
+
+
+def draw_bytes(secondary: int, points: int) -> int:
+    r"""Memory model of :meth:`BoundaryTransforms.shading_extra` for m = ``points`` shading points at once
+    (a memory chunk's): $\min(m, s) · k · b$ for k = ``secondary`` draws per point, s =
+    :func:`draw_points` points per slice and b = :data:`DRAW_BYTES`; at most
+    $\max(\mathrm{DRAW\_CHUNK}, k) · b$, one point's k draws being what no slicing bounds. The
+    silhouette test's blocks (:data:`~sphere3d.boundary.shading.MAX_PAIRS`) are apart from it."""
+    return min(points, draw_points(secondary)) * secondary * DRAW_BYTES
 
 
 @dataclass(frozen=True)
@@ -43,11 +64,17 @@ class BoundaryTransforms(Identity):
 
     def shading_extra(self, shading: Shading) -> np.ndarray | None:
         """The mean of ``per_point`` edge samples of the boundary term of E per shading point
-        (:func:`~sphere3d.boundary.shading.shading_edge_term`; uniforms ``"boundary.edge"``)."""
+        (:func:`~sphere3d.boundary.shading.shading_edge_term`; uniforms ``"boundary.edge"``, keyed on
+        the points' samples), in slices of :func:`draw_points` points (:func:`draw_bytes`)."""
         if not shading.state.dual:
             return None
-        u = shading.draws.uniforms("boundary.edge", 2, self.per_point)
-        return shading_edge_term(shading, self.edges, u)
+        m, step = len(shading), draw_points(self.per_point)
+        out = np.empty(m)
+        for lo in range(0, max(m, 1), step):
+            part = shading if m <= step else shading.take(np.arange(lo, min(m, lo + step)))
+            u = part.draws.uniforms("boundary.edge", 2, self.per_point)
+            out[lo : lo + step] = shading_edge_term(part, self.edges, u)
+        return out
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
         """The boundary term of every pixel integral per batch, shape (batches, height, width)

@@ -8,16 +8,21 @@ term (:mod:`sphere3d.boundary.shading`) through ``shading_extra``, the pixel int
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
+from flatland.core.budget import Term
 from flatland.core.contract import Option
 from flatland.core.dual import variable
 from flatland.core.validate import check_int, check_positive
+from sphere3d.boundary.camera import POINT_CHUNK, POINT_RAYS, film_edges, point_bytes, point_count
 from sphere3d.boundary.edges import mesh_edges
-from sphere3d.boundary.transforms import BoundaryTransforms
-from sphere3d.methods._common import GRADIENT_METHODS
+from sphere3d.boundary.transforms import BoundaryTransforms, draw_bytes, draw_points
+from sphere3d.methods._common import GRADIENT_METHODS, memory_model
 from sphere3d.state import build_state
-from sphere3d.tasks import ImageTask, PointTask, Tally
+from sphere3d.tasks import CHUNK, ImageTask, PointTask, Tally
 
-__all__ = ["RATE", "SECONDARY", "boundary"]
+__all__ = ["RATE", "SECONDARY", "boundary", "memory"]
 
 
 RATE = 2.0
@@ -60,3 +65,35 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     plain = build_state(task.scene, task.param, 0.0, task.tracer)
     edges = mesh_edges(plain.triangles, plain.shape_of)
     return task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary, rate))
+
+
+@memory_model("boundary")
+def memory(task: ImageTask | PointTask, options: Mapping[str, Any]) -> tuple[Term, ...]:
+    r"""Memory model of :func:`boundary`: what ``secondary`` (k) and ``rate`` add to a request.
+
+    ``secondary``: 2k rays per shading point (one per camera sample, or per sample at a point), traced
+    in slices: at once :func:`~sphere3d.boundary.transforms.draw_bytes` for a memory chunk's shading
+    points.
+    ``rate``: per batch $N = \lceil \mathrm{rate} · (\mathrm{spp}/\mathrm{batches}) · Λ \rceil$ film edge
+    points (Λ the edges' projected length, :func:`~sphere3d.boundary.camera.film_edges`, from the scene
+    at θ0), :data:`~sphere3d.boundary.camera.POINT_RAYS` rays each, and at once
+    :func:`~sphere3d.boundary.camera.point_bytes` (points in chunks); none at a point.
+    """
+    k = options.get("secondary", SECONDARY)
+    image = isinstance(task, ImageTask)
+    pixels = task.scene.camera.width * task.scene.camera.height if image else 1
+    samples = pixels * task.spp if image else task.n  # one shading point each
+    chunk = min(task.chunk_pixels, pixels) * task.spp if image else min(CHUNK, task.n // task.batches)
+    block = f"{min(chunk, draw_points(k))} shading points × {k} edge samples"
+    edge_samples = Term(
+        "secondary", k, "edge samples per shading point", block, draw_bytes(k, chunk), rays=2 * k * samples
+    )
+    if not image:
+        return (edge_samples,)
+    rate = options.get("rate", RATE)
+    plain = build_state(task.scene, task.param, 0.0, task.tracer)
+    length = film_edges(plain, plain, mesh_edges(plain.triangles, plain.shape_of)).total  # Λ
+    n = point_count(rate * (task.spp // task.batches), length)
+    block = f"{min(n, POINT_CHUNK)} film edge points"
+    what = "film edge points per pixel of edge and sample"
+    return edge_samples, Term("rate", rate, what, block, point_bytes(n), rays=task.batches * n * POINT_RAYS)

@@ -11,22 +11,27 @@ cosine samples; a :class:`~sphere3d.tasks.PointTask` calls only ``emitter`` and 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import partial
 from typing import Any
 
+from flatland.core.budget import Term
 from flatland.core.contract import Option
 from flatland.core.dual import variable
 from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import ValidationError, check_bool, check_choice, check_int, check_positive
-from sphere3d.methods._common import GRADIENT_METHODS
+from sphere3d.boundary.emitters import POINTS
+from sphere3d.methods._common import GRADIENT_METHODS, memory_model
+from sphere3d.reparam.bisection import pair_bytes, pair_rows
 from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.reparam.emitter_probes import PROBES as EMITTER_PROBES
+from sphere3d.reparam.emitter_probes import probe_rays, row_probes
 from sphere3d.reparam.film_kernel import KAPPA_FILM, check_kappa_film
 from sphere3d.reparam.paper import PaperTransforms
 from sphere3d.reparam.probes import REFINE
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
-__all__ = ["KAPPA_MAX", "PROBES", "VARIANTS", "reparam"]
+__all__ = ["KAPPA_MAX", "PROBES", "VARIANTS", "memory", "reparam"]
 
 VARIANTS = ("default", "paper")
 """``variant`` values: the default (the paper's estimator and its extensions), the paper's as published."""
@@ -148,3 +153,39 @@ def reparam(
     else:
         transforms = ReparamTransforms(kappa, kappa_film, probes, emitter_probes, spread, refine, paired)
     return task.evaluate(variable(0.0), transforms)
+
+
+@memory_model("reparam")
+def memory(task: ImageTask | PointTask, options: Mapping[str, Any]) -> tuple[Term, ...]:
+    r"""Memory model of :func:`reparam`: what ``probes`` (P) and ``emitter_probes`` (E) add to a sample.
+
+    Rays per sample beyond its camera ray and two shading rays, each an upper estimate: the film
+    kernel's P probes and 3R bisection rays (toward a silhouette, and a junction's two edges,
+    :mod:`sphere3d.reparam.junctions`), the cosine strategy's P probes and R bisection rays per kernel
+    sample (twice with ``paired``), the emitter strategy's
+    :func:`~sphere3d.reparam.emitter_probes.probe_rays` and its
+    :data:`~sphere3d.boundary.emitters.POINTS` edge points (R = ``refine``). At once: one slice of
+    probe-pair tables (:func:`~sphere3d.reparam.bisection.pair_bytes`), rows of P film probes
+    (junctions) and of :func:`~sphere3d.reparam.emitter_probes.row_probes` shadow probes, p² pairs a
+    row. The paper variant traces P film probes, P cosine probes and a second kernel sample (it pairs
+    every cosine sample) and E shadow probes, and has no pairs, no bisection.
+    """
+    variant = options.get("variant", "default")
+    p = options.get("probes") or PROBES[variant]
+    e = options.get("emitter_probes", EMITTER_PROBES)
+    if variant == "paper":
+        probes = Term("probes", p, "probes per kernel", sample_rays=2 * p + 1)
+        return probes, Term("emitter_probes", e, "shadow probes per shading point", sample_rays=e)
+    r = options.get("refine", 0)
+    film = isinstance(task, ImageTask)
+    rays = (p + 3 * r if film else 0) + (p + r) * (2 if options.get("paired") else 1)
+    film_pairs = pair_bytes(p) if film else 0.0
+    probes = Term(
+        "probes", p, "probes per kernel", f"{pair_rows(p)} × {p}² film probe pairs", film_pairs, rays
+    )
+    q = row_probes(e)
+    shadow_pairs = f"{pair_rows(q)} × {q}² shadow probe pairs"
+    rays = probe_rays(e) + POINTS
+    return probes, Term(
+        "emitter_probes", e, "shadow probes per shading point", shadow_pairs, pair_bytes(q), rays
+    )

@@ -20,33 +20,75 @@ from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
 from sphere3d.vector import dot, norm
 
-__all__ = ["PAIR_ROWS", "bisect", "bisect_silhouette", "closest_pair"]
+__all__ = [
+    "PAIR_ENTRY_BYTES",
+    "PAIR_MEMORY",
+    "PAIR_ROWS",
+    "bisect",
+    "bisect_silhouette",
+    "closest_pair",
+    "pair_bytes",
+    "pair_rows",
+]
 
 
 PAIR_ROWS = 1024
-"""Rows per slice of :func:`closest_pair`: the (rows, p, p) cosines of 14 probes (8 of them on the
+"""Rows per slice of :func:`closest_pair` at most: the (rows, p, p) cosines of 14 probes (8 of them on the
 emitters' edges then) are 1.6 MB and stay in cache; a chunk's at once (up to 25 000 rows, 38 MB,
 above the mmap threshold of :func:`sphere3d.execution._heap_for_temporaries`) was mapped and faulted
 in anew at every call: 24 ms per call against 4 ms of arithmetic; by slices of 4096 / 1024 rows
 11 / 6 ms (the emitter probes of two 64 spp ``hard_shadow`` renders, one thread: 0.24 -> 0.06 s
 in all). The same numbers, row by row."""
+PAIR_MEMORY = 64 << 20
+"""Bytes of one slice of :func:`closest_pair` (:func:`pair_bytes`) beyond which it holds fewer rows than
+:data:`PAIR_ROWS`, down to one: the pair tables grow like p², so many probes would otherwise hold a
+chunk's rows × p² entries at once."""
+PAIR_ENTRY_BYTES = 16
+"""Bytes per probe pair of a row in a slice: the float64 cosine, the allowed-pair mask and the
+boolean temporaries the callers' rules build it from."""
 
 
-def closest_pair(w: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row of probe directions ``w`` (s, p, 3) the closest pair (i, j) allowed by ``pairs`` (s, p, p),
-    the largest w_i . w_j, and whether the row has one; by slices of :data:`PAIR_ROWS` rows."""
+def pair_rows(p: int) -> int:
+    """Rows per slice of :func:`closest_pair` for ``p`` probes per row: as many as :data:`PAIR_MEMORY` holds,
+    at least one, at most :data:`PAIR_ROWS`."""
+    return max(1, min(PAIR_ROWS, PAIR_MEMORY // (PAIR_ENTRY_BYTES * p * p)))
+
+
+def pair_bytes(p: int) -> int:
+    r"""Memory model of :func:`closest_pair`: the bytes one slice holds at once for ``p`` probes per row,
+    $\mathrm{rows}(p) · p^2 · b$ ($b$ = :data:`PAIR_ENTRY_BYTES`, rows from :func:`pair_rows`), at
+    most $\max(\mathrm{PAIR\_MEMORY}, p^2 b)$: a row's table is never split, so one row of p² pairs
+    is what no slicing bounds."""
+    return pair_rows(p) * PAIR_ENTRY_BYTES * p * p
+
+
+def closest_pair(
+    w: np.ndarray, allowed: Callable[[slice], np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of probe directions ``w`` (s, p, 3) the closest pair (i, j) allowed by ``allowed(rows)``
+    (the (len(rows), p, p) mask of a slice of rows), the largest w_i . w_j, and whether the row has one.
+
+    By slices of :func:`pair_rows` rows, so the p × p tables of the rows are never all held at once
+    (:func:`pair_bytes`); every row is computed alone, the same numbers whatever the slices.
+    """
     n, p = w.shape[:2]
     best = np.empty(n, dtype=np.intp)
     found = np.empty(n, dtype=bool)
-    for a in range(0, n, PAIR_ROWS):
-        b = min(n, a + PAIR_ROWS)
-        cosine = np.matmul(w[a:b], np.ascontiguousarray(w[a:b].transpose(0, 2, 1)))  # (rows, p, p)
-        np.putmask(cosine, ~pairs[a:b], -2.0)  # allowed pairs only
-        flat = cosine.reshape(b - a, -1)
-        best[a:b] = np.argmax(flat, axis=1)
-        found[a:b] = flat[np.arange(b - a), best[a:b]] > -2.0
+    step = pair_rows(p)
+    for a in range(0, n, step):
+        rows = slice(a, min(n, a + step))
+        best[rows], found[rows] = _closest(w[rows], allowed(rows))
     i, j = np.divmod(best, p)
     return i, j, found
+
+
+def _closest(w: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The flat index of each row's allowed pair of largest cosine, and whether it has one (one slice:
+    its tables are freed on return, before the next slice's are made)."""
+    cosine = np.matmul(w, np.ascontiguousarray(w.transpose(0, 2, 1))).reshape(len(w), -1)  # (rows, p²)
+    np.putmask(cosine, ~allowed.reshape(len(w), -1), -2.0)  # allowed pairs only
+    best = np.argmax(cosine, axis=1)
+    return best, cosine[np.arange(len(w)), best] > -2.0
 
 
 def bisect(

@@ -58,7 +58,7 @@ from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points, intersect_triangles
 from sphere3d.vector import dot, norm, zeros
 
-__all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "emitter_rotation"]
+__all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "emitter_rotation", "probe_rays", "row_probes"]
 
 PROBES = 4
 """Shadow probes per shading point uniform on the emitters' area."""
@@ -71,6 +71,19 @@ AIM = 2
 emitter points nearest to (none occluded) or farthest from (all occluded) the moving occluders'
 centre in angle (:func:`_aimed_points`), where a thin hidden or lit part of the light appears
 first; 0: none."""
+
+
+def row_probes(probes: int) -> int:
+    """Shadow probes per shading point at most, ``probes`` + :data:`BOUNDARY` + :data:`AIM`: the rows of
+    the pair tables of :func:`~sphere3d.reparam.bisection.closest_pair` are this long."""
+    return probes + BOUNDARY + AIM
+
+
+def probe_rays(probes: int) -> int:
+    """Rays per shading point of :func:`emitter_rotation` at most: its :func:`row_probes` shadow probes,
+    traced again where all are occluded, then the closest pair's inside ray and :data:`REFINE`
+    bisection rays."""
+    return 2 * row_probes(probes) + 1 + REFINE
 
 
 def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:
@@ -248,7 +261,8 @@ def _probe_rotation(
     s = np.flatnonzero(some_occluded & some_visible)
     if s.size:  # a shadow edge crosses the light: its silhouette point between the closest pair
         ws, origin = take_rows(w, s), take_rows(shading.origin, s)
-        i, j, _ = closest_pair(ws, occluded[s][:, :, None] & visible[s][:, None, :])
+        occ, vis = occluded[s], visible[s]
+        i, j, _ = closest_pair(ws, lambda r: occ[r, :, None] & vis[r, None, :])
         rows = np.arange(s.size)
         inside, outside = ws[rows, i], ws[rows, j]
         hits = state.tracer.intersect(origin, inside)

@@ -111,20 +111,24 @@ def junction_rotation(
         return rows[:0], Rotation.identity((0,))
     d, cls, h = directions[rows], seen[rows], hits.take(rows)
     on_moving, static = cls == MOVING, cls != MOVING
-    differ = static[:, :, None] & static[:, None, :] & (cls[:, :, None] != cls[:, None, :])
     k = np.arange(rows.size)
     snap = edge_snap(state, lambda r, ends: np.full(ends.shape[:2], np.inf), 0.0)  # exit edges, no corner
     o = np.asarray(detach(origin), dtype=np.float64)
     trace = np.broadcast_to(o, (rows.size, 3))
     # the moving edge: between the closest pair of a moving probe and a static one
-    i, j, ok = closest_pair(d, on_moving[:, :, None] & static[:, None, :])
+    i, j, ok = closest_pair(d, lambda r: on_moving[r, :, None] & static[r, None, :])
     start = h.take((k, i))
     moved = bisect_silhouette(state, trace, d[k, i], d[k, j], start, None, refine)
     c_end, d_end, found_m = _edge_ends(state, snap, k, trace, moved)
+
+    def differ_in_front(r: slice) -> np.ndarray:  # (rows, P, P) of a slice of rows (closest_pair)
+        c, t = cls[r], h.t[r]
+        differ = static[r, :, None] & static[r, None, :] & (c[:, :, None] != c[:, None, :])
+        return differ & (c[:, :, None] >= 0) & ((t[:, :, None] < t[:, None, :]) | (c[:, None, :] < 0))
+
     # the static edge: between the closest pair of static probes that see different things, the
     # inside one a hit in front of what the other sees (a miss is never in front)
-    front = (cls[:, :, None] >= 0) & ((h.t[:, :, None] < h.t[:, None, :]) | (cls[:, None, :] < 0))
-    a, b, ok_s = closest_pair(d, differ & front)
+    a, b, ok_s = closest_pair(d, differ_in_front)
     # a row stays valid while every bisection ray sees one of the two (else a third discontinuity lies
     # between them)
     inside_class, outside_class = cls[k, a], cls[k, b]

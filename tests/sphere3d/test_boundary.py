@@ -493,3 +493,26 @@ def test10_hard_shadow_cube_creases_and_regions_match_the_reference():
     rms = np.sqrt(np.mean(z**2))
     print(f"{pixels.sum()} pixels: max |z| {np.abs(z).max():.2f} <= {limit:.2f}, rms {rms:.2f}")
     assert np.abs(z).max() <= limit
+
+
+def test11_edge_points_in_chunks_and_edge_samples_in_slices_give_the_numbers_of_one_pass(monkeypatch):
+    # memory bounds (sphere3d.boundary.camera.point_bytes, sphere3d.boundary.transforms.draw_bytes): each
+    # chunk of film edge points reads its own part of the batch's stream, each slice of shading points
+    # its points' keyed uniforms; only the order of the film's sums changes (rounding)
+    import sphere3d.boundary.camera as camera
+    import sphere3d.boundary.transforms as transforms
+
+    scene = s3.load_scene("shadow")
+    plain = build_state(scene, "occluder.translate.x")
+    state = build_state(scene, "occluder.translate.x", variable(0.0))
+    edges = mesh_edges(plain.triangles, plain.shape_of)
+    whole = camera_edge_term(state, plain, edges, 5, 2, 1.0)
+    assert camera.point_count(1.0, camera.film_edges(state, plain, edges).total) > 150
+    monkeypatch.setattr(camera, "POINT_CHUNK", 50)
+    np.testing.assert_allclose(camera_edge_term(state, plain, edges, 5, 2, 1.0), whole, rtol=0, atol=1e-12)
+    point = dict(param="occluder.translate.x", method="boundary", n=32, secondary=8, progress=False)
+    one = s3.irradiance("shadow", [0.136, -0.214, 0.0], [0, 0, 1], **point)
+    monkeypatch.setattr(transforms, "DRAW_CHUNK", 64)  # slices of 8 shading points
+    sliced = s3.irradiance("shadow", [0.136, -0.214, 0.0], [0, 0, 1], **point)
+    assert one.derivative != 0.0 and sliced.derivative == pytest.approx(one.derivative, rel=1e-12, abs=0)
+    assert sliced.value == one.value
