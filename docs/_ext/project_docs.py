@@ -418,4 +418,9 @@ def setup(app: Sphinx) -> dict[str, Any]:
     app.connect("autodoc-skip-member", _skip_outside_all)
     app.connect("build-finished", _forget_environment_after_warnings)
     app.add_css_file("project.css")
+    # sphinx-mathjax-offline declares nothing, so Sphinx would assume it unsafe for `make docs`'s
+    # parallel build; all it does is copy MathJax into the output when the build has finished
+    offline = app.extensions.get("sphinx-mathjax-offline")
+    if offline is not None:
+        offline.parallel_read_safe = offline.parallel_write_safe = True
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

@@ -10,6 +10,7 @@ import pytest
 from flatland.__main__ import PACKAGE
 from flatland.app.study import CSV_COLUMNS, run_study
 from flatland.app.study_config import StudyConfig
+from tests.tiers import SLOW
 
 TIMED = {
     "seconds_per_sample",
@@ -51,6 +52,7 @@ def test01_two_worker_processes_give_identical_numbers(serial):
     assert len(serial.rows) == 6 and all(len(r.derivatives) == 4 for r in serial.rows)
 
 
+@SLOW  # test01 checks the same identity with two worker processes
 def test02_a_local_dask_cluster_gives_identical_numbers(serial):
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(

@@ -258,6 +258,7 @@ def test04_the_paper_variant_drags_the_lights_edges_and_the_default_keeps_the_pe
         assert gain > q * gain_se, (other, gain, gain_se)
 
 
+@SLOW
 def test05_the_identity_on_one_plane_keeps_the_cube_unbiased_and_leaves_the_sphere_alone(masks):
     # reparam's film_one_plane (default) takes the identity where every film probe of a kernel hits one
     # plane of a flat-shaded shape (sphere3d.reparam.film_kernel, Noise): on the cube's faces the image
