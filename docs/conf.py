@@ -1,7 +1,9 @@
 """Sphinx configuration: theory pages, API reference from the docstrings, executed tutorials.
 
-Build with ``make docs`` (``sphinx-build -W --keep-going -b html docs docs/_build/html``):
-every warning is an error.
+Build with ``make docs`` (``sphinx-build -W --keep-going -j auto -b html docs docs/_build/html``):
+every warning is an error. ``DOCS_SOURCE_PAGES=0`` leaves out the highlighted source page of
+each module (sphinx.ext.viewcode): CI sets it, as those pages check nothing and cost about
+40 % of the build on a slow machine.
 
 Generated at build time (git-ignored, never edited by hand):
 
@@ -15,6 +17,7 @@ Generated at build time (git-ignored, never edited by hand):
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -35,12 +38,13 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
-    "sphinx.ext.viewcode",
     "sphinx_copybutton",
     "sphinx-mathjax-offline",  # MathJax 3 copied into _static: formulas typeset without a network
     "myst_nb",
     "project_docs",
 ]
+if os.environ.get("DOCS_SOURCE_PAGES", "1") != "0":  # .ci/run: 0 (module docstring)
+    extensions.append("sphinx.ext.viewcode")  # each module's highlighted source, linked from its API page
 
 project_api_packages = API_PACKAGES = ("flatland", "sphere3d")
 """Packages in the API reference, each documented recursively when it can be imported."""
