@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 
 import matplotlib
 from hypothesis import HealthCheck, settings
@@ -22,3 +23,19 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow],
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev"))
+
+
+NOTEBOOK = re.compile(r"tests/test_tutorials\.py::TestNotebook(\d+)")
+
+
+def pytest_collection_modifyitems(config, items):
+    """The tutorial notebooks first, the last tutorial first: they are the suite's longest tests
+    (the sphere3d and study tutorials at the end of the course the longest), and pytest-xdist hands
+    out test classes in collection order, so the workers run them while the short tests fill in
+    around them instead of one worker running the last notebook alone at the end."""
+
+    def notebooks_first(item):
+        match = NOTEBOOK.match(item.nodeid)
+        return (0, -int(match[1])) if match else (1, 0)
+
+    items.sort(key=notebooks_first)  # stable: every other test keeps its place
