@@ -15,9 +15,15 @@ boundary, non-manifold and crease edge (a crease between faces of a shape with z
 albedo, or of a smooth-shaded shape, has no jump and is skipped). An edge is clipped
 to the part in front of the camera ($\mathrm{depth} > ε$) and its projection to the film
 widened by the filter radius;
-points are drawn *stratified along the total projected length* Λ,
-$N = \lceil \mathrm{rate} · \mathrm{spp}/\mathrm{batches} · Λ \rceil$ per batch
-(``rate`` points per pixel of projected length per camera sample per pixel), each weighted $Λ/N$.
+points are drawn *stratified along each edge's projected length* $Λ_e$,
+$N_e = \lceil ρ Λ_e \rceil$ per batch, $ρ = \mathrm{rate} · \mathrm{spp}/\mathrm{batches}$
+(``rate`` points per pixel of projected length per camera sample per pixel): point j of edge e
+uniform in the j-th of $N_e$ equal parts of its image, weighted $Λ_e/N_e$. The strata end at the
+edge's ends, so each holds a single edge and its integrand is smooth there ($v · n$ jumps at a
+vertex between the two edges' normals): a batch's estimate of a pixel varies continuously with its
+uniforms, not by whether a stratum's point fell on one edge or the next, an event whose
+probability the same strata in every batch would fix alike for all batches (the standard error
+from the batches' spread would then miss it).
 At each point:
 
 - its 3D position on the edge, $P = A + s (B - A)$ with A, B the edge's Dual vertices
@@ -29,7 +35,7 @@ At each point:
 - $L(x ∓ δn)$ by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
   with the same shading uniforms on both sides (common random numbers), δ =
   :data:`EPS_FILM` pixels;
-- the contribution $Λ/N\, [L^- - L^+] (v · n)$ goes to every pixel whose filter
+- the contribution $Λ_e/N_e\, [L^- - L^+] (v · n)$ goes to every pixel whose filter
   support covers the point, weighted by $k(x - p)$.
 
 Unbiased for these curves; the side rays are δ off the curve (a bias of $O(δ)$ in the
@@ -191,10 +197,11 @@ def film_edges(state: SceneState, plain: SceneState, edges: Edges) -> FilmEdges:
     return FilmEdges(edges, s0, s1, p3a, p3b, fa, fb, t0, t1, length)
 
 
-def point_count(points_per_pixel: float, total: float) -> int:
-    r"""Edge points of one batch, $N = \lceil \mathrm{points\_per\_pixel} · Λ \rceil$ (at least one);
-    none if Λ = 0."""
-    return max(1, math.ceil(points_per_pixel * total)) if total > 0.0 else 0
+def point_count(points_per_pixel: float, length: np.ndarray) -> np.ndarray:
+    r"""Edge points of one batch per edge, $N_e = \lceil \mathrm{points\_per\_pixel} · Λ_e \rceil$
+    (none where $Λ_e = 0$); their sum is at most $\lceil ρ Λ \rceil$ plus the number of edges seen."""
+    length = np.asarray(length, dtype=np.float64)
+    return np.where(length > 0.0, np.ceil(points_per_pixel * length), 0.0).astype(np.int64)
 
 
 def point_bytes(n: int) -> int:
@@ -236,9 +243,10 @@ def camera_edge_term(
     cam = state.camera
     out = np.zeros(cam.height * cam.width)
     seg = film_edges(state, plain, edges)
-    n = point_count(points_per_pixel, seg.total)
+    count = point_count(points_per_pixel, seg.length)
+    n = int(count.sum())
     for lo in range(0, n, POINT_CHUNK):
-        _splat_points(out, state, plain, seg, (seed, batch), n, range(lo, min(n, lo + POINT_CHUNK)))
+        _splat_points(out, state, plain, seg, (seed, batch), count, range(lo, min(n, lo + POINT_CHUNK)))
     return out.reshape(cam.height, cam.width)
 
 
@@ -248,21 +256,21 @@ def _splat_points(
     plain: SceneState,
     seg: FilmEdges,
     key: tuple[int, int],
-    n: int,
+    per_edge: np.ndarray,
     points: range,
 ) -> None:
     """Add the contributions of the batch's edge points ``points`` (of n) to ``out`` (module docstring)."""
     cam = state.camera
     height, width = cam.height, cam.width
-    edges, total, count = seg.edges, seg.total, len(points)
+    edges, count, n = seg.edges, len(points), int(per_edge.sum())
     o0 = plain.camera.origin
-    # stratified along the concatenated projected lengths: point i in [i, i + 1) Λ / N
-    at = (np.arange(points.start, points.stop) + _uniforms(*key, points.start, (count,))) * (total / n)
-    length, cdf = seg.length, np.cumsum(seg.length)
-    k = np.minimum(np.searchsorted(cdf, at, side="right"), len(length) - 1)
-    t = seg.t0[k] + (at - (cdf[k] - length[k])) / np.where(length[k] > 0.0, length[k], 1.0) * (
-        seg.t1[k] - seg.t0[k]
-    )
+    # stratified along each edge's image: its point j uniform in [j, j + 1) Λ_e / N_e, weight Λ_e / N_e
+    i = np.arange(points.start, points.stop)
+    end = np.cumsum(per_edge)
+    k = np.searchsorted(end, i, side="right")  # the edge of point i: end[k - 1] <= i < end[k]
+    j = i - (end[k] - per_edge[k])
+    t = seg.t0[k] + (j + _uniforms(*key, points.start, (count,))) / per_edge[k] * (seg.t1[k] - seg.t0[k])
+    share = seg.length[k] / per_edge[k]
     t = np.clip(t, 0.0, 1.0)
     # film fraction t -> fraction σ of the clipped 3D segment (perspective: x = lerp weighted by depth)
     da, db = dot(seg.p3a[k] - o0, cam.forward), dot(seg.p3b[k] - o0, cam.forward)
@@ -289,12 +297,13 @@ def _splat_points(
     side = np.concatenate([x - EPS_FILM * normal, x + EPS_FILM * normal])
     d = cam.directions(side[:, 0], side[:, 1])
     u = _uniforms(*key, n + SHADING_UNIFORMS * points.start, (count, SHADING_UNIFORMS))
-    draws = Draws.of(key[0], np.arange(points.start, points.stop)).tile(2)
+    # keyed per batch, apart from the primary samples' keys (below 2^62): no draw shared between batches
+    draws = Draws.of(key[0], (1 << 62) + key[1] * (1 << 40) + i).tile(2)
     hits = _side_hits(plain, edges.take(k), d)
     radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits))
     jump = radiance[:count] - radiance[count:]
     # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2)
-    weight = jump * np.sum(v * normal, axis=1) * (total / n) * seen
+    weight = jump * np.sum(v * normal, axis=1) * share * seen
     reach = math.ceil(filter_radius(cam.filter) + 0.5)
     base = np.floor(x).astype(np.int64)
     for dy in range(-reach, reach + 1):  # splat to every pixel whose filter support covers x

@@ -92,8 +92,8 @@ def memory(task: ImageTask | PointTask, options: Mapping[str, Any]) -> tuple[Ter
         return (edge_samples,)
     rate = options.get("rate", RATE)
     plain = build_state(task.scene, task.param, 0.0, task.tracer)
-    length = film_edges(plain, plain, mesh_edges(plain.triangles, plain.shape_of)).total  # Λ
-    n = point_count(rate * (task.spp // task.batches), length)
+    length = film_edges(plain, plain, mesh_edges(plain.triangles, plain.shape_of)).length  # Λ_e
+    n = int(point_count(rate * (task.spp // task.batches), length).sum())
     block = f"{min(n, POINT_CHUNK)} film edge points"
     what = "film edge points per pixel of edge and sample"
     return edge_samples, Term("rate", rate, what, block, point_bytes(n), rays=task.batches * n * POINT_RAYS)

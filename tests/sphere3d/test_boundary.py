@@ -507,7 +507,7 @@ def test11_edge_points_in_chunks_and_edge_samples_in_slices_give_the_numbers_of_
     state = build_state(scene, "occluder.translate.x", variable(0.0))
     edges = mesh_edges(plain.triangles, plain.shape_of)
     whole = camera_edge_term(state, plain, edges, 5, 2, 1.0)
-    assert camera.point_count(1.0, camera.film_edges(state, plain, edges).total) > 150
+    assert camera.point_count(1.0, camera.film_edges(state, plain, edges).length).sum() > 150
     monkeypatch.setattr(camera, "POINT_CHUNK", 50)
     np.testing.assert_allclose(camera_edge_term(state, plain, edges, 5, 2, 1.0), whole, rtol=0, atol=1e-12)
     point = dict(param="occluder.translate.x", method="boundary", n=32, secondary=8, progress=False)
