@@ -47,6 +47,8 @@ from sphere3d.closed_form.film import (
 )
 from sphere3d.closed_form.junction import clip_convex, junction_image
 from sphere3d.closed_form.lambert import (
+    Flux,
+    boundary_flux,
     occluded_sky_irradiance,
     polygon_irradiance,
     projected_solid_angle,
@@ -65,8 +67,10 @@ __all__ = [
     "PIXEL",
     "QUADRATURE_NODES",
     "TRIANGLE_SHAPE",
+    "Flux",
     "ShareLost",
     "TriangleImage",
+    "boundary_flux",
     "clip_convex",
     "filter_cdf_1d",
     "filter_kinks",

@@ -330,7 +330,8 @@ def triangle_image(scene: Any, param: str | None = None, theta: float = 0.0) -> 
         One black triangle (a ``mesh`` shape with one face, albedo 0, emission 0) in front
         of the camera, a constant ``sky``.
     param : str, optional
-        A translate, rotate or scale parameter of the triangle.
+        A translate, rotate or scale parameter of the triangle, or ``camera.translate.x|y|z`` (the
+        camera's position and look-at point move together: the image is the triangle's moved by -θ).
     theta : float
         The parameter's offset at which to evaluate (finite differences of this closed form
         take ±h).
@@ -350,7 +351,13 @@ def triangle_image(scene: Any, param: str | None = None, theta: float = 0.0) -> 
     scene = load_scene(scene)
     theta = float(check_vector("theta", [theta], 1)[0])
     dual = variable(theta) if param is not None else theta
-    x, y = project(scene.camera, triangle_vertices(scene, param, dual))
+    if param is not None and param.startswith("camera."):
+        # the camera and its look-at point move together: the frame stays, every point shifts by -θ e_a
+        axis = AXES.index(scene.check_param(param).rpartition(".")[2])
+        vertices = triangle_vertices(scene) - np.eye(3)[axis] * dual
+    else:
+        vertices = triangle_vertices(scene, param, dual)
+    x, y = project(scene.camera, vertices)
     film = np.stack([np.asarray(detach(x)), np.asarray(detach(y))], axis=-1)
     velocity = np.stack([np.asarray(tangent(x)), np.asarray(tangent(y))], axis=-1) * (param is not None)
     cam = scene.camera

@@ -3,6 +3,7 @@ formula for the projected solid angle, on Duals so that its θ-derivative comes 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -13,6 +14,8 @@ from sphere3d.closed_form.film import triangle_vertices
 from sphere3d.scene import check_vector, load_scene
 
 __all__ = [
+    "Flux",
+    "boundary_flux",
     "occluded_sky_irradiance",
     "polygon_irradiance",
     "projected_solid_angle",
@@ -98,3 +101,49 @@ def occluded_sky_irradiance(
         np.pi - projected_solid_angle(point, normal / length, triangle_vertices(scene, param, dual))
     )
     return float(np.asarray(detach(e))), float(np.asarray(tangent(e))) if param is not None else 0.0
+
+
+@dataclass(frozen=True)
+class Flux:
+    r"""The boundary term of dE/dθ under the sky, $-L ∮ (n·ω) (\dot ω·m) dl$ (``net``, which is
+    Lambert's derivative), and its gross flux $L ∮ |(n·ω) (\dot ω·m)| dl$ (``gross``): how much
+    moving boundary a method must carry, the scale its error is measured against where the net
+    derivative is a small difference of large parts (a sideways turn of a small triangle)."""
+
+    net: float
+    gross: float
+
+
+def boundary_flux(scene: Any, point: Any, normal: Any, param: str, nodes: int = 48) -> Flux:
+    r""":class:`Flux` of the scene's black triangle seen from ``point`` (normal ``normal``) under ``param``.
+
+    Reynolds transport on the sphere of directions: the triangle's image Ω(T) is bounded by the
+    great arcs of its edges; at the direction $ω(s) = P(s)/|P(s)|$ of the edge point
+    $P(s) = A + s (B - A) - x$ (fixed s, Dual vertices) the boundary moves along the arc's outward
+    normal m (pointing away from the third vertex) at $\dot ω·m$, and $dΦ/dθ = ∮ (n·ω) (\dot ω·m) dl$,
+    $dl = |dω/ds| ds$, $dω/ds = (I - ω ω^T)(B - A)/|P|$. Each edge by ``nodes``-point Gauss–Legendre
+    quadrature (the integrand is smooth in s; the sum agrees with Lambert's formula's derivative to
+    rounding, tests/sphere3d/test_closed_forms.py).
+    """
+    scene = load_scene(scene)
+    x = np.array(check_vector("point", point))
+    n = np.array(check_vector("normal", normal))
+    n = n / np.linalg.norm(n)
+    v = triangle_vertices(scene, param, variable(0.0)) - x
+    s, w = np.polynomial.legendre.leggauss(nodes)
+    s, w = 0.5 * (s + 1.0), 0.5 * w
+    net = gross = 0.0
+    for i in range(3):  # the three edges (not a loop over samples)
+        a, b, c = v[i], v[(i + 1) % 3], v[(i + 2) % 3]
+        m = np.cross(np.asarray(detach(a)), np.asarray(detach(b)))
+        m = m / np.linalg.norm(m)
+        m = -m if m @ np.asarray(detach(c)) > 0.0 else m  # outward: away from the third vertex
+        p = a[None, :] + s[:, None] * (b - a)[None, :]  # (nodes, 3) Dual
+        omega = p / np.linalg.norm(p, axis=-1)[:, None]
+        o = np.asarray(detach(omega))
+        d = np.asarray(detach(b - a))
+        dl = np.linalg.norm(d - o * (o @ d)[:, None], axis=1) / np.linalg.norm(np.asarray(detach(p)), axis=1)
+        density = (o @ n) * (np.asarray(tangent(omega)) @ m) * dl
+        net += float(np.sum(w * density))
+        gross += float(np.sum(w * np.abs(density)))
+    return Flux(-scene.sky * net, scene.sky * gross)

@@ -1,0 +1,65 @@
+"""The bias atlas (:mod:`benchmarks.atlas`): its cases, its measure and its flags.
+
+The atlas itself is measured by ``make bench``; these tests check that its cases mean what they say
+(every case's closed-form derivative is the central difference of its closed-form value, so the
+tilt, the pivot and the camera motions are built as named), that a cell of an unbiased method is
+not flagged while a method that misses the whole derivative is, and that the page lists every cell.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import atlas
+from benchmarks.atlas_cases import FAMILIES, MOTIONS, QUICK, Case, grid
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test01_every_motion_and_angle_has_its_closed_form_derivative(family):
+    """Dual derivative against [f(h) - f(-h)] / 2h of the case's own value (h = 1e-6), one size per
+    family, every motion and viewing angle of the quick grid: < 1e-5 of the scale the atlas measures
+    against (the largest pixel derivative on the film, the gross boundary flux in shading, where a
+    motion's net derivative may vanish by symmetry)."""
+    size = QUICK.film_sizes[1] if family.endswith("film") else QUICK.shading_sizes[1]
+    for motion in MOTIONS[family]:
+        for angle in QUICK.angles:
+            case = Case(family, motion, size, angle, "gaussian" if family.endswith("film") else "")
+            exact = np.asarray(case.derivative(), dtype=np.float64)
+            diff = np.asarray(case.central_difference(1e-6), dtype=np.float64)
+            scale = np.max(np.abs(exact)) if case.film else atlas._scale(case, exact)
+            assert scale > 1e-4, case.label()
+            assert np.max(np.abs(exact - diff)) < 1e-5 * scale, case.label()
+
+
+def test02_an_unbiased_cell_is_within_its_quantile_and_a_blind_one_is_flagged(monkeypatch):
+    """``finite_difference`` on a flatland film cell (quick samples): |z| against its own expectation
+    below the atlas's quantile, with a spread; ``boundary`` exact there (in 2D the film's jumps are
+    the segment's two end points, evaluated without sampling); ``naive``, which sees no derivative
+    here (a black segment against the sky: only visibility moves), loses 100 % of it and is flagged."""
+    monkeypatch.setitem(atlas.METHODS, "naive", ("naive", {}, ("flatland", "sphere3d")))
+    monkeypatch.setitem(atlas.QUICK_SAMPLES, "film", 1 << 14)  # 1024 spp: a spread, in seconds
+    case = Case("flatland film", "translate x", 2.0, 90.0, "gaussian")
+    q = atlas.quantile(len(grid(quick=True)))
+    fair = atlas.measure(case, "finite_difference", quick=True)
+    assert abs(fair.z) <= q and fair.stderr > 0.0
+    assert abs(atlas.measure(case, "boundary", quick=True).lost) < 1e-9
+    blind = atlas.measure(case, "naive", quick=True)
+    assert blind.lost == pytest.approx(1.0, abs=1e-12) and blind.stderr == 0.0
+    assert blind.z == math.inf and blind.flags(q) == "z, > 5 %"  # no spread: off beyond rounding
+    assert dataclasses.replace(blind, lost=1e-12).z == 0.0
+
+
+def test03_the_page_has_a_summary_and_one_line_per_cell():
+    cells = [
+        atlas.Cell(Case("flatland shading", "rotate", 0.1, 90.0), "boundary", 0.001, 0.01, 0.0, 0.1),
+        atlas.Cell(Case("flatland shading", "rotate", 0.01, 5.0), "reparam", 0.5, 0.01, 0.0, 0.1),
+    ]
+    page = atlas.table(cells, quick=True)
+    assert page.startswith("# Bias atlas")
+    rows = [line for line in page.splitlines() if line.startswith("| rotate |")]
+    assert len(rows) == 2 and rows[1].endswith("| z |")  # 5 degrees: outside the goals, flagged by z only
+    assert "| flatland shading | reparam | 1 | 1 | 0 |" in page
