@@ -39,7 +39,11 @@ At each point:
   support covers the point, weighted by $k(x - p)$.
 
 Unbiased for these curves; the side rays are δ off the curve (a bias of $O(δ)$ in the
-shading, and where two curves come within δ of each other).
+shading, and where two curves come within δ of each other). The batches are independent (their
+own strata and keyed draws), so the batch standard error is honest per pixel; where a pixel's
+filter support meets the edges only in a sliver (the filter's tail, near a vertex) a batch's
+estimate is a sum of one or two rare points, far from normal, and its z-score has heavier tails
+than Student's t (tests/sphere3d/test_standard_errors.py measures both).
 """
 
 from __future__ import annotations
