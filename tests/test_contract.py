@@ -503,3 +503,19 @@ def test19_help_states_every_options_default_and_no_verb_lists_the_verbs(package
     table = importlib.import_module(f"{package}.render").GRADIENT_METHODS
     assert f"(default {table['reparam'].options['kappa'].default:g})" in words
     assert f"(default {table['finite_difference'].options['h'].default:g})" in words
+
+
+def test20_every_builtin_study_loads_and_each_package_sweeps_kappa_on_a_scene(package):
+    """Every built-in study is a valid configuration, and each package has one κ sweep on a scene
+    (the bias/variance trade-off shown where a renderer's shading integral holds it), with the
+    methods it is judged beside."""
+    entry = importlib.import_module(f"{package}.__main__")
+    configs = [load_config(data, package=entry.PACKAGE, name=name) for name, data in entry.STUDIES.items()]
+
+    def kappas(config):
+        return sorted({c.options_dict["kappa"] for c in config.cells if c.method == "reparam"})
+
+    sweeps = [c for c in configs if c.problem.is_scene and len(kappas(c)) >= 3]
+    assert sweeps, f"{package}: no built-in κ sweep on a scene"
+    assert {"naive", "boundary", "reparam"} <= {c.method for c in sweeps[0].cells}
+    assert kappas(sweeps[0])[-1] / kappas(sweeps[0])[0] >= 100  # wide enough to cross from bias to variance

@@ -72,6 +72,7 @@ def test03_builtin_scenes_load_and_round_trip():
         "shadow",
         "silhouette",
         "sky",
+        "soft_shadow",
         "two_occluders",
     )
     for name in list_scenes():
