@@ -49,7 +49,7 @@ from IPython.display import display
 from scipy import integrate, special, stats
 
 from flatland import estimate, get_integral, tangent, variable
-from flatland.core.stats import normal_quantile, sidak
+from flatland.core.stats import LEVEL, normal_quantile, sidak
 from flatland.plotting import textbook as pt
 from flatland.textbook.reparam import follow_nearest
 from flatland.widgets import explore, kernel_view
@@ -242,7 +242,8 @@ for name, s in sweep.items():
     assert np.all(steps[:-1] - steps[1:] > 5 * step_se), name
 
 # %% [markdown]
-# The trade-off, drawn: on the left the measured bias with its 99.9 % interval against $b(\kappa)$
+# The trade-off, drawn: on the left the measured bias with its 99 % interval (the level of every
+# printed interval, `LEVEL`) against $b(\kappa)$
 # (a symmetric-log axis, linear near zero), on the right the standard deviation of one sample's
 # derivative against $\sigma(\kappa)$.
 
@@ -251,11 +252,11 @@ for name, s in sweep.items():
     fig = pt.plot_kappa_tradeoff(
         kappas,
         s["bias"],
-        normal_quantile(0.999) * s["stderr"],
+        normal_quantile(LEVEL) * s["stderr"],
         s["std"],
         predicted_bias=(grid, predicted_bias[name](grid)),
         predicted_std=(grid, predicted_std[name](grid)),
-        level=0.999,
+        level=LEVEL,
         title=f"{name} at θ = {theta}, N = {N}",
     )
     display(fig)
