@@ -69,21 +69,29 @@ from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
 
 SEED = 20191117
-BATCHES = 16  # independent batches per estimate: standard errors with 15 degrees of freedom
-METHODS = {"reparam": "reparam", "boundary": "boundary", "finite differences": "finite_difference"}
-ALPHA = 1e-3  # family-wise level of every check cell (two-sided, Šidák over its comparisons)
+# independent batches per estimate: standard errors with 15 degrees of freedom
+BATCHES = 16
+METHODS = {
+    "reparam": "reparam",
+    "boundary": "boundary",
+    "finite differences": "finite_difference",
+}
+# family-wise level of every check cell (two-sided, Šidák over its comparisons)
+ALPHA = 1e-3
 
 
 def quantile(comparisons):
-    """Two-sided Student-t quantile (15 degrees of freedom) at level ALPHA, Šidák over ``comparisons``."""
+    """Two-sided Student-t quantile (15 degrees of freedom) at level ALPHA,
+    Šidák over ``comparisons``."""
     return sidak_t(ALPHA, comparisons, BATCHES - 1)
 
 
 def run(scene, param, method, spp, seed, **options):
-    """Per-batch derivative images (BATCHES, height, width) of ``method``, the CPU seconds taken,
-    and the mean rendered image."""
+    """Per-batch derivative images (BATCHES, height, width) of ``method``, the CPU
+    seconds taken, and the mean rendered image."""
     start = time.process_time()
-    tally = GRADIENT_METHODS.run(method, ImageTask(scene, param, spp, seed, BATCHES), **options)
+    task = ImageTask(scene, param, spp, seed, BATCHES)
+    tally = GRADIENT_METHODS.run(method, task, **options)
     return tally.derivative, time.process_time() - start, tally.value.mean(axis=0)
 
 
