@@ -17,10 +17,16 @@ shading
 
 z = lost / ±, Student's t with BATCHES - 1 degrees of freedom (a method that draws no random
 numbers in a cell, flatland's film ``boundary`` or ``naive`` here, has no ±: it reads ``exact, off``
-and is flagged when its share lost exceeds rounding); a cell is flagged ``z`` where |z|
+and is flagged when its share lost exceeds rounding; ``finite_difference`` with every batch exactly
+0 reads ``no event``, below); a cell is flagged ``z`` where |z|
 exceeds the two-sided quantile at the Šidák-corrected level $1 - (1 - α)^{1/m}$ over the m cells of
 the atlas (α = :data:`ALPHA`). ``finite_difference`` is measured against its own expectation, the
-closed form's central difference at its step h (its truncation is the column ``trunc``).
+closed form's central difference at its step h (its truncation is the column ``trunc``). With
+common random numbers its estimate is a sum over the samples whose contribution changes between
+θ - h and θ + h, rare events with a probability of order h per sample near a moving edge: when
+no sample of any batch changed, every batch is exactly 0, and the cell cannot tell a bias from
+no event. It reads ``no event``, is neither flagged nor passed, and the summary counts such
+cells (more samples, or a larger h, would measure them).
 The goals are flagged as ``> 5 %`` (a feature of at least 2 px on the film or 0.1 rad in shading,
 seen at 10 degrees or more, off by more than 5 %) and ``reach`` (a smaller feature off by more than
 10 %), where the z flag also holds.
@@ -76,11 +82,15 @@ class Cell:
     stderr: float
     expected: float
     seconds: float
+    silent: bool = False
+    """Finite differences that saw no event: every batch exactly 0 (module docstring)."""
 
     @property
     def z(self) -> float:
         """(lost - expected) / stderr; without a spread (a method that draws no random numbers here),
-        ±inf if it is off by more than rounding (:data:`ROUNDING`), else 0."""
+        ±inf if it is off by more than rounding (:data:`ROUNDING`), else 0; nan for a silent cell."""
+        if self.silent:
+            return math.nan
         off = self.lost - self.expected
         if self.stderr > 0.0:
             return off / self.stderr
@@ -94,8 +104,9 @@ class Cell:
         return 0.05 if large else 0.10
 
     def flags(self, quantile: float) -> str:
-        """``z`` beyond the quantile; ``> 5 %`` / ``reach`` beyond the goal's tolerance as well."""
-        if abs(self.z) <= quantile:
+        """``z`` beyond the quantile; ``> 5 %`` / ``reach`` beyond the goal's tolerance as well; never
+        for a silent cell."""
+        if self.silent or abs(self.z) <= quantile:
             return ""
         tolerance = self.goal()
         if tolerance is not None and abs(self.lost) > tolerance:
@@ -175,7 +186,8 @@ def measure(case: Case, label: str, quick: bool = False) -> Cell:
     seconds = time.perf_counter() - start
     lost = _lost(case, batches, exact, scale)
     stderr = float(lost.std(ddof=1) / math.sqrt(len(lost)))
-    return Cell(case, label, float(lost.mean()), stderr, expected, seconds)
+    silent = method == "finite_difference" and not np.any(batches)  # no sample changed: no event
+    return Cell(case, label, float(lost.mean()), stderr, expected, seconds, silent)
 
 
 def quantile(cells: int) -> float:
@@ -209,16 +221,17 @@ def _row(cell: Cell, q: float) -> str:
     c = cell.case
     unit = "px" if c.film else "rad"
     trunc = f"{100 * cell.expected:+.2f}" if cell.method == "finite_difference" else ""
-    z = f"{cell.z:+.1f}" if math.isfinite(cell.z) else "exact, off"  # no spread, off beyond rounding
+    z = "exact, off" if math.isinf(cell.z) else f"{cell.z:+.1f}"  # no spread, off beyond rounding
+    z = "no event" if cell.silent else z
     return (
         f"| {c.motion} | {c.size:g} {unit} | {c.angle:g} | {c.filter or '-'} | {cell.method} | "
         f"{100 * cell.lost:+.2f} | {100 * cell.stderr:.2f} | {z} | {trunc} | {cell.flags(q)} |"
     )
 
 
-def summary(cells: list[Cell]) -> list[tuple[str, str, int, int, int, list[Cell]]]:
-    """Per family and method: cells, flagged z, flagged against the goals, and the flagged cells
-    ordered by |lost| (largest first)."""
+def summary(cells: list[Cell]) -> list[tuple[str, str, int, int, int, list[Cell], int]]:
+    """Per family and method: cells, flagged z, flagged against the goals, the flagged cells
+    ordered by |lost| (largest first), and the silent cells (no event)."""
     q = quantile(len(cells))
     out = []
     for family in FAMILIES:
@@ -228,7 +241,7 @@ def summary(cells: list[Cell]) -> list[tuple[str, str, int, int, int, list[Cell]
                 continue
             flagged = sorted((c for c in mine if c.flags(q)), key=lambda c: -abs(c.lost))
             goal = sum(1 for c in flagged if c.flags(q) != "z")
-            out.append((family, label, len(mine), len(flagged), goal, flagged))
+            out.append((family, label, len(mine), len(flagged), goal, flagged, sum(c.silent for c in mine)))
     return out
 
 
@@ -248,16 +261,17 @@ def table(cells: list[Cell], quick: bool) -> str:
         f"{q:.2f} (two-sided Student t, {BATCHES - 1} degrees of freedom, Šidák over the {len(cells)} "
         f"cells at family-wise level {ALPHA:g}); `> 5 %` and `reach` where a flagged cell also misses "
         "the goal (features of at least 2 px on the film or 0.1 rad in shading seen at 10 degrees or "
-        "more within 5 %; smaller ones within 10 %, else outside the method's reach).",
+        "more within 5 %; smaller ones within 10 %, else outside the method's reach). `no event`: finite "
+        "differences whose every batch is exactly 0 (no sample changed between θ ± h), not measured.",
         "",
         "## Summary",
         "",
-        "| family | method | cells | flagged z | flagged goal | worst flagged cells (lost %) |",
-        "|---|---|---|---|---|---|",
+        "| family | method | cells | flagged z | flagged goal | worst flagged cells (lost %) | no event |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for family, label, n, flagged, goal, worst in summary(cells):
+    for family, label, n, flagged, goal, worst, silent in summary(cells):
         names = "; ".join(f"{c.case.label().partition(': ')[2]} ({100 * c.lost:+.1f})" for c in worst[:3])
-        lines.append(f"| {family} | {label} | {n} | {flagged} | {goal} | {names} |")
+        lines.append(f"| {family} | {label} | {n} | {flagged} | {goal} | {names} | {silent} |")
     for family in FAMILIES:
         mine = [c for c in cells if c.case.family == family]
         if not mine:

@@ -63,3 +63,20 @@ def test03_the_page_has_a_summary_and_one_line_per_cell():
     rows = [line for line in page.splitlines() if line.startswith("| rotate |")]
     assert len(rows) == 2 and rows[1].endswith("| z |")  # 5 degrees: outside the goals, flagged by z only
     assert "| flatland shading | reparam | 1 | 1 | 0 |" in page
+
+
+def test04_finite_differences_that_saw_no_event_are_not_measured(monkeypatch):
+    """At a step so small that no sample can change between θ ± h (1e-9 against 4096 samples),
+    finite differences return exactly 0 in every batch: the cell reads ``no event``, is not flagged
+    (a bias cannot be told from no event) and is counted as such in the summary, while ``naive``'s
+    exact 0 (it draws random numbers but has no derivative to find) stays flagged (test02)."""
+    monkeypatch.setitem(atlas.QUICK_SAMPLES, "film", 1 << 12)
+    monkeypatch.setitem(atlas.FD_STEP, "flatland", 1e-9)
+    case = Case("flatland film", "translate x", 2.0, 90.0, "gaussian")
+    cell = atlas.measure(case, "finite_difference", quick=True)
+    assert cell.silent and cell.stderr == 0.0 and cell.lost == pytest.approx(1.0, abs=1e-12)
+    q = atlas.quantile(len(grid(quick=True)))
+    assert math.isnan(cell.z) and cell.flags(q) == ""
+    page = atlas.table([cell], quick=True)
+    assert "| no event | " in page
+    assert page.splitlines()[8].endswith("| 1 | 0 | 0 |  | 1 |")  # cells, flagged, goal, worst, no event
