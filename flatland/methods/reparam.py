@@ -88,7 +88,9 @@ def reparam(
     isolated edge only beyond it. A primitive whose image is narrower than the probes' spacing
     lies between two probes for most kernel centres: one more probe is then traced at its
     image (:func:`~flatland.reparam.probes.film_gap_probe`,
-    :func:`~flatland.reparam.probes.angle_gap_probe`).
+    :func:`~flatland.reparam.probes.angle_gap_probe`). On the film, a shape whose whole image
+    lies inside the probes' span has both its ends followed by one piecewise-linear map
+    (:func:`~flatland.reparam.probes.film_inner_shape`), exact whatever the shape's motion.
 
     Emitter samples: the authors used one transform per shading point, from the mean of the
     occluded shadow rays' hits, and emitters faded at their ends. Here each emitter sample
@@ -100,7 +102,8 @@ def reparam(
     discontinuities, theory/pixel_filters: refused) and that one translation follows every
     discontinuity within a kernel. Biased where it does not: discontinuities moving
     differently inside one kernel (``two_occluders``; a thin primitive seen from a shading
-    point, whose ends' angles move at different rates), a wrong pick by the heuristic, an
+    point, whose ends' angles move at different rates: the film's map for a small shape has
+    no counterpart for directions yet), a wrong pick by the heuristic, an
     attached point moving unlike the silhouette (first order in its distance from it, exact
     under translation), an edge beyond the probes. The bias falls as the kernels narrow,
     while the variance of the weights' derivatives (about $\sqrt{κ}$ per affected sample)

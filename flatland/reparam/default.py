@@ -15,13 +15,20 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import detach
+from flatland.core.dual import as_dual, detach, is_dual
 from flatland.core.rng import Draws
 from flatland.core.translation import translation_offset, unit_weight
 from flatland.integrator import Context, Identity, Members
-from flatland.reparam.probes import Choice, angle_gap_probe, film_gap_probe, select_points
+from flatland.reparam.probes import (
+    Choice,
+    FilmImage,
+    angle_gap_probe,
+    film_gap_probe,
+    film_inner_shape,
+    select_points,
+)
 from flatland.sampling import filter_blurred, sample_von_mises
-from flatland.tracing import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction
+from flatland.tracing import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction, zeros
 
 __all__ = ["ReparamTransforms", "default_kappa_film"]
 
@@ -121,9 +128,63 @@ class ReparamTransforms(Identity):
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (Loubet et al. 2019, Sec. 3.2)
         points = mu + translation_offset(t_p, ok)[:, None]
+        log_jacobian = 0.0
+        # a visible shape whose whole image lies inside the probes' span: follow both its ends
+        inner = film_inner_shape(ctx.geom0, probes)
+        rows = np.flatnonzero(inner.ok)
+        if rows.size:
+            points, log_jacobian = self._stretch(ctx, inner, rows, mu, points, trace)
         sq = (points - center[:, None]) ** 2
-        # w = k(T y, ω) / detach(k(T y, ω)), log k = -κ/2 x² + const for the Gaussian   (Sec. 4.2)
-        return Members(points, unit_weight(-0.5 * self.kappa_film * sq), self.paired, density)
+        # w = k(T y, ω) |det J_T| / detach(...), log k = -κ/2 x² + const for the Gaussian   (Sec. 4.2)
+        log_k = -0.5 * self.kappa_film * sq + log_jacobian
+        return Members(points, unit_weight(log_k), self.paired, density)
+
+    @staticmethod
+    def _stretch(
+        ctx: Context, inner: FilmImage, rows: np.ndarray, mu: np.ndarray, points: Any,
+        trace: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    ) -> tuple[Any, Any]:  # fmt: skip
+        r"""``points`` with ``rows`` moved by the map that follows both ends of a small shape's image.
+
+        With a, b the film coordinates of the image's ends and a0, b0 their values, the
+        piecewise-linear map $T(t) = t + (a - a_0)$ left of $a_0$, $T(t) = a + (t - a_0) s$ on
+        $[a_0, b_0]$ and $T(t) = t + (b - b_0)$ right of $b_0$, $s = (b - a) / (b_0 - a_0)$, is
+        continuous, increasing and the identity at θ0; it carries both discontinuities a, b to
+        fixed points, so the shape may translate, turn, scale or move in depth (a translation
+        follows one point only: a thin shape turning about its middle has ends moving apart,
+        and the middle, which probes see, does not move). $|\det J_T|$ is s on the image, else 1.
+        Only rows where a ray at the image's middle sees the shape (it is not hidden) are moved.
+        Returns the points and $\log |\det J_T|$ (shaped like ``points``).
+        """
+        geom, n_seg = ctx.geom, ctx.geom0.n_seg
+        ends = (inner.first[rows], inner.last[rows])
+        a, b = (
+            film_coordinate(
+                geom,
+                np.where((i < n_seg)[:, None], geom.seg_a[i % n_seg], geom.seg_b[i % n_seg]) - geom.cam_o,
+            )
+            for i in ends
+        )
+        a0, b0 = detach(a), detach(b)
+        prim, _ = trace(rows, 0.5 * (a0 + b0))
+        seen = (prim >= 0) & (ctx.geom0.prim_shape[np.maximum(prim, 0)] == inner.shape[rows])
+        rows, a, b, a0, b0 = rows[seen], a[seen], b[seen], a0[seen], b0[seen]
+        if not rows.size:
+            return points, 0.0
+        y = mu[rows]
+        s = (b - a) / (b0 - a0)  # value exactly 1
+        # T(y) = y + Δ(y), Δ of value exactly 0 (so the primal is the naive one): the offsets of the
+        # two ends outside the image, inside it (a - a0) + (y - a0)(s - 1)   (piecewise-linear map above)
+        left, right = translation_offset(a)[:, None], translation_offset(b)[:, None]
+        middle = left + (y - a0[:, None]) * translation_offset(s)[:, None]
+        inside = (y >= a0[:, None]) & (y <= b0[:, None])
+        moved = y + np.where(y < a0[:, None], left, np.where(inside, middle, right))
+        log_jacobian = zeros(np.shape(mu), geom.differentiable)
+        log_jacobian[rows] = np.where(inside, np.log(s)[:, None], 0.0)
+        if not is_dual(points) and is_dual(moved):
+            points = as_dual(points)
+        points[rows] = moved
+        return points, log_jacobian
 
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         kappa = self.kappa
