@@ -78,7 +78,7 @@ from flatland.core.translation import translation_offset, unit_weight
 from flatland.plotting.probe_rays import plot_probes
 from flatland.plotting.tutorials import plot_grid
 from flatland.reparam.default import default_kappa_film
-from flatland.reparam.probes import PARALLEL, select_points
+from flatland.reparam.probes import PARALLEL, film_shape_end, select_points
 from flatland.sampling import filter_value, sample_filter
 from flatland.scene import load_scene
 from flatland.state import build_state
@@ -400,6 +400,30 @@ fig = plot_grid(2, titles=["the hit next to the switch (refine=0)", "after two b
 for ax, k in zip(fig.axes, (0, 2), strict=True):
     plot_case(rotating[k], ax=ax, tangents=False)
 fig
+
+# %% [markdown]
+# Bisection halves the distance to the silhouette with each step, but never removes it. On the
+# film the library takes the last step: the occluder is a segment, the silhouette is its end, and
+# that end's image $t = 0.24$ lies inside the probes' span $(-0.3, 0.3)$. Given the primitive the
+# probes followed, `film_shape_end` names the endpoint at that end of its shape's image (an index
+# into the segments' first ends, then their second ends), and the film transform follows the
+# endpoint itself, which moves like the silhouette under every motion. (A shape whose *whole*
+# image lies inside the span has both ends followed at once, by a map that stretches between
+# them: `film_inner_shape`, on the theory page.)
+
+# %%
+end = int(film_shape_end(geom.detached(), OFFSETS[None], np.zeros(1, dtype=int))[0])
+n_seg = geom.n_seg
+endpoint = (geom.seg_a if end < n_seg else geom.seg_b)[end % n_seg : end % n_seg + 1]
+end_point_speed = film_speed(endpoint)[0]
+print(f"followed endpoint {end}: {detach(endpoint)[0]}, film speed {end_point_speed:+.4f}")
+
+# %%
+# check: the endpoint is the occluder's second end (0.24, 1), and it moves on the film at the silhouette's
+# speed -0.24 (0.24 + 0.38) = -0.1488, to rounding
+assert end == n_seg + 0
+assert np.allclose(detach(endpoint)[0], [0.24, 1.0], rtol=0.0, atol=TOL)
+assert abs(end_point_speed - edge_speed) <= TOL
 
 # %% [markdown]
 # ## 7. Step 6: nothing to follow, the identity

@@ -25,6 +25,7 @@ from flatland.reparam.probes import (
     angle_gap_probe,
     film_gap_probe,
     film_inner_shape,
+    film_shape_end,
     select_points,
 )
 from flatland.sampling import filter_blurred, sample_von_mises
@@ -40,6 +41,14 @@ def default_kappa_film(pixel_width: float) -> float:
     (Loubet et al. 2019, Sec. 4.2), since $1 - \cos x ≈ x^2 / 2$.
     """
     return 2.0 / (0.4 * pixel_width) ** 2
+
+
+def _end_coordinate(geom: Any, index: np.ndarray) -> Any:
+    """Film coordinates of segment endpoints ``index`` into ``concatenate([seg_a, seg_b])`` (Dual)."""
+    n_seg = np.shape(detach(geom.seg_a))[0]
+    first = (index < n_seg)[:, None]
+    point = np.where(first, geom.seg_a[index % n_seg], geom.seg_b[index % n_seg])
+    return film_coordinate(geom, point - geom.cam_o)
 
 
 class ReparamTransforms(Identity):
@@ -94,9 +103,9 @@ class ReparamTransforms(Identity):
             return trace(rows[r], params)
 
         sub = self._choose(ctx, origins[rows], centre_dirs[rows], again, trace_rows)
-        point, code = choice.point, choice.code.copy()
-        point[rows], code[rows] = sub.point, sub.code
-        return Choice(point, code)
+        point, code, followed = choice.point, choice.code.copy(), choice.followed.copy()
+        point[rows], code[rows], followed[rows] = sub.point, sub.code, sub.followed
+        return Choice(point, code, followed)
 
     def camera(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
         n, sigma, geom = t.size, 1.0 / np.sqrt(self.kappa_film), ctx.geom
@@ -126,6 +135,11 @@ class ReparamTransforms(Identity):
         v = choice.point - geom.cam_o
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
+        # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
+        end = film_shape_end(ctx.geom0, probes, np.where(ok, choice.followed, -1))
+        rows = np.flatnonzero(end >= 0)
+        if rows.size:
+            t_p[rows] = _end_coordinate(geom, end[rows])
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (Loubet et al. 2019, Sec. 3.2)
         points = mu + translation_offset(t_p, ok)[:, None]
         log_jacobian = 0.0
@@ -156,15 +170,8 @@ class ReparamTransforms(Identity):
         Only rows where a ray at the image's middle sees the shape (it is not hidden) are moved.
         Returns the points and $\log |\det J_T|$ (shaped like ``points``).
         """
-        geom, n_seg = ctx.geom, ctx.geom0.n_seg
-        ends = (inner.first[rows], inner.last[rows])
-        a, b = (
-            film_coordinate(
-                geom,
-                np.where((i < n_seg)[:, None], geom.seg_a[i % n_seg], geom.seg_b[i % n_seg]) - geom.cam_o,
-            )
-            for i in ends
-        )
+        geom = ctx.geom
+        a, b = _end_coordinate(geom, inner.first[rows]), _end_coordinate(geom, inner.last[rows])
         a0, b0 = detach(a), detach(b)
         prim, _ = trace(rows, 0.5 * (a0 + b0))
         seen = (prim >= 0) & (ctx.geom0.prim_shape[np.maximum(prim, 0)] == inner.shape[rows])

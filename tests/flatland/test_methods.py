@@ -116,7 +116,7 @@ UNBIASED = {
     ("silhouette", "camera.rotate"),
 }
 # bias below the resolution of these tests at 4096 spp (neither claim holds): the error bound only
-UNRESOLVED = {("silhouette", "occluder.translate.x")}
+UNRESOLVED = {("silhouette", "occluder.translate.x"), ("silhouette", "occluder.rotate")}
 # per scene: about 1.3x the largest relative error measured for its biased parameters (test02b)
 BOUNDS = {
     "penumbra": 0.13,
@@ -184,7 +184,7 @@ def test02b_reparam_bias_is_seen_per_pixel_and_bounded(name, param, record_prope
     penumbra      camera.translate.x   exact    exact     0.071
     polygon       polygon.rotate       10.5     292       0.028
     silhouette    occluder.translate.x 4.1      35        0.024
-    silhouette    occluder.rotate      4.4      58        0.016
+    silhouette    occluder.rotate      3.8      37        0.015
     silhouette    ball.translate.y     8.1      71        0.015
     silhouette    ball.scale           8.4      80        0.030
     two_occluders near.translate.x     11.6     279       0.041
@@ -193,8 +193,10 @@ def test02b_reparam_bias_is_seen_per_pixel_and_bounded(name, param, record_prope
     ============= ==================== ======== ========= ==========
 
     ("exact": a pixel where both methods have zero standard error but disagree.)
-    The silhouette scene's occluder translation is not resolved by either test at
-    this sample count (:data:`UNRESOLVED`): only its error bound is checked.
+    The silhouette scene's occluder translation and rotation are not resolved by either
+    test at this sample count (:data:`UNRESOLVED`): only their error bound is checked. (The
+    rotation read 4.4 and 58 while the film transform followed the probes' hit next to an
+    end of the turning occluder instead of the end itself, :func:`flatland.reparam.probes.film_shape_end`.)
     The penumbra scene is the worst: its emitter is unfaded, and where a blocker's
     tangent line happens to separate the emitter from the floor point the heuristic
     follows the blocker while the emitter's edge stays put (see
