@@ -88,9 +88,13 @@ def reparam(
     isolated edge only beyond it. A primitive whose image is narrower than the probes' spacing
     lies between two probes for most kernel centres: one more probe is then traced at its
     image (:func:`~flatland.reparam.probes.film_gap_probe`,
-    :func:`~flatland.reparam.probes.angle_gap_probe`). On the film, a shape whose whole image
-    lies inside the probes' span has both its ends followed by one piecewise-linear map
-    (:func:`~flatland.reparam.probes.film_inner_shape`), exact whatever the shape's motion.
+    :func:`~flatland.reparam.probes.angle_gap_probe`). A shape of segments whose whole image
+    (film interval or angle interval) lies inside the probes' span has both its ends followed by
+    one piecewise-linear map (:func:`~flatland.reparam.probes.film_inner_shape`,
+    :func:`~flatland.reparam.probes.angle_inner_shape`), and where one end of the followed
+    shape's image lies inside the span, that endpoint is followed instead of the probes' hit
+    (:func:`~flatland.reparam.probes.film_shape_end`,
+    :func:`~flatland.reparam.probes.angle_shape_end`): exact whatever the shape's motion.
 
     Emitter samples: the authors used one transform per shading point, from the mean of the
     occluded shadow rays' hits, and emitters faded at their ends. Here each emitter sample
@@ -101,11 +105,11 @@ def reparam(
     Assumes a continuous pixel filter (a box filter's edges would become moving
     discontinuities, theory/pixel_filters: refused) and that one translation follows every
     discontinuity within a kernel. Biased where it does not: discontinuities moving
-    differently inside one kernel (``two_occluders``; a thin primitive seen from a shading
-    point, whose ends' angles move at different rates: the film's map for a small shape has
-    no counterpart for directions yet), a wrong pick by the heuristic, an
-    attached point moving unlike the silhouette (first order in its distance from it, exact
-    under translation), an edge beyond the probes. The bias falls as the kernels narrow,
+    differently inside one kernel (``two_occluders``; a thin shape of segments is followed at
+    both ends, but not a circle, nor two shapes in one kernel), a wrong pick by the
+    heuristic, an attached point moving unlike the silhouette where the silhouette is not a segment's end (a
+    circle's tangent point: first order in its distance from it, exact under translation), an
+    edge beyond the probes. The bias falls as the kernels narrow,
     while the variance of the weights' derivatives (about $\sqrt{κ}$ per affected sample)
     grows: the trade-off of Sec. 4.2. The tent filter's log-derivative grows like
     $1 / \mathrm{distance}$ near its support's end (a mildly heavy tail); the Gaussian

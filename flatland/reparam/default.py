@@ -21,8 +21,10 @@ from flatland.core.translation import translation_offset, unit_weight
 from flatland.integrator import Context, Identity, Members
 from flatland.reparam.probes import (
     Choice,
-    FilmImage,
+    ShapeImage,
     angle_gap_probe,
+    angle_inner_shape,
+    angle_shape_end,
     film_gap_probe,
     film_inner_shape,
     film_shape_end,
@@ -43,12 +45,57 @@ def default_kappa_film(pixel_width: float) -> float:
     return 2.0 / (0.4 * pixel_width) ** 2
 
 
-def _end_coordinate(geom: Any, index: np.ndarray) -> Any:
-    """Film coordinates of segment endpoints ``index`` into ``concatenate([seg_a, seg_b])`` (Dual)."""
+def _endpoint(geom: Any, index: np.ndarray) -> Any:
+    """Segment endpoints ``index`` into ``concatenate([seg_a, seg_b])`` (Dual, (k, 2))."""
     n_seg = np.shape(detach(geom.seg_a))[0]
-    first = (index < n_seg)[:, None]
-    point = np.where(first, geom.seg_a[index % n_seg], geom.seg_b[index % n_seg])
-    return film_coordinate(geom, point - geom.cam_o)
+    return np.where((index < n_seg)[:, None], geom.seg_a[index % n_seg], geom.seg_b[index % n_seg])
+
+
+def _end_coordinate(geom: Any, index: np.ndarray) -> Any:
+    """Film coordinates of segment endpoints ``index`` (Dual)."""
+    return film_coordinate(geom, _endpoint(geom, index) - geom.cam_o)
+
+
+def _stretch(
+    inner: ShapeImage, mu: np.ndarray, points: Any,
+    trace: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    geom0: Any, coordinate: Callable[[np.ndarray, np.ndarray], Any],
+) -> tuple[Any, Any]:  # fmt: skip
+    r"""``points`` (n, m) with the rows of ``inner`` moved by the map that follows both ends of a small
+    shape's image, and $\log |\det J_T|$ (0 elsewhere).
+
+    With a, b the coordinates (film or angle) of the image's ends, a0, b0 their values, the
+    piecewise-linear map $T(y) = y + (a - a_0)$ below $a_0$, $T(y) = a + (y - a_0) s$ on
+    $[a_0, b_0]$ and $T(y) = y + (b - b_0)$ above $b_0$, $s = (b - a) / (b_0 - a_0)$, is continuous,
+    increasing and the identity at θ0; it carries both discontinuities a, b to fixed points, so
+    the shape may translate, turn, scale or move in depth (a translation follows one point only:
+    a thin shape turning about its middle has ends moving apart, and its middle, which the probes
+    see, does not move). $|\det J_T|$ is s on the image, else 1. Only rows where a ray at the
+    image's middle sees the shape (it is not hidden) are moved. ``coordinate(rows, i)`` gives the
+    θ-dependent coordinates of endpoints ``i`` for ``rows`` (Dual; only their tangents are used, the
+    values ``inner.lo``, ``inner.hi`` are on the probes' branch).
+    """
+    rows = np.flatnonzero(inner.ok)
+    if rows.size:
+        prim, _ = trace(rows, 0.5 * (inner.lo[rows] + inner.hi[rows]))
+        rows = rows[(prim >= 0) & (geom0.prim_shape[np.maximum(prim, 0)] == inner.shape[rows])]
+    if not rows.size:
+        return points, 0.0
+    a0, b0 = inner.lo[rows][:, None], inner.hi[rows][:, None]
+    # T(y) = y + Δ(y), Δ of value exactly 0 (the primal stays the naive one): each end's offset outside
+    # the image, inside it Δa + (y - a0) (s - 1), s - 1 = (Δb - Δa) / (b0 - a0)   (the map above)
+    left = translation_offset(coordinate(rows, inner.first[rows]))[:, None]
+    right = translation_offset(coordinate(rows, inner.last[rows]))[:, None]
+    stretch = (right - left) / (b0 - a0)  # s - 1, value exactly 0
+    y = mu[rows]
+    inside = (y >= a0) & (y <= b0)
+    moved = y + np.where(y < a0, left, np.where(inside, left + (y - a0) * stretch, right))
+    log_jacobian = zeros(np.shape(mu), is_dual(moved))
+    log_jacobian[rows] = np.where(inside, np.log1p(stretch), 0.0)  # log |det J_T| = log s
+    if not is_dual(points) and is_dual(moved):
+        points = as_dual(points)
+    points[rows] = moved
+    return points, log_jacobian
 
 
 class ReparamTransforms(Identity):
@@ -103,8 +150,8 @@ class ReparamTransforms(Identity):
             return trace(rows[r], params)
 
         sub = self._choose(ctx, origins[rows], centre_dirs[rows], again, trace_rows)
-        point, code, followed = choice.point, choice.code.copy(), choice.followed.copy()
-        point[rows], code[rows], followed[rows] = sub.point, sub.code, sub.followed
+        point, code, followed = choice.point, choice.code.copy(), choice.followed_prim.copy()
+        point[rows], code[rows], followed[rows] = sub.point, sub.code, sub.followed_prim
         return Choice(point, code, followed)
 
     def camera(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
@@ -136,62 +183,21 @@ class ReparamTransforms(Identity):
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
         # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
-        end = film_shape_end(ctx.geom0, probes, np.where(ok, choice.followed, -1))
+        end = film_shape_end(ctx.geom0, probes, np.where(ok, choice.followed_prim, -1))
         rows = np.flatnonzero(end >= 0)
         if rows.size:
             t_p[rows] = _end_coordinate(geom, end[rows])
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (Loubet et al. 2019, Sec. 3.2)
         points = mu + translation_offset(t_p, ok)[:, None]
-        log_jacobian = 0.0
         # a visible shape whose whole image lies inside the probes' span: follow both its ends
         inner = film_inner_shape(ctx.geom0, probes)
-        rows = np.flatnonzero(inner.ok)
-        if rows.size:
-            points, log_jacobian = self._stretch(ctx, inner, rows, mu, points, trace)
+        points, log_jacobian = _stretch(
+            inner, mu, points, trace, ctx.geom0, lambda rows, i: _end_coordinate(geom, i)
+        )
         sq = (points - center[:, None]) ** 2
         # w = k(T y, ω) |det J_T| / detach(...), log k = -κ/2 x² + const for the Gaussian   (Sec. 4.2)
         log_k = -0.5 * self.kappa_film * sq + log_jacobian
         return Members(points, unit_weight(log_k), self.paired, density)
-
-    @staticmethod
-    def _stretch(
-        ctx: Context, inner: FilmImage, rows: np.ndarray, mu: np.ndarray, points: Any,
-        trace: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
-    ) -> tuple[Any, Any]:  # fmt: skip
-        r"""``points`` with ``rows`` moved by the map that follows both ends of a small shape's image.
-
-        With a, b the film coordinates of the image's ends and a0, b0 their values, the
-        piecewise-linear map $T(t) = t + (a - a_0)$ left of $a_0$, $T(t) = a + (t - a_0) s$ on
-        $[a_0, b_0]$ and $T(t) = t + (b - b_0)$ right of $b_0$, $s = (b - a) / (b_0 - a_0)$, is
-        continuous, increasing and the identity at θ0; it carries both discontinuities a, b to
-        fixed points, so the shape may translate, turn, scale or move in depth (a translation
-        follows one point only: a thin shape turning about its middle has ends moving apart,
-        and the middle, which probes see, does not move). $|\det J_T|$ is s on the image, else 1.
-        Only rows where a ray at the image's middle sees the shape (it is not hidden) are moved.
-        Returns the points and $\log |\det J_T|$ (shaped like ``points``).
-        """
-        geom = ctx.geom
-        a, b = _end_coordinate(geom, inner.first[rows]), _end_coordinate(geom, inner.last[rows])
-        a0, b0 = detach(a), detach(b)
-        prim, _ = trace(rows, 0.5 * (a0 + b0))
-        seen = (prim >= 0) & (ctx.geom0.prim_shape[np.maximum(prim, 0)] == inner.shape[rows])
-        rows, a, b, a0, b0 = rows[seen], a[seen], b[seen], a0[seen], b0[seen]
-        if not rows.size:
-            return points, 0.0
-        y = mu[rows]
-        s = (b - a) / (b0 - a0)  # value exactly 1
-        # T(y) = y + Δ(y), Δ of value exactly 0 (so the primal is the naive one): the offsets of the
-        # two ends outside the image, inside it (a - a0) + (y - a0)(s - 1)   (piecewise-linear map above)
-        left, right = translation_offset(a)[:, None], translation_offset(b)[:, None]
-        middle = left + (y - a0[:, None]) * translation_offset(s)[:, None]
-        inside = (y >= a0[:, None]) & (y <= b0[:, None])
-        moved = y + np.where(y < a0[:, None], left, np.where(inside, middle, right))
-        log_jacobian = zeros(np.shape(mu), geom.differentiable)
-        log_jacobian[rows] = np.where(inside, np.log(s)[:, None], 0.0)
-        if not is_dual(points) and is_dual(moved):
-            points = as_dual(points)
-        points[rows] = moved
-        return points, log_jacobian
 
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         kappa = self.kappa
@@ -219,8 +225,20 @@ class ReparamTransforms(Identity):
         # derivative of atan2 there is 0/0, so that sample keeps the identity transform
         ok = choice.ok & (np.hypot(*detach(offset).T) > EPS_DIST)
         angle = angle_of(np.where(ok[:, None], offset, dirs0))
+
+        def end_angle(rows: np.ndarray, i: np.ndarray) -> Any:  # angles of endpoints i seen from x[rows]
+            return angle_of(_endpoint(ctx.geom, i) - x[rows])
+
+        # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
+        end = angle_shape_end(ctx.geom0, x0, ignore, probes, np.where(ok, choice.followed_prim, -1))
+        rows = np.flatnonzero(end >= 0)
+        if rows.size:
+            angle[rows] = end_angle(rows, end[rows])
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (Sec. 4.1)
         points = mu + translation_offset(angle, ok)[:, None]
+        # a visible shape whose whole image lies inside the probes' span: follow both its ends
+        inner = angle_inner_shape(ctx.geom0, x0, ignore, probes)
+        points, log_jacobian = _stretch(inner, mu, points, trace, ctx.geom0, end_angle)
         c = np.cos(points - center[:, None])
-        # von Mises weight, log k = κ cos(T y - ω) + const   (Loubet et al. 2019, Sec. 4.2)
-        return Members(points, unit_weight(kappa * c), self.paired)
+        # von Mises weight times |det J_T|, log k = κ cos(T y - ω) + const   (Loubet et al. 2019, Sec. 4.2)
+        return Members(points, unit_weight(kappa * c + log_jacobian), self.paired)

@@ -42,13 +42,20 @@ Refinements, each measured to matter in flatland and each keeping the choice
   film: 1 - width / spacing of them, 83 % at 0.1 px). Where the probes chose nothing,
   one more probe is traced at the middle of such a primitive's image (the one nearest
   the kernel centre) and the choice is made again with it.
-- *A shape inside the span* (:func:`film_inner_shape`, film only): a shape of segments whose
-  whole image lies between the first and the last probe has its two silhouette ends there,
-  at its extreme endpoints' images. The camera transform then follows both ends at once by a
-  piecewise-linear map (:meth:`~flatland.reparam.default.ReparamTransforms.camera`), whatever
-  the probes chose: one followed point moves like both ends only under translation, and a
-  thin stick turning or scaling about its middle has ends moving apart about a middle that
-  stands still (measured: 94-100 % of such a 0.2 px stick's derivative lost, the middle
+- *The silhouette's end* (:func:`film_shape_end`, :func:`angle_shape_end`): a shape of
+  segments has its silhouette ends at its extreme endpoints' images (film coordinates, or
+  angles from the shading point). Where the probes follow a shape next to a switch to another
+  and one end of its image lies inside their span, that endpoint is followed instead of the hit
+  next to the switch: it moves like the silhouette under every motion, where the attached hit
+  does only under translation (measured on the film: 7-16 % of a turning, receding or
+  one-end-moved 2-8 px segment's derivative lost).
+- *A shape inside the span* (:func:`film_inner_shape`, :func:`angle_inner_shape`): a shape
+  whose whole image lies between the first and the last probe has both silhouette ends there.
+  The transform then follows both at once by a piecewise-linear map (``_stretch`` in
+  :mod:`flatland.reparam.default`), whatever the probes chose: one followed point moves like
+  both ends only under translation, and a thin stick turning or scaling about its middle has
+  ends moving apart about a middle that stands still (measured: 94-100 % of a 0.2 px stick's
+  film derivative, 50-100 % of a 0.01-0.1 rad stick's irradiance derivative lost, the middle
   followed). Circles are left to the probes.
 
 The chosen point is *attached* (:func:`flatland.tracing.attached_points`): it moves
@@ -77,8 +84,10 @@ from flatland.tracing import attached_points, zeros
 __all__ = [
     "PARALLEL",
     "Choice",
-    "FilmImage",
+    "ShapeImage",
     "angle_gap_probe",
+    "angle_inner_shape",
+    "angle_shape_end",
     "film_gap_probe",
     "film_inner_shape",
     "film_shape_end",
@@ -103,6 +112,11 @@ class Choice:
     def ok(self) -> np.ndarray:
         """Whether a point was chosen (else the transform is the identity)."""
         return self.code >= 0
+
+    @property
+    def followed_prim(self) -> np.ndarray:
+        """:attr:`followed`, -1 throughout where it was not recorded."""
+        return np.full(len(self.code), -1) if self.followed is None else self.followed
 
 
 def _dot(a: Any, b: Any) -> Any:
@@ -340,14 +354,16 @@ def angle_gap_probe(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes:
 
 
 @dataclass(frozen=True)
-class FilmImage:
-    """Per row, a shape whose whole film image lies inside the probes' span (-1 where none) and the
-    indices of the two segment endpoints at its image's ends, into ``concatenate([seg_a, seg_b])``.
-    """
+class ShapeImage:
+    """Per row, a shape whose whole image (film coordinates or angles) lies inside the probes' span
+    (-1 where none), its two ends' coordinates on the probes' branch, and the indices of the
+    segment endpoints at those ends, into ``concatenate([seg_a, seg_b])``."""
 
     shape: np.ndarray
     first: np.ndarray
     last: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
 
     @property
     def ok(self) -> np.ndarray:
@@ -355,31 +371,107 @@ class FilmImage:
         return self.shape >= 0
 
 
-def _film_images(geom: SceneState) -> tuple[np.ndarray, np.ndarray]:
-    """The film images of the shapes made of segments: a table (K, 3) of (shape, first endpoint, last
-    endpoint), endpoints indexing ``concatenate([seg_a, seg_b])``, and every endpoint's film
-    coordinate (θ-free). Shapes with a circle, with a point behind the camera or with an image of
-    zero width (a segment seen end-on) are left out."""
+@dataclass(frozen=True)
+class _Images:
+    """Per row and shape of segments (K of them): its image's ends' coordinates ``lo``, ``hi`` (n, K),
+    their endpoints ``first``, ``last`` (n, K) and whether the image is usable (``valid``)."""
+
+    shape: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
+    valid: np.ndarray
+
+
+def _images(geom: SceneState, coords: np.ndarray, usable: np.ndarray, widest: float = np.inf) -> _Images:
+    """Each shape of segments' image per row from its endpoints' coordinates ``coords`` (n, 2S): the
+    interval between the extremes. Shapes with a circle, with an endpoint not ``usable`` (n, 2S)
+    or with an image of zero width, or not narrower than ``widest``, are not valid."""
+    n = len(coords)
+    seg_shape = geom.prim_shape[: geom.n_seg]
+    end_shape = np.concatenate([seg_shape, seg_shape])
+    with_circle = set(geom.prim_shape[geom.n_seg :].tolist())
+    shapes = [k for k in np.unique(seg_shape) if k not in with_circle]
+    lo, hi = np.zeros((n, len(shapes))), np.zeros((n, len(shapes)))
+    first, last = np.zeros((n, len(shapes)), np.int64), np.zeros((n, len(shapes)), np.int64)
+    valid = np.zeros((n, len(shapes)), bool)
+    rows = np.arange(n)
+    for j, k in enumerate(shapes):  # a handful of shapes, each vectorized over rows and endpoints
+        idx = np.flatnonzero(end_shape == k)
+        c = np.where(usable[:, idx], coords[:, idx], 0.0)
+        i_lo, i_hi = np.argmin(c, axis=1), np.argmax(c, axis=1)
+        lo[:, j], hi[:, j] = c[rows, i_lo], c[rows, i_hi]
+        first[:, j], last[:, j] = idx[i_lo], idx[i_hi]
+        valid[:, j] = np.all(usable[:, idx], axis=1) & (hi[:, j] > lo[:, j]) & (hi[:, j] - lo[:, j] < widest)
+    return _Images(np.array(shapes, dtype=np.int64), lo, hi, first, last, valid)
+
+
+def _inner(images: _Images, probes: np.ndarray) -> ShapeImage:
+    """Per row, the valid image lying strictly inside (probes[0], probes[-1]) whose middle is nearest
+    the span's centre."""
+    n = len(probes)
+    inside = images.valid & (images.lo > probes[:, :1]) & (images.hi < probes[:, -1:])
+    centre = 0.5 * (probes[:, :1] + probes[:, -1:])
+    dist = np.where(inside, np.abs(0.5 * (images.lo + images.hi) - centre), np.inf)
+    rows = np.arange(n)
+    best = np.argmin(dist, axis=1) if dist.shape[1] else np.zeros(n, np.int64)
+    found = np.isfinite(dist[rows, best]) if dist.shape[1] else np.zeros(n, bool)
+
+    def pick(a: np.ndarray, fill: float) -> np.ndarray:
+        return np.where(found, a[rows, best], fill) if a.shape[1] else np.full(n, fill)
+
+    shape = np.where(found, images.shape[best], -1) if len(images.shape) else np.full(n, -1)
+    return ShapeImage(
+        shape, pick(images.first, -1), pick(images.last, -1), pick(images.lo, np.nan), pick(images.hi, np.nan)
+    )
+
+
+def _end(images: _Images, probes: np.ndarray, geom: SceneState, followed: np.ndarray) -> np.ndarray:
+    """Per row, the endpoint at the one end of the ``followed`` primitive's shape image inside the
+    probes' span, -1 where none or both are."""
+    end = np.full(len(probes), -1)
+    shape = np.where(followed >= 0, geom.prim_shape[np.maximum(followed, 0)], -1)
+    for j, k in enumerate(images.shape):  # a handful of shapes
+        rows = np.flatnonzero((shape == k) & images.valid[:, j])
+        lo, hi = images.lo[rows, j], images.hi[rows, j]
+        lo_in = (lo > probes[rows, 0]) & (lo < probes[rows, -1])
+        hi_in = (hi > probes[rows, 0]) & (hi < probes[rows, -1])
+        end[rows] = np.where(
+            lo_in & ~hi_in, images.first[rows, j], np.where(hi_in & ~lo_in, images.last[rows, j], -1)
+        )
+    return end
+
+
+def _film_coordinates(geom: SceneState, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every segment endpoint's film coordinate (θ-free) and whether it lies ahead of the camera,
+    as (n, 2S) (the same for every row)."""
     o, f, r = (np.asarray(detach(v), dtype=np.float64) for v in (geom.cam_o, geom.cam_f, geom.cam_r))
     ends = np.concatenate([np.asarray(detach(geom.seg_a)), np.asarray(detach(geom.seg_b))]) - o
     depth = ends @ f
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (ends @ r) / depth
+    return np.broadcast_to(t, (n, t.size)), np.broadcast_to(depth > 0.0, (n, t.size))
+
+
+def _angles(
+    geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every segment endpoint's angle seen from the rows' points ``x`` (n, 2) relative to the probes'
+    centre, in [-π, π), plus that centre (the probes' branch), (n, 2S); endpoints of the shape a
+    row's point lies on (``ignore``'s) are not usable."""
+    centre = 0.5 * (probes[:, :1] + probes[:, -1:])
+    ends = np.concatenate([np.asarray(detach(geom.seg_a)), np.asarray(detach(geom.seg_b))])
+    v = ends[None] - x[:, None]
+    rel = wrap_angle(np.arctan2(v[..., 1], v[..., 0]) - centre)
     seg_shape = geom.prim_shape[: geom.n_seg]
     end_shape = np.concatenate([seg_shape, seg_shape])
-    with_circle = set(geom.prim_shape[geom.n_seg :].tolist())
-    candidates = []  # (shape, first endpoint, last endpoint)
-    for k in np.unique(seg_shape):  # a handful of shapes, each vectorized over its endpoints
-        idx = np.flatnonzero(end_shape == k)
-        if k in with_circle or np.any(depth[idx] <= 0.0):
-            continue
-        i_lo, i_hi = idx[np.argmin(t[idx])], idx[np.argmax(t[idx])]
-        if t[i_hi] > t[i_lo]:
-            candidates.append((k, i_lo, i_hi))
-    return np.array(candidates, dtype=np.int64).reshape(-1, 3), t
+    own = np.where(ignore >= 0, geom.prim_shape[np.maximum(ignore, 0)], -1)
+    usable = (end_shape[None] != own[:, None]) & (np.hypot(v[..., 0], v[..., 1]) > 0.0)
+    return centre + rel, usable
 
 
-def film_inner_shape(geom: SceneState, probes: np.ndarray) -> FilmImage:
+def film_inner_shape(geom: SceneState, probes: np.ndarray) -> ShapeImage:
     """Per row, a shape made of segments whose whole film image lies strictly inside the probes' span.
 
     A shape's image on the film is the interval between its endpoints' extreme film coordinates
@@ -398,19 +490,9 @@ def film_inner_shape(geom: SceneState, probes: np.ndarray) -> FilmImage:
 
     Returns
     -------
-    FilmImage
+    ShapeImage
     """
-    n = len(probes)
-    table, t = _film_images(geom)
-    if not len(table):
-        none = np.full(n, -1)
-        return FilmImage(none, none, none)
-    lo_k, hi_k = t[table[:, 1]], t[table[:, 2]]
-    inside = (lo_k > probes[:, :1]) & (hi_k < probes[:, -1:])  # (rows, candidate shapes)
-    dist = np.where(inside, np.abs(0.5 * (lo_k + hi_k) - 0.5 * (probes[:, :1] + probes[:, -1:])), np.inf)
-    best = np.argmin(dist, axis=1)
-    chosen = np.where(np.isfinite(dist[np.arange(n), best])[:, None], table[best], -1)
-    return FilmImage(chosen[:, 0], chosen[:, 1], chosen[:, 2])
+    return _inner(_images(geom, *_film_coordinates(geom, len(probes))), probes)
 
 
 def film_shape_end(geom: SceneState, probes: np.ndarray, followed: np.ndarray) -> np.ndarray:
@@ -420,8 +502,7 @@ def film_shape_end(geom: SceneState, probes: np.ndarray, followed: np.ndarray) -
     The probes chose to follow a point of that shape next to a switch to another shape; a
     silhouette end of the shape inside the span is that switch, and its endpoint moves like it
     under every motion, where the followed hit point does only under translation (to first order
-    in its distance from the end otherwise: measured 7-16 % of a turning or receding 2-8 px
-    segment's derivative lost).
+    in its distance from the end otherwise).
 
     Parameters
     ----------
@@ -436,13 +517,18 @@ def film_shape_end(geom: SceneState, probes: np.ndarray, followed: np.ndarray) -
     -------
     ndarray of int, shape (n,)
     """
-    n = len(probes)
-    end = np.full(n, -1)
-    table, t = _film_images(geom)
-    shape = np.where(followed >= 0, geom.prim_shape[np.maximum(followed, 0)], -1)
-    for k, i_lo, i_hi in table:  # a handful of shapes
-        rows = np.flatnonzero(shape == k)
-        lo_in = (t[i_lo] > probes[rows, 0]) & (t[i_lo] < probes[rows, -1])
-        hi_in = (t[i_hi] > probes[rows, 0]) & (t[i_hi] < probes[rows, -1])
-        end[rows] = np.where(lo_in & ~hi_in, i_lo, np.where(hi_in & ~lo_in, i_hi, -1))
-    return end
+    return _end(_images(geom, *_film_coordinates(geom, len(probes))), probes, geom, followed)
+
+
+def angle_inner_shape(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray) -> ShapeImage:
+    """:func:`film_inner_shape` for the shading integral: images are the intervals between a shape's
+    endpoints' extreme angles seen from the rows' points ``x`` (n, 2), on the probes' branch; the
+    shape a row's point lies on (``ignore`` (n,), its primitive) is skipped."""
+    return _inner(_images(geom, *_angles(geom, x, ignore, probes), widest=np.pi - 1e-9), probes)
+
+
+def angle_shape_end(
+    geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray, followed: np.ndarray
+) -> np.ndarray:
+    """:func:`film_shape_end` for the shading integral, angles seen from the rows' points ``x``."""
+    return _end(_images(geom, *_angles(geom, x, ignore, probes), widest=np.pi - 1e-9), probes, geom, followed)
