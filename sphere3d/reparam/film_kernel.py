@@ -10,7 +10,10 @@ and the primal bit-identical to ``naive``'s; around c a ring of probes
 (:func:`~sphere3d.reparam.probes.ring_offsets`, radius ``spread`` kernel standard deviations)
 chooses the point the sample's rotation follows (:mod:`sphere3d.reparam.probes`, with the
 ``refine`` bisection onto the silhouette and the snap onto the hit triangle's edge,
-:func:`silhouette_snap`). The sample is evaluated along $R·ω(s)$ with the weight
+:func:`silhouette_snap`), and the rotation turns about that point at the rate that keeps the
+snapped edge's image on its own line (:func:`~sphere3d.reparam.snaps.line_spin`; at a corner
+the kernel-weighted mean of its two edges' rates), so an edge turning in the image (a shape
+rotating) is followed along the kernel, not only at the point. The sample is evaluated along $R·ω(s)$ with the weight
 $g(\mathrm{film}(Rω) - c) / \mathrm{detach}(g(\mathrm{film}(Rω) - c))$ (value exactly 1,
 :func:`~flatland.core.translation.unit_weight`), next to the filter's own
 $k J (Rω) / \mathrm{detach}(k J (Rω))$ (:func:`~sphere3d.integrator.pixel_samples`).
@@ -51,9 +54,11 @@ edges where a rotation following the silhouette drags the static one.
 
 Where it is biased: a kernel holding a discontinuity its rotation does not follow: an edge
 between the ring's probes, or a feature about a pixel across whose edges move differently
-inside one kernel (a small triangle's three edges: a rotation follows two at their common
-corner, not three; motion in depth and rotation make its edges' film velocities differ, where a
-sideways translation moves every edge alike). Not reduced by more samples. Sizes: the
+inside one kernel (a small triangle's three edges: a rotation with its turn follows one edge
+exactly and two at their common corner to first order, not three; motion in depth and scaling
+change the image's size, which no rotation follows, where a sideways translation moves every
+edge alike; a triangle narrower than the ring's probes' spacing, seen by none of them). Not
+reduced by more samples. Sizes: the
 ``reparam_bias`` and atlas measurement pages.
 """
 
@@ -65,7 +70,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from flatland.core.dual import detach, tangent
+from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import FilmTransform
@@ -175,7 +180,12 @@ def film_transform(
         # makes more than 30 degrees with the line to the centre (sin 30° = 1/2)
         snap = silhouette_snap(state, centre[rows], 2.0 * spread * sigma)
         o = cam.origin
-        sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap)
+        # the turn that keeps a snapped edge's image on its own line (sphere3d.reparam.snaps.line_spin),
+        # the kernel's σ read in radians at the film's centre
+        axis = cam.directions(centre[rows, 0], centre[rows, 1])
+        pixel_angle = 2.0 * cam.tan_half / cam.width
+        spin = (axis / np.linalg.norm(axis, axis=1, keepdims=True), sigma * pixel_angle)
+        sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap, spin=spin)
         if (
             junctions
         ):  # a moving silhouette across a static edge: follow their crossing (sphere3d.reparam.junctions)
@@ -184,8 +194,14 @@ def film_transform(
             )
             sub.target[at] = crossing.target
             sub.active[at] = crossing.active
+            if sub.spin is not None:  # the crossing's rotation has no turn of its own
+                sub.spin.tangent[at] = 0.0
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
+        if sub.spin is not None:
+            turn = np.zeros(2 * n)
+            turn[rows] = tangent(sub.spin)
+            rotation = Rotation(rotation.target, rotation.active, Dual(np.zeros(2 * n), turn))
     first, second = slice(0, n), slice(n, 2 * n)  # views, not copies
     return FilmTransform((rotation.take(first), rotation.take(second)), (centre[:n], centre[n:]), kappa_film)
 

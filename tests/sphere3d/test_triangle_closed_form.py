@@ -582,3 +582,25 @@ def test18_boundary_flux_is_lamberts_derivative_and_bounds_it(param):
     _, slope = cf.occluded_sky_irradiance(scene, ORIGIN, UP, param)
     assert flux.net == pytest.approx(slope, rel=1e-9, abs=1e-12)
     assert flux.gross >= abs(flux.net) - 1e-12 and flux.gross > 0.01
+
+
+TURNS = {"view axis": "tri.rotate.z", "tilt": "tri.rotate.x"}
+
+
+@pytest.mark.parametrize("turn", list(TURNS))
+def test19_a_turning_triangle_is_followed_with_its_edges_turn(turn):
+    """A 4 px triangle turning about its centre, about the line of sight or tilting: its edges' images
+    turn, so a rotation following a point of an edge drags the rest of the edge inside the kernel
+    by its distance from the point times the turn rate. The film rotations also turn about the
+    followed point at the edge's own rate (:func:`sphere3d.reparam.snaps.line_spin`, at a corner
+    the kernel-weighted mean of its two edges' rates): the share of the exact derivative lost
+    (:func:`~sphere3d.closed_form.share_lost`, 1024 spp, 16 batches) is 0 within the two-sided
+    Student-t quantile (15 dof) at family-wise α = 1e-3 over the 2 turns (Šidák) times its
+    standard error. Without the turn the share was -82 % (view axis, z -18) and -17 % (tilt)."""
+    scene = s3.load_scene(cf.pinhole_triangle_scene(4, 8))
+    param = TURNS[turn]
+    exact = cf.triangle_image(scene, param).derivative
+    tally = GRADIENT_METHODS.run("reparam", ImageTask(scene, param, 1024, 12, BATCHES))
+    lost = cf.share_lost(tally.derivative, exact)
+    q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, len(TURNS)), BATCHES - 1)
+    assert abs(lost.mean) <= q * lost.stderr, (lost.mean, lost.stderr)
