@@ -13,7 +13,8 @@ chooses the point the sample's rotation follows (:mod:`sphere3d.reparam.probes`,
 :func:`silhouette_snap`), and the rotation turns about that point at the rate that keeps the
 snapped edge's image on its own line (:func:`~sphere3d.reparam.snaps.line_spin`; at a corner
 the kernel-weighted mean of its two edges' rates), so an edge turning in the image (a shape
-rotating) is followed along the kernel, not only at the point. The sample is evaluated along $R·ω(s)$ with the weight
+rotating) is followed along the kernel, not only at the point. The sample is evaluated along
+$R·ω(s)$ with the weight
 $g(\mathrm{film}(Rω) - c) / \mathrm{detach}(g(\mathrm{film}(Rω) - c))$ (value exactly 1,
 :func:`~flatland.core.translation.unit_weight`), next to the filter's own
 $k J (Rω) / \mathrm{detach}(k J (Rω))$ (:func:`~sphere3d.integrator.pixel_samples`).
