@@ -63,15 +63,68 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import tangent
+from flatland.core.dual import Dual, tangent
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import filter_radius, filter_value_1d, log_filter_value_1d, pdf_filter_1d
 
-__all__ = ["FILMS", "FilmTransform", "Splat", "gather", "reach", "splat_weights", "stencil"]
+__all__ = [
+    "FILMS",
+    "AffineFilm",
+    "FilmTransform",
+    "Splat",
+    "affine_directions",
+    "gather",
+    "reach",
+    "splat_weights",
+    "stencil",
+]
 
 FILMS = ("splat", "pixel")
 """Image options, the default first: each sample splatted into every pixel its filter covers, or
 counted in its own pixel only."""
+
+
+@dataclass(frozen=True)
+class AffineFilm:
+    r"""Per camera sample (film kernel member): whether an affine film map applies (``mask``), and its
+    derivative, $\dot A(u) = \dot a + \dot B (u - \bar p)$: ``a_dot`` (n, 2), ``b_dot`` (n, 2, 2),
+    ``centre`` (n, 2) (pixels)."""
+
+    mask: np.ndarray
+    a_dot: np.ndarray
+    b_dot: np.ndarray
+    centre: np.ndarray
+
+    @staticmethod
+    def none(n: int) -> AffineFilm:
+        """No sample has a map."""
+        return AffineFilm(np.zeros(n, bool), np.zeros((n, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2)))
+
+    def take(self, index: Any) -> AffineFilm:
+        """The samples at ``index``."""
+        return AffineFilm(self.mask[index], self.a_dot[index], self.b_dot[index], self.centre[index])
+
+
+def affine_directions(cam: Any, omega: np.ndarray, affine: AffineFilm) -> tuple[Dual, np.ndarray]:
+    r"""Directions ``omega`` (plain, (n, 3)) moving with the affine film map (Dual), and tr B'.
+
+    The film point $u = \mathrm{film}(ω)$ moves at $\dot A(u) = \dot a + \dot B (u - \bar p)$; the
+    unnormalized direction $d = f + s_x r + s_y u_c$ ($s_x = (2x/w - 1) t$, $s_y = (1 - 2y/h) t h/w$,
+    $t = \tan(fov/2)$, $u_c$ the camera's up) then moves at $\dot d = (2t/w)(\dot x r - \dot y u_c)$,
+    and the unit direction $ω = d / |d|$, with $|d| = 1 / (ω·f)$, at
+    $\dot ω = (ω·f)(\dot d - ω (ω·\dot d))$. Rows without a map get a zero tangent.
+    """
+    x, y = cam.film(omega)
+    u = np.stack([x, y], axis=-1) - affine.centre
+    velocity = affine.a_dot + np.einsum("nij,nj->ni", affine.b_dot, u)
+    velocity = np.where(affine.mask[:, None], velocity, 0.0)
+    scale = 2.0 * cam.tan_half / cam.width
+    right, up, forward = (np.asarray(v, dtype=np.float64) for v in (cam.right, cam.up, cam.forward))
+    d_dot = scale * (velocity[:, :1] * right - velocity[:, 1:] * up)
+    cos = omega @ forward
+    omega_dot = cos[:, None] * (d_dot - omega * np.sum(omega * d_dot, axis=1)[:, None])
+    trace = np.where(affine.mask, affine.b_dot[:, 0, 0] + affine.b_dot[:, 1, 1], 0.0)
+    return Dual(np.array(omega, dtype=np.float64), omega_dot), trace
 
 
 @dataclass(frozen=True)
@@ -87,6 +140,36 @@ class FilmTransform:
     rotations: tuple[Rotation, ...]
     centres: tuple[np.ndarray, ...] = ()
     kappa: float = 0.0
+    affine: tuple[AffineFilm, ...] = ()
+    """Per member, the samples whose film map is an affine map instead of the rotation
+    (:mod:`sphere3d.reparam.film_affine`; none if empty)."""
+
+    def active(self, member: int) -> np.ndarray:
+        """Where the member's map moves anything (its rotation, or an affine map)."""
+        rotation = self.rotations[member].active
+        return rotation | self.affine[member].mask if self.affine else rotation
+
+    def directions(self, member: int, cam: Any, omega: np.ndarray, rows: np.ndarray) -> tuple[Any, Any]:
+        r"""The member's map applied to the plain directions ``omega`` of samples ``rows`` (Dual, value
+        ``omega``), and where an affine map applies, $\mathrm{tr}\,\dot B$ (None: no such row)."""
+        r = self.rotations[member].take(rows).apply(omega)
+        if not self.affine:
+            return r, None
+        affine = self.affine[member].take(rows)
+        if not affine.mask.any():
+            return r, None
+        moved, trace = affine_directions(cam, omega, affine)
+        return Dual(r.value, np.where(affine.mask[:, None], moved.tangent, r.tangent)), (affine.mask, trace)
+
+    def log_jacobian(self, cam: Any, r: Any, affine: Any) -> Any:
+        r"""log of the film map's Jacobian at the moved directions ``r``: the rotation's ratio of film
+        Jacobians $\log J(Rω)$ (up to a constant), or $\log |\det A|$ where ``affine`` = (mask,
+        trace) marks an affine map (derivative $\mathrm{tr}\,\dot B$; :mod:`sphere3d.reparam.film_affine`)."""
+        log_j = cam.log_jacobian(r)
+        if affine is None:
+            return log_j
+        mask, trace = affine
+        return Dual(log_j.value, np.where(mask, trace, log_j.tangent))
 
     @staticmethod
     def identity(shape: tuple[int, ...]) -> FilmTransform:

@@ -412,19 +412,20 @@ def pixel_samples(
     if state.dual:
         film = transforms.camera(state, x, y, draws)
         # only rows where a rotation moves: elsewhere every tangent below is exactly 0
-        live = np.flatnonzero(np.any([rotation.active for rotation in film.rotations], axis=0))
+        live = np.flatnonzero(np.any([film.active(m) for m in range(len(film.rotations))], axis=0))
         r_dot, w_dot = np.zeros(d.shape), np.zeros(np.shape(weight))
-        for member, rotation in enumerate(film.rotations):  # one or two (not a loop over samples)
-            r = rotation.take(live).apply(take_rows(d, live))
+        for member in range(len(film.rotations)):  # one or two (not a loop over samples)
+            r, affine = film.directions(member, cam, take_rows(d, live), live)
             fx, fy = cam.film(r)
+            log_j = film.log_jacobian(cam, r, affine)
             # k(film(Rω)) J(Rω) g(film(Rω) - c) / detach(...): value 1, derivative of the filter and the
             # film kernel under the rotation (theory/pixel_filters; Loubet et al. 2019, Sec. 4.2)
             if splat is None:
                 log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
-                w = unit_weight(log_k + cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live))
+                w = unit_weight(log_k + log_j + film.log_kernel(member, fx, fy, live))
                 w_dot[live] += tangent(w)
             else:  # the same with each reached pixel's centre (sphere3d.film): its tangent only
-                rest = cam.log_jacobian(r) + film.log_kernel(member, fx, fy, live)
+                rest = log_j + film.log_kernel(member, fx, fy, live)
                 w_dot[live] += splat.weight_tangents(fx, fy, rest, live, cam.filter)
             r_dot[live] += tangent(r)
         # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is

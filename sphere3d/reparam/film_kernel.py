@@ -76,6 +76,7 @@ from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import FilmTransform
 from sphere3d.live import all_rows, any_rows
+from sphere3d.reparam.film_affine import AffineFilm, inner_shapes
 from sphere3d.reparam.junctions import junction_rotation
 from sphere3d.reparam.probes import follow_probes, ring_offsets
 from sphere3d.reparam.snaps import Snap, edge_snap
@@ -121,6 +122,7 @@ def film_transform(
     refine: int,
     plane: bool = True,
     junctions: bool = True,
+    shapes: bool = True,
 ) -> FilmTransform:
     r"""Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
 
@@ -149,6 +151,9 @@ def film_transform(
     junctions : bool, optional
         Where a ring sees a moving silhouette cross a static edge, follow their crossing
         (:mod:`sphere3d.reparam.junctions`).
+    shapes : bool, optional
+        Where a moving shape's whole image lies inside a ring, follow it by an affine map of the
+        film (:mod:`sphere3d.reparam.film_affine`).
 
     Returns
     -------
@@ -203,8 +208,20 @@ def film_transform(
             turn = np.zeros(2 * n)
             turn[rows] = tangent(sub.spin)
             rotation = Rotation(rotation.target, rotation.active, Dual(np.zeros(2 * n), turn))
+    # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
+    affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n)
+    if affine.mask.any():
+        rotation.active[affine.mask] = False
+        rotation.target.tangent[affine.mask] = 0.0
+        if rotation.spin is not None:
+            rotation.spin.tangent[affine.mask] = 0.0
     first, second = slice(0, n), slice(n, 2 * n)  # views, not copies
-    return FilmTransform((rotation.take(first), rotation.take(second)), (centre[:n], centre[n:]), kappa_film)
+    return FilmTransform(
+        (rotation.take(first), rotation.take(second)),
+        (centre[:n], centre[n:]),
+        kappa_film,
+        (affine.take(first), affine.take(second)),
+    )
 
 
 COPLANAR = 1e-9
