@@ -14,6 +14,8 @@ shading
     (:func:`sphere3d.closed_form.boundary_flux`, :func:`flatland.closed_form.boundary_flux`): for a
     motion whose net derivative is a small difference of large parts (a small triangle turning
     about its centre), the error is measured against the moving boundary the method must follow.
+    The closed form is taken where the renderer evaluates the integral: sphere3d's ray origin
+    (:meth:`benchmarks.atlas_cases.Case.origin`).
 
 z = lost / ±, Student's t with BATCHES - 1 degrees of freedom (a method that draws no random
 numbers in a cell, flatland's film ``boundary`` or ``naive`` here, has no ±: it reads ``exact, off``
@@ -157,7 +159,7 @@ def _scale(case: Case, exact: Any) -> float:
         from sphere3d.closed_form import boundary_flux
     else:
         from flatland.closed_form import boundary_flux
-    return boundary_flux(case.scene(), case.point, case.normal, case.param).gross
+    return boundary_flux(case.scene(), case.origin(), case.normal, case.param).gross
 
 
 def _lost(case: Case, batches: np.ndarray, exact: Any, scale: float | None) -> np.ndarray:

@@ -51,8 +51,11 @@ from sphere3d.vector import cross, dot, norm
 
 __all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "MAX_PAIRS", "shading_edge_term"]
 
-EPS_ANGLE = 1e-5
-"""Angle (radians) between the sampled edge direction and the two rays traced beside it."""
+EPS_ANGLE = 1e-6
+"""Angle (radians) between the sampled edge direction and the two rays traced beside it. A bias of
+order EPS_ANGLE / (feature angle · tan(corner angle)): near a corner the ray on one side crosses the
+corner's other edge (measured: 0.6 % of the gross flux of a 0.01 rad triangle seen at 10 degrees at
+1e-5, within noise at 1e-6); below about 1e-7 the rays' float32 rounding (Embree) takes over."""
 MAX_PAIRS = 1 << 16
 """Shading points × edges of one block of the silhouette test (its arrays stay in cache: 5 × faster
 than blocks of 2^20 on 65536 points × 1925 edges)."""
