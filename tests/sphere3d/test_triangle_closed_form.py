@@ -343,30 +343,31 @@ def _film_lost(size, motion, **options):
 
 @pytest.mark.parametrize("motion", sweep(MOTIONS, ["depth"]))
 @SLOW
-def test10_the_film_kernel_loses_part_of_a_small_silhouette_and_less_as_it_grows(motion):
+def test10_a_small_silhouette_is_lost_by_the_paper_variant_and_followed_by_the_default(motion):
     """The film kernel's bias (Sec. 4.2, 4.3) on a triangle about as small as its probes' spacing.
 
-    The default's ring of probes (radius ``spread`` σ, σ = 1 / √``kappa_film`` ≈ 0.28 px: 0.85 px,
-    six probes 0.85 px apart) and the paper's four probes drawn from the kernel can all miss a
-    1 px triangle that the kernel's support reaches; such a kernel follows nothing and its share
-    of the silhouette term is lost; in depth a kernel wider than the triangle that follows it moves
-    it by one translation, which does not change its area, so the kernel's share of the image's
-    growth is lost as well. Share lost: 1 - Σ sign(g) d / Σ |g| over the film
-    (:func:`~sphere3d.closed_form.share_lost`), standard error over 16 batches. Asserted, one-sided
-    Student-t (15 dof) at the Šidák level over the 2 motions × 3 claims: at 1 px the default and
-    the paper variant lose a significantly positive share; the default loses significantly more
-    at 1 px than at 2 px, where the probes' spacing is smaller than the triangle and only the
-    kernels at its corners can miss it.
+    The paper variant's four probes drawn from the kernel can all miss a 1 px triangle that the
+    kernel's support reaches; such a kernel follows nothing and its share of the silhouette term
+    is lost; in depth a kernel wider than the triangle that follows it moves it by one rotation,
+    which does not change its area, so the kernel's share of the image's growth is lost as well.
+    The default variant follows such a triangle whole (:mod:`sphere3d.reparam.film_affine`) and a
+    larger one's corners with both their edges (:mod:`sphere3d.reparam.film_corners`). Share lost:
+    1 - Σ sign(g) d / Σ |g| over the film (:func:`~sphere3d.closed_form.share_lost`), standard
+    error over 16 batches; Student-t (15 dof) at the Šidák level over the 2 motions × 3 claims: at
+    1 px the paper variant loses a significantly positive share (one-sided), and the default is
+    within the two-sided quantile of 0 at 1 px and at 2 px (while it followed one point per kernel,
+    this test showed it losing a significant share at 1 px, and more than at 2 px).
     """
-    q = stats.t.ppf(1.0 - sidak(ALPHA, 2 * len(MOTIONS)), BATCHES - 1)
+    q1 = stats.t.ppf(1.0 - sidak(ALPHA, 2 * len(MOTIONS)), BATCHES - 1)
+    q2 = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, 2 * len(MOTIONS)), BATCHES - 1)
     small, paper, larger = (
         _film_lost(1, motion),
         _film_lost(1, motion, variant="paper"),
         _film_lost(2, motion),
     )
-    assert small.mean > q * small.stderr
-    assert paper.mean > q * paper.stderr
-    assert small.mean - larger.mean > q * math.hypot(small.stderr, larger.stderr)
+    assert paper.mean > q1 * paper.stderr
+    assert abs(small.mean) <= q2 * small.stderr
+    assert abs(larger.mean) <= q2 * larger.stderr
 
 
 def test11_a_triangle_translating_sideways_is_unbiased_in_every_pixel():

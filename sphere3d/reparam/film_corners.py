@@ -1,0 +1,175 @@
+r"""Vertices where discontinuities meet on the film: a fan of affine maps following every edge there.
+
+The film kernel's rotation (:mod:`sphere3d.reparam.film_kernel`) follows one point and turns with
+one edge (:func:`~sphere3d.reparam.snaps.line_spin`). At a vertex where several discontinuity
+edges meet (a box's corner: two silhouette edges and a crease between two visible faces, or three
+creases) their images move differently when the shape turns, scales or recedes, and one rotation
+follows one of them (a 2 px triangle turning about an axis in the image plane lost 19 % of its
+film derivative).
+
+Where a moving vertex V, at which two or more discontinuity edges seen from the camera meet
+(silhouette edges, :meth:`sphere3d.boundary.edges.Edges.silhouette`, and creases), has its film
+image v inside the ring of a camera sample's probes, the sample's film map is affine on each sector
+between two consecutive edges' images about v: $A(u) = u + (θ - θ_0)(\dot v + \dot L_s (u - v))$,
+where $\dot L_s$ keeps both of the sector's bounding edges on their moved lines. With $e_i$ the
+image of edge i's direction from v and $\dot e_i$ its rate, a point $v + s e_i$ maps onto the moved
+line when $(\dot L_s e_i) × e_i = \dot e_i × e_i$ (2D cross products): two linear conditions on the
+four entries of $\dot L_s$, solved by least norm (no stretch the turns do not ask for; stable
+where the two edges are nearly collinear and turn alike, as along a smooth silhouette). Each
+sector goes onto its moved sector, so the pieces tile the film: a change of variables whose
+pieces are fixed at θ0 and whose every edge through V stays on its line, to first order in θ,
+all the derivative needs. The sample's sector is the one its own film point lies in; the
+weight carries $|\det A|$ (:func:`sphere3d.film.affine_directions`). Loubet et al. 2019, Sec. 4.3:
+a refinement of the heuristic.
+
+Biased where the kernel also holds a discontinuity not through V (a static edge: a T-junction at
+the corner, which keeps its own rule, :mod:`sphere3d.reparam.junctions`; an edge of another
+shape), and not applied beyond the ring's reach from V, where two of its edges may still share a
+kernel (near an acute corner) and a crease is followed by a point of one face (the probes pair
+different shapes only). So the box of ``hard_shadow_cube`` turning about its centre keeps most
+of its bias (about a quarter of its gradient image's RMS, at a corner on the ground's far edge
+and along a crease): the vertices' reach holds few of its samples.
+
+The vertices are found by a k-d tree over their film images (built once per state,
+O(V log V)); a vertex hidden behind other geometry is skipped; the mesh edges are
+:func:`sphere3d.boundary.edges.mesh_edges` (O(E log E), once per state).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from flatland.core.dual import detach, tangent
+from sphere3d.boundary.edges import mesh_edges
+from sphere3d.film import AffineFilm
+from sphere3d.state import SceneState, per_state
+
+__all__ = ["silhouette_corners"]
+
+
+@dataclass(frozen=True)
+class _Corners:
+    """Visible moving vertices where two or more discontinuity edges meet: film images ``point``
+    (k, 2), velocity ``a_dot`` (k, 2), their edges' image directions sorted by angle ``angle``
+    (k, K; padded with +inf), the count of edges ``count`` (k,), per sector between consecutive
+    edges the map's linear derivative ``b_dot`` (k, K, 2, 2), and a k-d tree over the images."""
+
+    point: np.ndarray
+    a_dot: np.ndarray
+    angle: np.ndarray
+    count: np.ndarray
+    b_dot: np.ndarray
+    tree: cKDTree | None
+
+
+def _least_norm_turns(e: np.ndarray, e_dot: np.ndarray) -> np.ndarray:
+    r"""$\dot L$ (..., 2, 2), the least-norm solution of $(\dot L e_i) × e_i = \dot e_i × e_i$, i = 1, 2
+    (e, e_dot: (..., 2, 2), edge i in ``[..., i, :]``), each condition divided by $|e_i|^2$ (a turn
+    rate)."""
+    ex, ey = e[..., 0], e[..., 1]
+    length2 = ex * ex + ey * ey
+    # (L e) × e = l11 ex ey + l12 ey² - l21 ex² - l22 ex ey, for L = [[l11, l12], [l21, l22]]
+    rows = np.stack([ex * ey, ey * ey, -ex * ex, -ex * ey], axis=-1) / length2[..., None]
+    rhs = (e_dot[..., 0] * ey - e_dot[..., 1] * ex) / length2
+    return np.einsum("...ij,...j->...i", np.linalg.pinv(rows), rhs).reshape(*e.shape[:-2], 2, 2)
+
+
+@per_state
+def _corner_table(state: SceneState) -> _Corners:
+    """Once per state: the visible vertices where two or more discontinuity edges seen from the camera
+    meet (silhouette edges, and creases between two faces on one side), whose image moves, with
+    their fans of maps (module docstring)."""
+    cam = state.camera
+    o = np.asarray(detach(cam.origin), dtype=np.float64)
+    edges = mesh_edges(state.triangles, state.shape_of)
+    to = o - edges.a
+    s1, s2 = np.einsum("ek,ek->e", to, edges.n1), np.einsum("ek,ek->e", to, edges.n2)
+    jumps = np.flatnonzero(edges.silhouette(o) | (edges.crease & (s1 * s2 > 0.0)))
+    empty = _Corners(
+        *(np.zeros((0, *shape)) for shape in ((2,), (2,), (1,), ())), np.zeros((0, 1, 2, 2)), None
+    )
+    if not jumps.size:
+        return empty
+    a, b = edges.endpoints(state.triangles)
+    m = jumps.size
+    _, vid = np.unique(np.concatenate([edges.a[jumps], edges.b[jumps]]), axis=0, return_inverse=True)
+    vid = vid.ravel()
+    counts = np.bincount(vid)
+    corner_ids = np.flatnonzero(counts >= 2)
+    if not corner_ids.size:
+        return empty
+    k_max = int(counts[corner_ids].max())
+    # the half-ends at each corner (padded with its first): half-end j is edge jumps[j % m] at its a (j < m)
+    order = np.argsort(vid, kind="stable")
+    first = np.searchsorted(vid[order], corner_ids)
+    slot = np.minimum(np.arange(k_max), counts[corner_ids, None] - 1)
+    half = order[first[:, None] + slot]  # (k, K)
+    edge = jumps[half % m]
+    at_a = half < m
+    vertex = np.where(at_a[:, :1, None], a[edge[:, :1]], b[edge[:, :1]])[:, 0]  # Dual (k, 3)
+    far = np.where(at_a[..., None], b[edge], a[edge])  # Dual (k, K, 3): the edges' other ends
+    vx, vy = cam.film(vertex - cam.origin)
+    fx, fy = cam.film(far - cam.origin)
+    point = np.stack([np.asarray(detach(vx)), np.asarray(detach(vy))], axis=-1)
+    v_dot = np.stack([np.asarray(tangent(vx)), np.asarray(tangent(vy))], axis=-1)
+    e = np.stack([np.asarray(detach(fx)), np.asarray(detach(fy))], axis=-1) - point[:, None]
+    e_dot = np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=-1) - v_dot[:, None]
+    forward = np.asarray(cam.forward, dtype=np.float64)
+    v0 = np.asarray(detach(vertex)) - o
+    far_depth = (np.asarray(detach(far)) - o) @ forward
+    moves = np.any(v_dot != 0.0, axis=1) | np.any(e_dot != 0.0, axis=(1, 2))
+    ok = (
+        moves
+        & (v0 @ forward > 0.0)
+        & np.all(far_depth > 0.0, axis=1)
+        & np.all(np.sum(e * e, axis=-1) > 0.0, axis=1)
+    )
+    if ok.any():  # hidden behind other geometry: the ray to the vertex stops short of it
+        dist = np.linalg.norm(v0[ok], axis=1)
+        hits = state.tracer.intersect(o, v0[ok] / dist[:, None])
+        ok[np.flatnonzero(ok)] = hits.t >= dist * (1.0 - 1e-6)
+    if not ok.any():
+        return empty
+    point, v_dot, e, e_dot, count = point[ok], v_dot[ok], e[ok], e_dot[ok], counts[corner_ids][ok]
+    # the edges by the angle of their images about the vertex; padding (repeats) sorted last
+    angle = np.arctan2(e[..., 1], e[..., 0])
+    angle = np.where(np.arange(k_max) < count[:, None], angle, np.inf)
+    by_angle = np.argsort(angle, axis=1)
+    angle = np.take_along_axis(angle, by_angle, axis=1)
+    e = np.take_along_axis(e, by_angle[..., None], axis=1)
+    e_dot = np.take_along_axis(e_dot, by_angle[..., None], axis=1)
+    # sector s lies between edge s and edge s + 1 (cyclically among the corner's count edges)
+    nxt = (np.arange(k_max) + 1) % count[:, None]
+    pair = np.stack([e, np.take_along_axis(e, nxt[..., None], axis=1)], axis=2)  # (k, K, 2, 2)
+    pair_dot = np.stack([e_dot, np.take_along_axis(e_dot, nxt[..., None], axis=1)], axis=2)
+    return _Corners(point, v_dot, angle, count, _least_norm_turns(pair, pair_dot), cKDTree(point))
+
+
+def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: np.ndarray) -> AffineFilm:
+    """Per kernel centre (n, 2), pixels: the map of the nearest visible moving vertex where two or more
+    discontinuity edges meet, whose film image lies within ``reach`` pixels (the ring's radius), in
+    the sector (between two of its edges) that holds the sample's own film point ``at`` (n, 2);
+    none elsewhere.
+
+    One k-d tree query per centre (:func:`_corner_table` builds the tree once per state).
+    """
+    n = len(centre)
+    out = AffineFilm.none(n)
+    corners = _corner_table(state)
+    if corners.tree is None or n == 0:
+        return out
+    dist, k = corners.tree.query(centre, distance_upper_bound=reach)
+    rows = np.flatnonzero(np.isfinite(dist))
+    k = k[rows]
+    rel = at[rows] - corners.point[k]
+    phi = np.arctan2(rel[:, 1], rel[:, 0])
+    # the sector: after the last edge whose angle is <= phi (before the first: the last sector, cyclic)
+    below = np.sum(corners.angle[k] <= phi[:, None], axis=1)
+    sector = np.where(below > 0, below - 1, corners.count[k] - 1)
+    out.mask[rows] = True
+    out.a_dot[rows], out.centre[rows] = corners.a_dot[k], corners.point[k]
+    out.b_dot[rows] = corners.b_dot[k, sector]
+    return out
