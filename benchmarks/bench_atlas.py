@@ -38,5 +38,16 @@ def run() -> list[Row]:
 
 
 def markdown(rows: list[Row]) -> str:
-    """The atlas page (:func:`benchmarks.atlas.table`) of the last :func:`run`."""
-    return table(_LAST, quick=QUICK)
+    """The atlas page (:func:`benchmarks.atlas.table`) of the last :func:`run`, with the date, the
+    commit and the machine it was generated on."""
+    import datetime
+
+    from benchmarks.__main__ import machine, revision
+
+    title, _, rest = table(_LAST, quick=QUICK).partition("\n\n")
+    seconds = sum(c.seconds for c in _LAST)
+    when = (
+        f"Generated on {datetime.date.today().isoformat()} from commit {revision()} ({machine()}, "
+        f"{seconds:.0f} s of rendering over {len(_LAST)} cells)."
+    )
+    return f"{title}\n\n{when}\n\n{rest}"

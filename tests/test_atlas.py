@@ -116,4 +116,6 @@ def test06_make_bench_turns_the_cells_into_summary_rows_and_the_page(monkeypatch
         ("flatland shading, reparam: flagged of 1", 1),
         ("flatland shading, boundary: flagged of 1", 0),
     ]
-    assert bench_atlas.markdown(rows) == atlas.table(cells, quick=bench_atlas.QUICK)
+    page = bench_atlas.markdown(rows)
+    assert page.replace(page.split("\n\n")[1] + "\n\n", "", 1) == atlas.table(cells, quick=bench_atlas.QUICK)
+    assert page.split("\n\n")[1].startswith("Generated on ") and "from commit" in page
