@@ -23,6 +23,7 @@ A notebook changed since, or a docs build without a test run before it, executes
 from __future__ import annotations
 
 import atexit
+import fcntl
 import os
 import re
 import tempfile
@@ -232,13 +233,18 @@ def _hand_to_the_docs_build(executed: Path, docs_path: Path, seconds: float) -> 
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = done.outputs, done.execution_count
     nb.metadata["language_info"] = ran.metadata.get("language_info", {})
-    cache = get_cache(DOCS_CACHE)
-    cache.cache_notebook_bundle(
-        CacheBundleIn(nb, str(docs_path), data={"execution_seconds": seconds}),
-        check_validity=False,
-        overwrite=True,
-    )
-    try:  # what myst-nb looks up: the docs copy of the source notebook, byte for byte the same
-        cache.match_cache_notebook(read_notebook(TUTORIALS / executed.name))
-    except KeyError:
-        pytest.fail(f"{executed.name}: the docs build would not find these outputs (another cache key)")
+    # one worker at a time: the cache is an sqlite database that the first caller creates, and two
+    # workers creating it at once fail ("table settings already exists"); a lock file beside it
+    DOCS_CACHE.parent.mkdir(parents=True, exist_ok=True)
+    with open(DOCS_CACHE.parent / ".jupyter_cache.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        cache = get_cache(DOCS_CACHE)
+        cache.cache_notebook_bundle(
+            CacheBundleIn(nb, str(docs_path), data={"execution_seconds": seconds}),
+            check_validity=False,
+            overwrite=True,
+        )
+        try:  # what myst-nb looks up: the docs copy of the source notebook, byte for byte the same
+            cache.match_cache_notebook(read_notebook(TUTORIALS / executed.name))
+        except KeyError:
+            pytest.fail(f"{executed.name}: the docs build would not find these outputs (another cache key)")
