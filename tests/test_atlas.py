@@ -119,3 +119,25 @@ def test06_make_bench_turns_the_cells_into_summary_rows_and_the_page(monkeypatch
     page = bench_atlas.markdown(rows)
     assert page.replace(page.split("\n\n")[1] + "\n\n", "", 1) == atlas.table(cells, quick=bench_atlas.QUICK)
     assert page.split("\n\n")[1].startswith("Generated on ") and "from commit" in page
+
+
+def test07_the_occluder_table_takes_every_motion_of_the_occluder_in_both_scenes(monkeypatch):
+    """``benchmarks.bench_occluder_motions``: its motions are every translation, turn and the scale of
+    the shape named ``occluder`` in both scenes (the parameters a user can differentiate), and one
+    scene and motion gives a row per method, relative to the reference's RMS (a fake renderer whose
+    every image is the reference reads bias 0 and RMSE 0)."""
+    from benchmarks import bench_occluder_motions as occ
+    from sphere3d.scene import load_scene
+
+    for scene in occ.SCENES:
+        mine = {p for p in load_scene(scene).parameters if p.startswith("occluder.")}
+        assert mine - {"occluder.albedo", "occluder.emission"} == set(occ.MOTIONS)
+
+    class Fake:
+        derivative = np.array([[1.0, -2.0], [0.5, 0.0]])
+        derivative_stderr = np.zeros((2, 2))
+
+    monkeypatch.setattr(occ, "render_gradient", lambda *a, **k: Fake())
+    rows = occ.measure("hard_shadow", "occluder.rotate.z")
+    assert [r.case for r in rows] == [f"hard_shadow occluder.rotate.z {m}: bias / rms" for m in occ.METHODS]
+    assert all(r.value == 0.0 and r.note.startswith("RMSE 0.000") for r in rows)
