@@ -35,7 +35,7 @@ from flatland.core.dual import detach
 from sphere3d.tracing import face_normals
 from sphere3d.vector import dot
 
-__all__ = ["COPLANAR_TOL", "Edges", "mesh_edges"]
+__all__ = ["COPLANAR_TOL", "Edges", "mesh_edges", "row_ids"]
 
 COPLANAR_TOL = 1e-9
 """Two faces are coplanar (their common edge is no crease) when ``1 - n₁·n₂ <= COPLANAR_TOL``."""
@@ -101,24 +101,41 @@ class Edges:
         return Edges(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
 
+def row_ids(rows: np.ndarray) -> np.ndarray:
+    """Ids of the distinct rows of ``rows`` (N, k), numbered in the rows' lexicographic order: the
+    ``return_inverse`` of ``np.unique(rows, axis=0)``, from one ``np.lexsort`` of the k columns
+    (O(N log N); ``np.unique`` with an axis sorts the rows as opaque records, several times slower)."""
+    n = len(rows)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    order = np.lexsort(rows.T[::-1])  # first column the primary key, as np.unique(axis=0)
+    ranked = rows[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    np.any(ranked[1:] != ranked[:-1], axis=1, out=new[1:])  # by value: -0.0 and 0.0 are one vertex
+    ids = np.empty(n, dtype=np.int64)
+    ids[order] = np.cumsum(new) - 1
+    return ids
+
+
 def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
     """The unique edges of ``triangles`` (T, 3, 3), welded by exact position (see the module doc).
 
-    Vectorized: vertex ids from ``np.unique`` over the positions, edges as sorted id
-    pairs, their faces from one stable sort of the three half-edges of every face.
+    Vectorized, O(T log T): vertex ids from one sort of the positions (:func:`row_ids`), edges as
+    sorted id pairs (one integer key each), their faces from one stable sort of the three
+    half-edges of every face.
     """
     tri = np.asarray(detach(triangles), dtype=np.float64)
     t = len(tri)
-    _, vid = np.unique(tri.reshape(-1, 3), axis=0, return_inverse=True)
-    vid = vid.reshape(t, 3)
+    vid = row_ids(tri.reshape(-1, 3)).reshape(t, 3)
     slots = np.array([[0, 1], [1, 2], [2, 0]])
     face = np.repeat(np.arange(t), 3)
     ia, ib = np.tile(slots[:, 0], t), np.tile(slots[:, 1], t)
     ends = np.stack([vid[face, ia], vid[face, ib]], axis=1)
     keep = ends[:, 0] != ends[:, 1]  # zero-length edges (refused earlier by check_world) are dropped
     face, ia, ib, ends = face[keep], ia[keep], ib[keep], np.sort(ends[keep], axis=1)
-    _, edge, count = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
-    edge = edge.ravel()
+    # one key per (lower id, higher id): its order is the pairs' lexicographic order
+    _, edge, count = np.unique(ends[:, 0] * (3 * t) + ends[:, 1], return_inverse=True, return_counts=True)
     order = np.argsort(edge, kind="stable")  # half-edges grouped by edge, faces in index order
     first = np.searchsorted(edge[order], np.arange(count.size))
     h1 = order[first]

@@ -8,7 +8,9 @@ follows one of them (a 2 px triangle turning about an axis in the image plane lo
 film derivative).
 
 Where a moving vertex V, at which two or more discontinuity edges seen from the camera meet
-(silhouette edges, :meth:`sphere3d.boundary.edges.Edges.silhouette`, and creases), has its film
+(silhouette edges, :meth:`sphere3d.boundary.edges.Edges.silhouette`, and the creases of flat-shaded
+shapes, :func:`sphere3d.boundary.camera.camera_candidates`: a smooth shape's interpolated normals
+make its creases no discontinuity, and its vertices slide under its silhouette), has its film
 image v inside the ring of a camera sample's probes, the sample's film map is affine on each sector
 between two consecutive edges' images about v: $A(u) = u + (θ - θ_0)(\dot v + \dot L_s (u - v))$,
 where $\dot L_s$ keeps both of the sector's bounding edges on their moved lines. With $e_i$ the
@@ -43,7 +45,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from flatland.core.dual import detach, tangent
-from sphere3d.boundary.edges import mesh_edges
+from sphere3d.boundary.camera import camera_candidates
+from sphere3d.boundary.edges import mesh_edges, row_ids
 from sphere3d.film import AffineFilm
 from sphere3d.state import SceneState, per_state
 
@@ -87,7 +90,8 @@ def _corner_table(state: SceneState) -> _Corners:
     edges = mesh_edges(state.triangles, state.shape_of)
     to = o - edges.a
     s1, s2 = np.einsum("ek,ek->e", to, edges.n1), np.einsum("ek,ek->e", to, edges.n2)
-    jumps = np.flatnonzero(edges.silhouette(o) | (edges.crease & (s1 * s2 > 0.0)))
+    # silhouettes, and creases where the radiance jumps (flat-shaded, reflecting) seen between two faces
+    jumps = np.flatnonzero(camera_candidates(state, edges) & (edges.silhouette(o) | (s1 * s2 > 0.0)))
     empty = _Corners(
         *(np.zeros((0, *shape)) for shape in ((2,), (2,), (1,), ())), np.zeros((0, 1, 2, 2)), None
     )
@@ -95,8 +99,7 @@ def _corner_table(state: SceneState) -> _Corners:
         return empty
     a, b = edges.endpoints(state.triangles)
     m = jumps.size
-    _, vid = np.unique(np.concatenate([edges.a[jumps], edges.b[jumps]]), axis=0, return_inverse=True)
-    vid = vid.ravel()
+    vid = row_ids(np.concatenate([edges.a[jumps], edges.b[jumps]]))
     counts = np.bincount(vid)
     corner_ids = np.flatnonzero(counts >= 2)
     if not corner_ids.size:
