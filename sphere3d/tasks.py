@@ -10,7 +10,8 @@ sample: sample j of pixel p has the global index ``p * spp + j`` (batch
 whatever the method, and anything a method draws in addition is keyed on the same
 index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.emitter"``,
 ...; see :class:`flatland.core.rng.Draws`). Results therefore do not depend on
-:data:`CHUNK` or on the number of threads (:mod:`sphere3d.execution`).
+:data:`CHUNK` or on the number of threads (:mod:`sphere3d.execution`), nor on which machines of a
+Dask cluster compute which tiles of chunks (:meth:`ImageTask._on_cluster`).
 """
 
 from __future__ import annotations
