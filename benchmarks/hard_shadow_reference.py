@@ -45,6 +45,12 @@ as the stored files were made before film splatting (:mod:`sphere3d.film`) becam
 The file is rewritten after every pass, so a run cut short keeps what it completed,
 and ``--resume`` adds passes to a stored file.
 
+``--scheduler ADDRESS`` runs every render's chunks as tiles on the workers of that
+``dask.distributed`` scheduler (:func:`sphere3d.execution.cluster`; the ``cluster`` extra), each
+worker on its own cores (``SPHERE3D_THREADS`` there), this process only assembling the images:
+the passes are bit for bit those of a local run, so a cluster's passes and a machine's mix in one
+file (``--resume``).
+
 Stored: ``hard_shadow`` 43 passes (44 032 spp; on one core of a shared machine a pass
 took 25-110 s and the time budget ended the run before 64), rms standard error 0.020;
 ``hard_shadow_cube`` 64 passes (65 536 spp), rms standard error 0.024; 44 and 32
@@ -60,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flatland.core.validate import ValidationError
 from sphere3d import execution
 from sphere3d.scene import load_scene
 from sphere3d.tasks import ImageTask
@@ -114,12 +121,24 @@ def _write(scene_name: str, n: int, sums: np.ndarray, m2: np.ndarray, seconds: f
 
 
 def generate(
-    scene_name: str, passes: int = PASSES, budget: float = float("inf"), resume: bool = False
+    scene_name: str,
+    passes: int = PASSES,
+    budget: float = float("inf"),
+    resume: bool = False,
+    scheduler: str | None = None,
 ) -> int:
     """Run passes (seeds SEED + k) until ``passes`` are stored or ``budget`` seconds are spent; returns
     the number of passes stored. The file is rewritten after every pass (from the second on); with
     ``resume`` the passes already stored are kept (their sums and squared deviations are recovered
-    from the stored means and standard error) and the run continues with the next seed."""
+    from the stored means and standard error) and the run continues with the next seed. With
+    ``scheduler`` (a ``dask.distributed`` address) the renders run on that cluster, with the same
+    numbers (:func:`sphere3d.execution.cluster`)."""
+    with execution.cluster(scheduler):
+        return _passes(scene_name, passes, budget, resume)
+
+
+def _passes(scene_name: str, passes: int, budget: float, resume: bool) -> int:
+    """:func:`generate`'s loop over passes, wherever the renders run."""
     n, seconds = 0, 0.0
     sums = m2 = None
     if resume and path_of(scene_name).exists():
@@ -155,11 +174,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--passes", type=int, default=PASSES)
     parser.add_argument("--budget", type=float, default=float("inf"), help="seconds per scene (this run)")
     parser.add_argument("--resume", action="store_true", help="add passes to the stored ones")
+    parser.add_argument(
+        "--scheduler", default=None,
+        help="dask.distributed scheduler address: the renders run on that cluster (default: here, one core)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
-    execution.WORKERS = 1  # one core: the reference runs beside other work
+    execution.WORKERS = 1  # one core: the reference runs beside other work (on a cluster: the workers' own)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     for name in args.scenes:
-        stored = generate(name, args.passes, args.budget, args.resume)
+        try:
+            stored = generate(name, args.passes, args.budget, args.resume, args.scheduler)
+        except ValidationError as e:  # a bad --scheduler: one line, status 2
+            parser.error(str(e))
         print(f"{name}: stored {stored} passes ({stored * SPP_PER_PASS} spp) in {path_of(name)}", flush=True)
     return 0
 

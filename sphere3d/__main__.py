@@ -99,6 +99,7 @@ PACKAGE = Package(
     estimate=_estimate,
     estimators=_ESTIMATORS,
     films=FILMS,  # --film for render and gradient, "splat" (the default) first
+    cluster=True,  # --scheduler for render and gradient: tiles on a dask.distributed cluster
 )
 """What the command line and the study runner (:mod:`flatland.app`) need to know about sphere3d."""
 

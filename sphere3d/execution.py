@@ -1,4 +1,4 @@
-"""Threads and memory: how a task's chunks run, apart from the maths.
+"""Threads, memory and machines: how a task's chunks run, apart from the maths.
 
 A task (:mod:`sphere3d.tasks`) splits its samples into memory chunks whose random numbers are
 keyed on the samples' indices, so its result does not depend on how the chunks are run. This
@@ -9,6 +9,13 @@ temporaries on glibc, and reports each finished chunk to the call's progress bar
 
 :data:`WORKERS` defaults to every core (``os.cpu_count()``); the environment variable
 ``SPHERE3D_THREADS`` (read at import) or an assignment ``sphere3d.execution.WORKERS = n`` limits it.
+
+Beyond one machine: inside :func:`cluster` (``render(..., scheduler=address)``), a task sends tiles
+of its chunks to the workers of a ``dask.distributed`` scheduler through :func:`map_tiles`, each
+tile run there by :func:`map_chunks` on that machine's threads (the optional ``cluster`` extra,
+``pip install 'reparam-lab[cluster]'``). The address is checked and the client made as for a study's trials
+(``flatland.app.study_trials``); workers started with one thread each
+(``dask worker ADDRESS --nthreads 1``) leave a machine's cores to its tiles' chunks.
 """
 
 from __future__ import annotations
@@ -18,14 +25,26 @@ import ctypes
 import functools
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from typing import Any
 
 from flatland.core import progress
 from flatland.core.validate import ValidationError
 
-__all__ = ["TRIM_DELAY", "WORKERS", "map_chunks", "workers"]
+__all__ = [
+    "TILES_PER_THREAD",
+    "TRIM_DELAY",
+    "WORKERS",
+    "client",
+    "cluster",
+    "connect",
+    "map_chunks",
+    "map_tiles",
+    "tile_count",
+    "workers",
+]
 
 
 def _default_workers() -> int:
@@ -138,3 +157,97 @@ def _map_threads(func: Callable[[int], Any], items: range, counted: bool = False
         if counted:
             progress.advance()
     return out
+
+
+TILES_PER_THREAD = 4
+"""Tiles a task sends to a cluster per worker thread (:func:`tile_count`): enough that a slow or late
+worker leaves little idle time at the end; each tile builds the scene's state (and tracer) once."""
+
+_CLIENT: contextvars.ContextVar[Any] = contextvars.ContextVar("sphere3d_cluster", default=None)
+
+
+def connect(scheduler: Any) -> Any:
+    """A ``dask.distributed`` client of the scheduler at address ``scheduler`` (not the default client).
+
+    Raises
+    ------
+    ValidationError
+        Naming ``scheduler``: not a string, dask.distributed not installed, a malformed address, or
+        no scheduler answering there (after dask's connect timeout).
+    """
+    if not isinstance(scheduler, str):
+        raise ValidationError(
+            "scheduler",
+            f"must be a dask.distributed scheduler address such as 'tcp://host:8786', got {scheduler!r}",
+        )
+    try:
+        from dask.distributed import Client
+        from distributed.comm import parse_address, parse_host_port
+    except ImportError:  # the optional 'cluster' extra
+        raise ValidationError(
+            "scheduler", "needs dask.distributed, the 'cluster' extra: pip install 'reparam-lab[cluster]'"
+        ) from None
+    try:  # a malformed address fails before a Client exists (a half-built one stalls the exit)
+        scheme, location = parse_address(scheduler)
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)
+        return Client(scheduler, set_as_default=False)
+    except (ValueError, OSError) as e:  # a malformed address, or no scheduler there
+        raise ValidationError("scheduler", f"cannot connect to {scheduler!r}: {e}") from None
+
+
+@contextmanager
+def cluster(scheduler: str | None) -> Iterator[None]:
+    """Within, tasks run their chunks on the Dask cluster at ``scheduler`` (:func:`map_tiles`).
+
+    The client connects on entry (:func:`connect`) and closes on exit. None changes nothing: the
+    chunks run where the enclosing call runs them (this machine's threads, unless an outer
+    ``cluster`` is active).
+    """
+    if scheduler is None:
+        yield
+        return
+    dask_client = connect(scheduler)
+    token = _CLIENT.set(dask_client)
+    try:
+        yield
+    finally:
+        _CLIENT.reset(token)
+        dask_client.close()
+
+
+def client() -> Any:
+    """The Dask client of the enclosing :func:`cluster`, or None: chunks run on this machine."""
+    return _CLIENT.get()
+
+
+def tile_count(chunks: int) -> int:
+    """Tiles to cut ``chunks`` memory chunks into on the current cluster: :data:`TILES_PER_THREAD` per
+    worker thread it has now (at least one tile, at most one per chunk)."""
+    threads = sum(client().nthreads().values())
+    return max(1, min(chunks, TILES_PER_THREAD * threads))
+
+
+def map_tiles(func: Callable[[Any, Any], Any], shared: Any, items: Sequence[Any]) -> list[Any]:
+    """``[func(shared, item) for item in items]``, each call a task on the workers of :func:`client`.
+
+    ``shared`` (the scene, the transforms: what every tile needs) is sent to the cluster once; ``func``
+    must be importable by the workers (a module-level function). The call's progress bar advances as
+    each task finishes, in any order; the results come back in the order of ``items``. The first
+    failure is raised (a :class:`ValidationError` raised on a worker comes back as one) and the other
+    tasks are cancelled.
+    """
+    from distributed import as_completed
+
+    dask_client = client()
+    progress.start(len(items))
+    [data] = dask_client.scatter([shared], hash=False)
+    futures = [dask_client.submit(func, data, item, pure=False) for item in items]
+    try:
+        for future in as_completed(futures, loop=dask_client.loop):  # this client, not a default one
+            future.result()  # raises the task's exception
+            progress.advance()
+        return [future.result() for future in futures]
+    except BaseException:
+        dask_client.cancel(futures)
+        raise

@@ -8,6 +8,13 @@ gradient methods are in :data:`GRADIENT_METHODS` (``naive``, ``finite_difference
 Every entry point takes ``progress``: a tqdm bar on standard error, advanced per chunk of
 samples, shown after a couple of seconds when stderr is a terminal (None, the default),
 always (True) or never (False); it changes no number (:mod:`flatland.core.progress`).
+
+:func:`render` and :func:`render_gradient` also take ``scheduler``, the address of a
+``dask.distributed`` scheduler (as a study's ``scheduler``; the optional ``cluster`` extra): the
+image's memory chunks then run as tiles on that cluster's workers, each building its own scene
+state and tracer from the pickled scene, and the image is assembled here, bit for bit the image of
+a local run (:func:`sphere3d.execution.cluster`, :meth:`sphere3d.tasks.ImageTask._on_cluster`); the
+progress bar then advances per finished tile.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ from flatland.core.contract import Estimate
 from flatland.core.image import GradientImage, Image, resolve_batches
 from flatland.core.progress import run as _bar
 from flatland.core.validate import ValidationError, check_int, check_seed
-from sphere3d import tasks
+from sphere3d import execution, tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.methods._common import MEMORY_MODELS
 from sphere3d.scene import check_vector, load_scene
@@ -37,6 +44,7 @@ def render(
     batches: int | None = None,
     film: str = "splat",
     progress: bool | None = None,
+    scheduler: str | None = None,
 ) -> Image:
     """Render ``scene`` (a built-in name, a .json path, a dict or a Scene).
 
@@ -56,11 +64,22 @@ def render(
     progress : bool, optional
         A progress bar per chunk on stderr: None (default) when stderr is a terminal, True
         always, False never (:mod:`flatland.core.progress`); it changes no number.
+    scheduler : str, optional
+        Address of a ``dask.distributed`` scheduler, e.g. ``"tcp://10.0.0.5:8786"`` (needs the
+        ``cluster`` extra): the chunks run as tiles on its workers and the image is bit for bit
+        that of a local run (module docstring); None (default): on this machine's threads.
 
     Returns
     -------
     Image
         ``value`` and ``stderr`` of shape (height, width).
+
+    Raises
+    ------
+    ValidationError
+        One error naming the field and value: unknown scene field, spp < 1, batches not dividing
+        spp, film not one of "pixel", "splat", a scheduler address that is malformed or where no
+        scheduler answers (or dask.distributed missing).
     """
     scene = load_scene(scene)
     spp = check_int("spp", spp)
@@ -68,7 +87,7 @@ def render(
     batches = resolve_batches(spp, batches)
     task = ImageTask(scene, None, spp, seed, batches, film=film)
     _check_budget(task, {})
-    with _bar(f"render {scene.name}", progress):
+    with execution.cluster(scheduler), _bar(f"render {scene.name}", progress):
         tally = task.evaluate(0.0)
     return Image.from_batches(tally.value, spp=spp, seed=seed, scene=scene.name)
 
@@ -96,10 +115,16 @@ def _check_budget(task: ImageTask | PointTask, options: dict[str, Any], method: 
     check_request(_request(task, options, method))
 
 
-def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
+def _resolve(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The method's table entry and its checked options, once the request fits (:func:`_check_budget`)."""
     spec = GRADIENT_METHODS.lookup(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
     _check_budget(task, resolved, spec.name)
+    return spec, resolved
+
+
+def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
+    spec, resolved = _resolve(method, task, options)
     return spec.func(task, **resolved), resolved
 
 
@@ -112,6 +137,7 @@ def render_gradient(
     batches: int | None = None,
     film: str = "splat",
     progress: bool | None = None,
+    scheduler: str | None = None,
     **options: Any,
 ) -> GradientImage:
     """Render ``scene`` and its derivative with respect to ``param`` by ``method``.
@@ -121,9 +147,10 @@ def render_gradient(
     param : str
         A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
     method : {"naive", "finite_difference", "boundary", "reparam"}
-    spp, seed, batches, film, progress
+    spp, seed, batches, film, progress, scheduler
         As in :func:`render`; the film (default ``"splat"``) applies to every method alike (their
-        values stay equal).
+        values stay equal). With ``scheduler`` every render a method makes (finite differences:
+        three) runs on the cluster, its per-image term (boundary's edges on the film) as one more task.
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
@@ -141,7 +168,7 @@ def render_gradient(
     ValidationError
         One error naming the field and value: unknown scene field, method, option or
         parameter, spp < 1, κ outside (0, 1e15], h <= 0 (or h >= 1 on a scale), batches not dividing spp,
-        film not one of "pixel", "splat".
+        film not one of "pixel", "splat", a bad ``scheduler`` (as in :func:`render`).
     """
     scene = load_scene(scene)
     param = scene.check_param(param)
@@ -149,8 +176,10 @@ def render_gradient(
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    with _bar(f"{method} {scene.name}", progress):
-        tally, resolved = _run(method, ImageTask(scene, param, spp, seed, batches, film=film), options)
+    task = ImageTask(scene, param, spp, seed, batches, film=film)
+    spec, resolved = _resolve(method, task, options)  # every argument checked before a cluster is reached
+    with execution.cluster(scheduler), _bar(f"{method} {scene.name}", progress):
+        tally = spec.func(task, **resolved)
     return GradientImage.from_batches(
         tally.value,
         tally.derivative,

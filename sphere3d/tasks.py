@@ -10,11 +10,13 @@ sample: sample j of pixel p has the global index ``p * spp + j`` (batch
 whatever the method, and anything a method draws in addition is keyed on the same
 index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.emitter"``,
 ...; see :class:`flatland.core.rng.Draws`). Results therefore do not depend on
-:data:`CHUNK` or on the number of threads (:mod:`sphere3d.execution`).
+:data:`CHUNK` or on the number of threads (:mod:`sphere3d.execution`), nor on which machines of a
+Dask cluster compute which tiles of chunks (:meth:`ImageTask._on_cluster`).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -151,17 +153,35 @@ class ImageTask:
         All batches of a range of pixels are processed together (one vectorized call
         per memory chunk); every sample's numbers, its camera rotation's included, are
         keyed on its index ``pixel * spp + j``, so every batch is independent and the
-        image does not depend on how pixels are grouped into chunks.
+        image does not depend on how pixels are grouped into chunks. Inside
+        :func:`sphere3d.execution.cluster` the chunks run on a Dask cluster (:meth:`_on_cluster`).
         """
         transforms = transforms or Identity()
-        state = build_state(self.scene, self.param, theta, self.tracer)
+        batches, per_batch = self.batches, self.spp // self.batches
+        pixels = self.shape[0] * self.shape[1]
+        if execution.client() is not None:
+            parts, splat, extra = self._on_cluster(theta, transforms)
+        else:
+            state = build_state(self.scene, self.param, theta, self.tracer)
+            parts, splat = self._pixel_range(state, transforms, 0, pixels, self.chunk_pixels)
+            extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
+        if splat is not None:
+            tally = self._splat_image(splat, batches, per_batch)
+        else:
+            tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
+        return tally if extra is None else Tally(tally.value, tally.derivative + extra)
+
+    def _pixel_range(
+        self, state: Any, transforms: Transforms, first: int, stop: int, chunk_pixels: int
+    ) -> tuple[list[np.ndarray] | None, tuple | None]:
+        """Pixels ``first`` to ``stop`` (exclusive), in memory chunks of ``chunk_pixels`` from ``first`` on
+        (:func:`~sphere3d.execution.map_chunks`): the per-pixel film's per-batch means per chunk, or with
+        the splat film None and the stencils of these pixels (:meth:`_splat_buffers`)."""
         height, width = self.shape
         batches, per_batch = self.batches, self.spp // self.batches
-        pixels = np.arange(height * width)
-        rows_all, cols_all = np.divmod(pixels, width)
-        chunk_pixels = self.chunk_pixels
-
-        splat = self._splat_buffers(batches, per_batch) if self.film == "splat" else None
+        pixels = np.arange(first, stop)
+        rows_all, cols_all = np.divmod(np.arange(height * width), width)
+        splat = self._splat_buffers(batches, per_batch, pixels.size) if self.film == "splat" else None
 
         def chunk(c: int) -> np.ndarray | None:
             pix = pixels[c * chunk_pixels : (c + 1) * chunk_pixels]
@@ -174,18 +194,41 @@ class ImageTask:
                 kind = self.scene.camera.filter
                 reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
                 est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of)
-                self._splat_chunk(est, pix, batches, per_batch, splat)
+                self._splat_chunk(est, pix - first, batches, per_batch, splat)
                 return None
             est = pixel_samples(state, transforms, rows, cols, u, draws)
             return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
         parts = execution.map_chunks(chunk, range(-(-pixels.size // chunk_pixels)))
-        if splat is not None:
-            tally = self._splat_image(splat, batches, per_batch)
-        else:
-            tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
-        extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
-        return tally if extra is None else Tally(tally.value, tally.derivative + extra)
+        return (None, splat) if splat is not None else (parts, None)
+
+    def _on_cluster(self, theta: Any, transforms: Transforms) -> tuple[list | None, tuple | None, Any]:
+        """:meth:`evaluate`'s chunks as tiles on the Dask cluster of :func:`~sphere3d.execution.client`.
+
+        The memory chunks are this process's (:attr:`chunk_pixels`); a tile is a run of whole chunks
+        (:func:`~sphere3d.execution.tile_count` of them), computed on a worker by :meth:`_pixel_range`
+        from the pickled task, θ and transforms, the worker building its own scene state and tracer.
+        Each chunk thus computes the same numbers as in a local run, the tiles' stencils fill the
+        same columns of the same buffers, and :meth:`_splat_image` sums them here in its fixed order:
+        the image is bit for bit the local one. The per-image term (``pixel_extra``) is one more task.
+        Returns the per-chunk means (or None), the stencils (or None) and the per-image term.
+        """
+        height, width = self.shape
+        pixels, chunk_pixels = height * width, self.chunk_pixels
+        chunks = -(-pixels // chunk_pixels)
+        tiles = execution.tile_count(chunks)
+        bounds = [k * chunks // tiles * chunk_pixels for k in range(tiles)] + [pixels]
+        items = list(itertools.pairwise(bounds))
+        results = execution.map_tiles(_remote, (self, theta, transforms, chunk_pixels), [*items, None])
+        extra, results = results[-1], results[:-1]
+        if self.film != "splat":
+            return [part for parts, _ in results for part in parts], None, extra
+        splat = self._splat_buffers(self.batches, self.spp // self.batches, pixels)
+        for (a, b), (_, tile) in zip(items, results, strict=True):
+            for whole, part in zip(splat, tile, strict=True):
+                if whole is not None:
+                    whole[..., a:b] = part
+        return None, splat, extra
 
     @property
     def chunk_pixels(self) -> int:
@@ -210,13 +253,14 @@ class ImageTask:
         totals = 2 * 8 * (1 if self.cv_scope == "pixel" else self.batches) / self.batches if cv else 0.0
         return IMAGE_BYTES_PER_PIXEL + stencils + totals
 
-    def _splat_buffers(self, batches: int, per_batch: int) -> tuple[np.ndarray, np.ndarray | None]:
-        """The chunks' outputs for :meth:`_splat_chunk`: stencils (quantities, batches, slots, pixels),
-        four quantities with the control variate and two without, and the pixels' radiance totals (value
-        and tangent)."""
+    def _splat_buffers(
+        self, batches: int, per_batch: int, pixels: int
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """The chunks' outputs for :meth:`_splat_chunk`, for ``pixels`` pixels: stencils (quantities,
+        batches, slots, pixels), four quantities with the control variate and two without, and the
+        pixels' radiance totals (value and tangent)."""
         cv = self._cv_samples(batches, per_batch) > 0
         _, h = reach(self.scene.camera.filter)
-        pixels = self.shape[0] * self.shape[1]
         stencils = np.empty((4 if cv else 2, batches, (2 * h + 1) ** 2, pixels))
         return stencils, (np.empty((2, 1 if self.cv_scope == "pixel" else batches, pixels)) if cv else None)
 
@@ -224,8 +268,9 @@ class ImageTask:
         self, samples: PixelSamples, pix: np.ndarray, batches: int, per_batch: int, out: tuple
     ) -> None:
         r"""One chunk's splatted estimates as stencils (:func:`~sphere3d.film.stencil`), written to its
-        pixels' columns of ``out`` (:meth:`_splat_buffers`): value and tangent, then those of the weights
-        $w_{i,p}$ of samples i in pixels p other than their own, and the radiance totals of its pixels.
+        pixels' columns ``pix`` (consecutive) of ``out`` (:meth:`_splat_buffers`): value and tangent, then
+        those of the weights $w_{i,p}$ of samples i in pixels p other than their own, and the radiance
+        totals of its pixels.
 
         Control variate (:mod:`sphere3d.film`), value and tangent: $Σ_i e_{i,p}$ minus
         $Σ_i c_{p,-i} (w_{i,p} - [i ∈ p])$, $c_{p,-i}$ the mean radiance of pixel p's samples
@@ -286,6 +331,17 @@ class ImageTask:
 
         image = np.concatenate(execution.map_chunks(band, range(-(-height // step)), counted=False), axis=2)
         return Tally(value=image[0], derivative=image[1])
+
+
+def _remote(shared: tuple[ImageTask, Any, Transforms, int], item: tuple[int, int] | None) -> Any:
+    """One task of :meth:`ImageTask._on_cluster` on a worker: with ``item`` = (first, stop) the
+    :meth:`~ImageTask._pixel_range` of those pixels, with None the per-image term ``pixel_extra``;
+    both from a scene state built here."""
+    task, theta, transforms, chunk_pixels = shared
+    state = build_state(task.scene, task.param, theta, task.tracer)
+    if item is None:
+        return transforms.pixel_extra(task, state)
+    return task._pixel_range(state, transforms, *item, chunk_pixels)
 
 
 @dataclass(frozen=True)

@@ -115,6 +115,10 @@ class Package:
         The package's films (``render(..., film=)``), the default first: ``render`` and
         ``gradient`` then take ``--film`` (checked by the package's own renderer: a bad
         value is one :class:`ValidationError`). Empty (the default): no such option.
+    cluster : bool
+        The package's ``render`` and ``render_gradient`` take ``scheduler=`` (a ``dask.distributed``
+        scheduler address): ``render`` and ``gradient`` then take ``--scheduler``. False (the
+        default): no such option.
     sketch : callable, optional
         ``sketch(ax, scene, param)`` draws a scene (and what ``param`` moves; None:
         nothing) into a matplotlib Axes; the figures of ``demo``, ``render`` and
@@ -149,6 +153,7 @@ class Package:
     plot_study: Callable[..., list[Path]] | None = None
     sketch: Callable[[Any, Any, str | None], Any] | None = None
     films: tuple[str, ...] = ()
+    cluster: bool = False
 
     def plot(self, kind: str) -> Callable[..., Any]:
         """The figure writer ``plot_<kind>``: the package's own, else the shared one (imported now)."""
@@ -212,6 +217,12 @@ def _parser(pkg: Package) -> _Parser:
         if pkg.films:
             choices = " or ".join(pkg.films)
             p.add_argument("--film", default=None, help=f"{choices} (default {pkg.films[0]})")
+        if pkg.cluster:
+            p.add_argument(
+                "--scheduler", default=None,
+                help="dask.distributed scheduler address: the image's tiles run on that cluster, bit for bit"
+                " the local image (default: none, on this machine)",
+            )  # fmt: skip
 
     demo = verbs.add_parser("demo", help="the default scene: panel of methods and error table (< 1 min)")
     common(demo, f"samples per pixel (default {pkg.demo_spp})", None)

@@ -92,6 +92,11 @@ def _film(args: argparse.Namespace) -> dict[str, Any]:
     return {} if getattr(args, "film", None) is None else {"film": args.film}
 
 
+def _scheduler(args: argparse.Namespace) -> dict[str, Any]:
+    """``scheduler=`` when ``--scheduler`` was given (only packages with ``Package.cluster`` have it)."""
+    return {} if getattr(args, "scheduler", None) is None else {"scheduler": args.scheduler}
+
+
 def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int) -> int | None:
     """Reference spp that makes its film-sum stderr 1/4 of the smallest unbiased method's (x 1.25
     for the scatter of the estimated errors), or None if it already is."""
@@ -213,8 +218,9 @@ def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     """``render SCENE``: the image as PNG and ``.npy``."""
     scene = _load_scene(pkg, args.scene)
     image = pkg.render(
-        scene, spp=args.spp, seed=args.seed, batches=args.batches, progress=_progress(args), **_film(args)
-    )
+        scene, spp=args.spp, seed=args.seed, batches=args.batches, progress=_progress(args),
+        **_film(args), **_scheduler(args),
+    )  # fmt: skip
     name = _stem(args.scene)
     out = Path(args.out)
     png = pkg.plot("image")(
@@ -233,7 +239,7 @@ def verb_gradient(pkg: Package, args: argparse.Namespace) -> int:
         raise UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
     g = pkg.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
-        progress=_progress(args), **_film(args), **_options(args),
+        progress=_progress(args), **_film(args), **_scheduler(args), **_options(args),
     )  # fmt: skip
     name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
     out = Path(args.out)
