@@ -222,7 +222,7 @@ class ImageTask:
         buffers hold (:meth:`_splat_buffers`).
 
         A tile is as many chunks as :data:`TILE_BYTES` of stencils hold, at least one per thread
-        (:func:`~sphere3d.execution.workers`) and one in all: T pixels, a multiple of the chunk's.
+        (:func:`~sphere3d.execution.workers`), at most the image's: T pixels, a multiple of the chunk's.
         The buffers also keep the rows of stencils the next tile's image rows still need: with W
         the image's width, after a tile ending at pixel $p_1$ the rows up to $\lfloor p_1 / W
         \rfloor - h$ are made, and the stencils from h rows above the first row not made are kept,
@@ -231,7 +231,8 @@ class ImageTask:
         height, width = self.shape
         _, h = reach(self.scene.camera.filter)
         per_chunk = self.chunk_pixels * self._stencil_bytes()
-        tile_chunks = max(1, TILE_BYTES // per_chunk, execution.workers())
+        chunks = -(-height * width // self.chunk_pixels)
+        tile_chunks = min(chunks, max(1, TILE_BYTES // per_chunk, execution.workers()))
         return tile_chunks, min(height * width, tile_chunks * self.chunk_pixels + (2 * h + 1) * width)
 
     def film_terms(self) -> tuple[Term, ...]:
