@@ -52,7 +52,7 @@ variate couples the batches weakly (:meth:`~sphere3d.tasks.ImageTask._control_va
 Independence of chunks and threads: each chunk holds whole pixels and sums, per source
 pixel p', batch and target offset p - p', over the source's own samples (:func:`stencil`);
 the image sums these stencils in a fixed order (:func:`gather`, in bands of rows on the threads),
-whatever the chunking.
+whatever the chunking, tile by tile of rows (:meth:`~sphere3d.tasks.ImageTask._splat_tiles`).
 """
 
 from __future__ import annotations
@@ -293,11 +293,13 @@ def stencil(values: tuple[np.ndarray, ...], slot: np.ndarray, h: int, out: np.nd
         out[i] = sums.reshape(g, p, slots + 1)[:, :, 1:].transpose(0, 2, 1)
 
 
-def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range) -> np.ndarray:
-    """Image rows ``rows`` (..., len(rows), width) from stencils (..., (2h + 1)², height * width),
-    each pixel the sum of its sources' slots in a fixed order (offsets row-major)."""
+def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range, first: int = 0) -> np.ndarray:
+    """Image rows ``rows`` (..., len(rows), width) from stencils (..., (2h + 1)², n * width) of the source
+    rows ``first`` to ``first + n`` (every source row of ``rows`` inside the image: from
+    ``max(0, rows.start - h)`` to ``min(height, rows.stop + h)``), each pixel the sum of its sources'
+    slots in a fixed order (offsets row-major), whatever ``first`` and ``rows``."""
     side = 2 * h + 1
-    st = parts.reshape(*parts.shape[:-2], side * side, height, width)
+    st = parts.reshape(*parts.shape[:-2], side * side, -1, width)
     r0, r1 = rows.start, rows.stop
     image = np.zeros((*parts.shape[:-2], r1 - r0, width))
     for a in range(side):  # 25 slots at most: a loop over offsets, not samples
@@ -305,7 +307,6 @@ def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range) -> n
             da, db = a - h, b - h  # target = source + (da, db)
             t0, t1, u0, u1 = max(r0, da), min(r1, height + da), max(0, db), min(width, width + db)
             if t0 < t1 and u0 < u1:
-                image[..., t0 - r0 : t1 - r0, u0:u1] += st[
-                    ..., a * side + b, t0 - da : t1 - da, u0 - db : u1 - db
-                ]
+                s0, s1 = t0 - da - first, t1 - da - first  # the source rows, from the first one held
+                image[..., t0 - r0 : t1 - r0, u0:u1] += st[..., a * side + b, s0:s1, u0 - db : u1 - db]
     return image

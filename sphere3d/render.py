@@ -93,8 +93,9 @@ def render(
 
 
 def _request(task: ImageTask | PointTask, options: dict[str, Any], method: str | None = None) -> Request:
-    """What the call will hold and trace (:class:`~flatland.core.budget.Request`): the image and its film
-    (:meth:`~sphere3d.tasks.ImageTask.pixel_bytes`), the rays, and what the method's options add (its
+    """What the call will hold and trace (:class:`~flatland.core.budget.Request`): the image
+    (:meth:`~sphere3d.tasks.ImageTask.pixel_bytes`) and its film's working set
+    (:meth:`~sphere3d.tasks.ImageTask.film_terms`), the rays, and what the method's options add (its
     memory model, :data:`~sphere3d.methods._common.MEMORY_MODELS`)."""
     model = MEMORY_MODELS.get(method or "")
     terms = model(task, options) if model else ()
@@ -102,6 +103,7 @@ def _request(task: ImageTask | PointTask, options: dict[str, Any], method: str |
     if isinstance(task, ImageTask):
         pixels, spp, field = task.scene.camera.width * task.scene.camera.height, task.spp, "spp"
         chunk, pixel_bytes = task.chunk_pixels * task.spp, task.pixel_bytes()
+        terms = (*terms, *task.film_terms())  # the splat film's tile of stencils
     else:
         pixels, spp, field, chunk, pixel_bytes = 1, task.n, "n", tasks.CHUNK, IMAGE_BYTES_PER_PIXEL
     large = field if chunk > tasks.CHUNK else ""  # a chunk holds a whole pixel: all its samples at once

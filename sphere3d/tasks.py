@@ -16,13 +16,15 @@ Dask cluster compute which tiles of chunks (:meth:`ImageTask._on_cluster`).
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from flatland.core.budget import IMAGE_BYTES_PER_PIXEL
+from flatland.core import progress
+from flatland.core.budget import IMAGE_BYTES_PER_PIXEL, Term
 from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import control_variate
@@ -41,11 +43,15 @@ from sphere3d.integrator import (
 from sphere3d.scene import Scene
 from sphere3d.state import build_state
 
-__all__ = ["CHUNK", "ImageTask", "PointTask", "Tally"]
+__all__ = ["CHUNK", "TILE_BYTES", "ImageTask", "PointTask", "Tally"]
 
 CHUNK = 1 << 15
 """Camera samples per memory chunk (a loop over chunks, vectorized inside); results do not
 depend on it (every draw is keyed on the sample's index)."""
+TILE_BYTES = 128 << 20
+"""Bytes of the splat film's stencils per tile of memory chunks (:meth:`ImageTask._splat_tiles`): with
+the rows a tile's neighbours still need, the film's working set, whatever the image's height
+(:meth:`ImageTask.film_terms`). Results do not depend on it."""
 CV_SCOPES = ("pixel", "batch", "off")
 """Whose radiance scales a sample's filter-weight control variate (:meth:`ImageTask._control_variate`)."""
 
@@ -153,82 +159,95 @@ class ImageTask:
         All batches of a range of pixels are processed together (one vectorized call
         per memory chunk); every sample's numbers, its camera rotation's included, are
         keyed on its index ``pixel * spp + j``, so every batch is independent and the
-        image does not depend on how pixels are grouped into chunks. Inside
-        :func:`sphere3d.execution.cluster` the chunks run on a Dask cluster (:meth:`_on_cluster`).
+        image does not depend on how pixels are grouped into chunks, nor the splat film's
+        chunks into tiles (:meth:`_splat_tiles`). Inside :func:`sphere3d.execution.cluster` the
+        chunks run on a Dask cluster (:meth:`_on_cluster`).
         """
         transforms = transforms or Identity()
-        batches, per_batch = self.batches, self.spp // self.batches
-        pixels = self.shape[0] * self.shape[1]
         if execution.client() is not None:
-            parts, splat, extra = self._on_cluster(theta, transforms)
+            return self._on_cluster(theta, transforms)
+        state = build_state(self.scene, self.param, theta, self.tracer)
+        batches, per_batch = self.batches, self.spp // self.batches
+        chunk = functools.partial(self._chunk, state, transforms)
+        chunks = range(self._chunk_count())
+        if self.film == "splat":
+            tally = self._splat_tiles(chunk, chunks, batches, per_batch)
         else:
-            state = build_state(self.scene, self.param, theta, self.tracer)
-            parts, splat = self._pixel_range(state, transforms, 0, pixels, self.chunk_pixels)
-            extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
-        if splat is not None:
-            tally = self._splat_image(splat, batches, per_batch)
-        else:
+            parts = execution.map_chunks(chunk, chunks)
             tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
+        extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
         return tally if extra is None else Tally(tally.value, tally.derivative + extra)
 
-    def _pixel_range(
-        self, state: Any, transforms: Transforms, first: int, stop: int, chunk_pixels: int
-    ) -> tuple[list[np.ndarray] | None, tuple | None]:
-        """Pixels ``first`` to ``stop`` (exclusive), in memory chunks of ``chunk_pixels`` from ``first`` on
-        (:func:`~sphere3d.execution.map_chunks`): the per-pixel film's per-batch means per chunk, or with
-        the splat film None and the stencils of these pixels (:meth:`_splat_buffers`)."""
+    def _chunk_count(self) -> int:
+        """The image's memory chunks (:attr:`chunk_pixels` pixels each, the last one fewer)."""
+        return -(-self.shape[0] * self.shape[1] // self.chunk_pixels)
+
+    def _chunk(
+        self, state: Any, transforms: Transforms, c: int, out: tuple | None = None, offset: int = 0
+    ) -> np.ndarray | None:
+        """Memory chunk c's samples: their per-batch means (pixel film), or their stencils written to
+        ``out``, whose first column is pixel ``offset`` (splat film)."""
         height, width = self.shape
         batches, per_batch = self.batches, self.spp // self.batches
-        pixels = np.arange(first, stop)
-        rows_all, cols_all = np.divmod(np.arange(height * width), width)
-        splat = self._splat_buffers(batches, per_batch, pixels.size) if self.film == "splat" else None
+        pix = np.arange(c * self.chunk_pixels, min(height * width, (c + 1) * self.chunk_pixels))
+        # sample order: batch, pixel, sample; sample s of batch b is its pixel's j = b * per_batch + s
+        b_idx, p_idx, s_idx = np.meshgrid(np.arange(batches), pix, np.arange(per_batch), indexing="ij")
+        draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
+        u = draws.uniforms("samples", PRIMARY_UNIFORMS)
+        rows, cols = np.divmod(p_idx.ravel(), width)
+        if out is not None:
+            kind = self.scene.camera.filter
+            reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
+            est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of)
+            self._splat_chunk(est, pix, batches, per_batch, out, offset)
+            return None
+        est = pixel_samples(state, transforms, rows, cols, u, draws)
+        return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
-        def chunk(c: int) -> np.ndarray | None:
-            pix = pixels[c * chunk_pixels : (c + 1) * chunk_pixels]
-            # sample order: batch, pixel, sample; sample s of batch b is its pixel's j = b * per_batch + s
-            b_idx, p_idx, s_idx = np.meshgrid(np.arange(batches), pix, np.arange(per_batch), indexing="ij")
-            draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
-            u = draws.uniforms("samples", PRIMARY_UNIFORMS)
-            rows, cols = rows_all[p_idx.ravel()], cols_all[p_idx.ravel()]
-            if splat is not None:
-                kind = self.scene.camera.filter
-                reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
-                est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of)
-                self._splat_chunk(est, pix - first, batches, per_batch, splat)
-                return None
-            est = pixel_samples(state, transforms, rows, cols, u, draws)
-            return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
+    def _chunk_range(self, state: Any, transforms: Transforms, first: int, stop: int) -> Any:
+        """Memory chunks ``first`` to ``stop`` (exclusive) on this machine's threads: their per-batch means
+        (pixel film), or the stencils of their pixels (splat film, :meth:`_splat_buffers`)."""
+        chunk = functools.partial(self._chunk, state, transforms)
+        if self.film != "splat":
+            return execution.map_chunks(chunk, range(first, stop), counted=False)
+        pixels = self.shape[0] * self.shape[1]
+        lo, hi = first * self.chunk_pixels, min(pixels, stop * self.chunk_pixels)
+        out = self._splat_buffers(hi - lo)
+        execution.map_chunks(functools.partial(chunk, out=out, offset=lo), range(first, stop), counted=False)
+        return out
 
-        parts = execution.map_chunks(chunk, range(-(-pixels.size // chunk_pixels)))
-        return (None, splat) if splat is not None else (parts, None)
-
-    def _on_cluster(self, theta: Any, transforms: Transforms) -> tuple[list | None, tuple | None, Any]:
+    def _on_cluster(self, theta: Any, transforms: Transforms) -> Tally:
         """:meth:`evaluate`'s chunks as tiles on the Dask cluster of :func:`~sphere3d.execution.client`.
 
         The memory chunks are this process's (:attr:`chunk_pixels`); a tile is a run of whole chunks
-        (:func:`~sphere3d.execution.tile_count` of them), computed on a worker by :meth:`_pixel_range`
+        (:func:`~sphere3d.execution.tile_count` of them), computed on a worker by :meth:`_chunk_range`
         from the pickled task, θ and transforms, the worker building its own scene state and tracer.
-        Each chunk thus computes the same numbers as in a local run, the tiles' stencils fill the
-        same columns of the same buffers, and :meth:`_splat_image` sums them here in its fixed order:
-        the image is bit for bit the local one. The per-image term (``pixel_extra``) is one more task.
-        Returns the per-chunk means (or None), the stencils (or None) and the per-image term.
+        Each chunk thus computes the same numbers as in a local run; the tiles' stencils fill the
+        columns of one buffer for the whole image, from which :meth:`_splat_rows` makes every row by
+        the same sums in the same order as a local run: the image is bit for bit the local one (the
+        client holds the whole image's stencils, :meth:`film_terms` of a one-tile image). The
+        per-image term (``pixel_extra``) is one more task.
         """
         height, width = self.shape
-        pixels, chunk_pixels = height * width, self.chunk_pixels
-        chunks = -(-pixels // chunk_pixels)
+        batches, per_batch = self.batches, self.spp // self.batches
+        chunks = self._chunk_count()
         tiles = execution.tile_count(chunks)
-        bounds = [k * chunks // tiles * chunk_pixels for k in range(tiles)] + [pixels]
-        items = list(itertools.pairwise(bounds))
-        results = execution.map_tiles(_remote, (self, theta, transforms, chunk_pixels), [*items, None])
+        items = list(itertools.pairwise([k * chunks // tiles for k in range(tiles)] + [chunks]))
+        results = execution.map_tiles(_remote, (self, theta, transforms), [*items, None])
         extra, results = results[-1], results[:-1]
         if self.film != "splat":
-            return [part for parts, _ in results for part in parts], None, extra
-        splat = self._splat_buffers(self.batches, self.spp // self.batches, pixels)
-        for (a, b), (_, tile) in zip(items, results, strict=True):
-            for whole, part in zip(splat, tile, strict=True):
-                if whole is not None:
-                    whole[..., a:b] = part
-        return None, splat, extra
+            tally = _tally(list(np.concatenate([p for parts in results for p in parts], axis=1)), self.shape)
+        else:
+            out = self._splat_buffers(height * width)
+            for (first, stop), tile in zip(items, results, strict=True):
+                lo, hi = first * self.chunk_pixels, min(height * width, stop * self.chunk_pixels)
+                for whole, part in zip(out, tile, strict=True):
+                    if whole is not None:
+                        whole[..., lo:hi] = part
+            image = np.empty((2, batches, height, width))
+            self._splat_rows(out, 0, range(height), per_batch, image)
+            tally = Tally(value=image[0], derivative=image[1])
+        return tally if extra is None else Tally(tally.value, tally.derivative + extra)
 
     @property
     def chunk_pixels(self) -> int:
@@ -238,39 +257,77 @@ class ImageTask:
     def pixel_bytes(self) -> float:
         r"""Memory model of the image: bytes held per pixel and batch until the image is made.
 
-        :data:`~flatland.core.budget.IMAGE_BYTES_PER_PIXEL` for the per-batch images; with the splat
-        film also its stencils (:meth:`_splat_buffers`), $Q (2h + 1)^2$ float64 per batch (Q = 4
-        quantities with the control variate, else 2; h from :func:`~sphere3d.film.reach`), and with
-        the control variate the radiance totals, 2 float64 per pixel (per batch with
-        ``cv_scope="batch"``).
+        :data:`~flatland.core.budget.IMAGE_BYTES_PER_PIXEL`, for the per-batch images, whatever the film:
+        the splat film's stencils are held for a tile of rows at a time (:meth:`_splat_tiles`), a
+        bounded working set apart from the image (:meth:`film_terms`).
         """
+        return IMAGE_BYTES_PER_PIXEL
+
+    def _stencil_bytes(self) -> int:
+        r"""Bytes of the splat film's buffers per pixel (:meth:`_splat_buffers`): $Q (2h + 1)^2$ float64 per
+        batch (Q = 4 quantities with the control variate, else 2; h from :func:`~sphere3d.film.reach`),
+        and with the control variate the radiance totals, 2 float64 per pixel (per batch with
+        ``cv_scope="batch"``)."""
+        cv = self._cv_samples(self.batches, self.spp // self.batches) > 0
+        _, h = reach(self.scene.camera.filter)
+        stencils = (4 if cv else 2) * self.batches * (2 * h + 1) ** 2 * 8
+        return stencils + (2 * 8 * (1 if self.cv_scope == "pixel" else self.batches) if cv else 0)
+
+    def _tile(self) -> tuple[int, int]:
+        r"""The splat film's tiles (:meth:`_splat_tiles`): memory chunks per tile, and the pixels its
+        buffers hold (:meth:`_splat_buffers`).
+
+        A tile is as many chunks as :data:`TILE_BYTES` of stencils hold, at least one per thread
+        (:func:`~sphere3d.execution.workers`), at most the image's: T pixels, a multiple of the chunk's.
+        The buffers also keep the rows of stencils the next tile's image rows still need: with W
+        the image's width, after a tile ending at pixel $p_1$ the rows up to $\lfloor p_1 / W
+        \rfloor - h$ are made, and the stencils from h rows above the first row not made are kept,
+        fewer than $(2h + 1) W$ pixels'. Hence T + (2h + 1) W pixels (at most the image's).
+        """
+        height, width = self.shape
+        _, h = reach(self.scene.camera.filter)
+        per_chunk = self.chunk_pixels * self._stencil_bytes()
+        chunks = -(-height * width // self.chunk_pixels)
+        tile_chunks = min(chunks, max(1, TILE_BYTES // per_chunk, execution.workers()))
+        return tile_chunks, min(height * width, tile_chunks * self.chunk_pixels + (2 * h + 1) * width)
+
+    def film_terms(self) -> tuple[Term, ...]:
+        r"""Memory model of the film's working set (:class:`~flatland.core.budget.Term`): with the splat film,
+        the buffers of one tile of rows (:meth:`_tile`), $(T + (2h + 1) W) b$ bytes for T pixels per tile,
+        W the image's width and b the stencil bytes per pixel (:meth:`_stencil_bytes`): at most
+        $\max(\mathrm{TILE\_BYTES}, \text{a chunk's stencils per thread}) + (2h + 1) W b$, whatever the
+        image's height; none with the pixel film."""
         if self.film != "splat":
-            return IMAGE_BYTES_PER_PIXEL
+            return ()
+        tile_chunks, held = self._tile()
+        block = f"the stencils of {held} pixels ({tile_chunks} memory chunks and their neighbours' rows)"
+        what = "each sample in every pixel its filter covers"
+        return (Term("film", self.film, what, block, at_once=held * self._stencil_bytes()),)
+
+    def _splat_buffers(self, pixels: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The chunks' outputs for :meth:`_splat_chunk`, columns for ``pixels`` pixels: stencils
+        (quantities, batches, slots, pixels), four quantities with the control variate and two without,
+        and the pixels' radiance totals (value and tangent)."""
         per_batch = self.spp // self.batches
         cv = self._cv_samples(self.batches, per_batch) > 0
         _, h = reach(self.scene.camera.filter)
-        stencils = (4 if cv else 2) * (2 * h + 1) ** 2 * 8
-        totals = 2 * 8 * (1 if self.cv_scope == "pixel" else self.batches) / self.batches if cv else 0.0
-        return IMAGE_BYTES_PER_PIXEL + stencils + totals
-
-    def _splat_buffers(
-        self, batches: int, per_batch: int, pixels: int
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """The chunks' outputs for :meth:`_splat_chunk`, for ``pixels`` pixels: stencils (quantities,
-        batches, slots, pixels), four quantities with the control variate and two without, and the
-        pixels' radiance totals (value and tangent)."""
-        cv = self._cv_samples(batches, per_batch) > 0
-        _, h = reach(self.scene.camera.filter)
-        stencils = np.empty((4 if cv else 2, batches, (2 * h + 1) ** 2, pixels))
-        return stencils, (np.empty((2, 1 if self.cv_scope == "pixel" else batches, pixels)) if cv else None)
+        stencils = np.empty((4 if cv else 2, self.batches, (2 * h + 1) ** 2, pixels))
+        totals = np.empty((2, 1 if self.cv_scope == "pixel" else self.batches, pixels)) if cv else None
+        return stencils, totals
 
     def _splat_chunk(
-        self, samples: PixelSamples, pix: np.ndarray, batches: int, per_batch: int, out: tuple
+        self,
+        samples: PixelSamples,
+        pix: np.ndarray,
+        batches: int,
+        per_batch: int,
+        out: tuple,
+        offset: int = 0,
     ) -> None:
         r"""One chunk's splatted estimates as stencils (:func:`~sphere3d.film.stencil`), written to its
-        pixels' columns ``pix`` (consecutive) of ``out`` (:meth:`_splat_buffers`): value and tangent, then
-        those of the weights $w_{i,p}$ of samples i in pixels p other than their own, and the radiance
-        totals of its pixels.
+        pixels' columns of ``out`` (:meth:`_splat_buffers`; its column 0 is pixel ``offset``): value and
+        tangent, then those of the weights $w_{i,p}$ of samples i in pixels p other than their own, and
+        the radiance totals of its pixels.
 
         Control variate (:mod:`sphere3d.film`), value and tangent: $Σ_i e_{i,p}$ minus
         $Σ_i c_{p,-i} (w_{i,p} - [i ∈ p])$, $c_{p,-i}$ the mean radiance of pixel p's samples
@@ -285,7 +342,8 @@ class ImageTask:
         Off where :meth:`_control_variate` is (``cv_scope="off"``, one sample per scope, box).
         """
         _, h = reach(self.scene.camera.filter)
-        stencils, totals = (part[..., pix[0] : pix[-1] + 1] if part is not None else None for part in out)
+        cols = slice(pix[0] - offset, pix[-1] + 1 - offset)
+        stencils, totals = (part[..., cols] if part is not None else None for part in out)
         shape = (batches, pix.size, per_batch, samples.weight.shape[-1])
         slot = samples.slot.reshape(shape)
         wv, wt = (np.asarray(f(samples.weight), dtype=np.float64).reshape(shape) for f in (detach, tangent))
@@ -310,38 +368,80 @@ class ImageTask:
         totals[0] = total.reshape(totals.shape[1:])
         totals[1] = total_t.reshape(totals.shape[1:])
 
-    def _splat_image(self, out: tuple, batches: int, per_batch: int) -> Tally:
-        """The image from the chunks' stencils, summed in a fixed order (:func:`~sphere3d.film.gather`, in
-        bands of rows on the threads): value and tangent, minus the other pixels' samples' weights times
-        their target's mean radiance."""
+    def _splat_tiles(self, chunk: Any, chunks: range, batches: int, per_batch: int) -> Tally:
+        r"""The splat film's image, tile by tile: the stencils of a tile of memory chunks (:meth:`_tile`;
+        ``chunk(c, out, offset)`` writes chunk c's, :meth:`_splat_chunk`), then every image row whose
+        sources are all done (:meth:`_splat_rows`), before the next tile.
+
+        A target row r sums the stencils of the source rows r - h to r + h (:func:`~sphere3d.film.reach`),
+        so after the chunks up to pixel $p_1$ (row-major, W per row) the rows $r < \lfloor p_1 / W
+        \rfloor - h$ are complete (all of them after the last chunk). The buffers then drop the source
+        rows more than h above the first row not made, moving the rest to their front; what is held
+        for the whole image is its per-batch value and tangent. Each pixel is the same sum in the same
+        order (:func:`~sphere3d.film.gather`) whatever the tiles, so the image does not depend on
+        :data:`TILE_BYTES`, nor on the chunks (a source pixel's stencil is its own samples' sums).
+        """
         height, width = self.shape
         _, h = reach(self.scene.camera.filter)
-        stencils, totals = out
-        step = -(-height // (2 * execution.workers()))
-
-        def band(i: int) -> np.ndarray:
-            rows = range(i * step, min(height, (i + 1) * step))
-            sums = gather(stencils, height, width, h, rows).reshape(len(stencils), batches, -1) / per_batch
-            value, deriv = sums[0], sums[1]
-            if totals is not None:
-                mean = totals[..., rows.start * width : rows.stop * width]
-                mean = mean / self._cv_samples(batches, per_batch)
-                value, deriv = value - mean[0] * sums[2], deriv - mean[0] * sums[3] - mean[1] * sums[2]
-            return np.stack([value, deriv]).reshape(2, batches, len(rows), width)
-
-        image = np.concatenate(execution.map_chunks(band, range(-(-height // step)), counted=False), axis=2)
+        pixels, chunk_pixels = height * width, self.chunk_pixels
+        tile_chunks, held = self._tile()
+        out = self._splat_buffers(held)
+        image = np.empty((2, batches, height, width))
+        lo, done = 0, 0  # the pixel in the buffers' column 0; the first image row not made
+        progress.start(len(chunks))  # one pass, advanced tile by tile
+        for first in range(chunks.start, chunks.stop, tile_chunks):
+            tile = range(first, min(chunks.stop, first + tile_chunks))
+            stop = min(pixels, tile.stop * chunk_pixels)  # the tile's chunks write pixels up to here
+            execution.map_chunks(functools.partial(chunk, out=out, offset=lo), tile, counted=False)
+            progress.advance(len(tile))
+            ready = height if stop == pixels else max(done, stop // width - h)
+            if ready > done:
+                self._splat_rows(out, lo // width, range(done, ready), per_batch, image)
+                done = ready
+            keep = max(0, done - h) * width  # the first source pixel an image row not made needs
+            if keep > lo:
+                for part in out:
+                    if part is not None:
+                        part[..., : stop - keep] = part[..., keep - lo : stop - lo]  # overlap: numpy copies
+                lo = keep
         return Tally(value=image[0], derivative=image[1])
 
+    def _splat_rows(self, out: tuple, first: int, rows: range, per_batch: int, image: np.ndarray) -> None:
+        """Image ``rows`` from the stencils (:func:`~sphere3d.film.gather`, in bands of rows on the threads),
+        written to ``image`` (value and tangent, batches, height, width): value and tangent, minus the
+        other pixels' samples' weights times their target's mean radiance. ``out`` holds the source rows
+        from ``first`` on, every row the image rows need."""
+        height, width = self.shape
+        batches = image.shape[1]
+        _, h = reach(self.scene.camera.filter)
+        stencils, totals = out
+        stencils = stencils[..., : (min(height, rows.stop + h) - first) * width]  # whole rows only
+        step = -(-len(rows) // (2 * execution.workers()))
 
-def _remote(shared: tuple[ImageTask, Any, Transforms, int], item: tuple[int, int] | None) -> Any:
+        def band(i: int) -> None:
+            part = range(rows.start + i * step, min(rows.stop, rows.start + (i + 1) * step))
+            sums = gather(stencils, height, width, h, part, first).reshape(len(stencils), batches, -1)
+            sums = sums / per_batch
+            value, deriv = sums[0], sums[1]
+            if totals is not None:
+                mean = totals[..., (part.start - first) * width : (part.stop - first) * width]
+                mean = mean / self._cv_samples(batches, per_batch)
+                value, deriv = value - mean[0] * sums[2], deriv - mean[0] * sums[3] - mean[1] * sums[2]
+            image[0, :, part.start : part.stop] = value.reshape(batches, len(part), width)
+            image[1, :, part.start : part.stop] = deriv.reshape(batches, len(part), width)
+
+        execution.map_chunks(band, range(-(-len(rows) // step)), counted=False)
+
+
+def _remote(shared: tuple[ImageTask, Any, Transforms], item: tuple[int, int] | None) -> Any:
     """One task of :meth:`ImageTask._on_cluster` on a worker: with ``item`` = (first, stop) the
-    :meth:`~ImageTask._pixel_range` of those pixels, with None the per-image term ``pixel_extra``;
+    :meth:`~ImageTask._chunk_range` of those chunks, with None the per-image term ``pixel_extra``;
     both from a scene state built here."""
-    task, theta, transforms, chunk_pixels = shared
+    task, theta, transforms = shared
     state = build_state(task.scene, task.param, theta, task.tracer)
     if item is None:
         return transforms.pixel_extra(task, state)
-    return task._pixel_range(state, transforms, *item, chunk_pixels)
+    return task._chunk_range(state, transforms, *item)
 
 
 @dataclass(frozen=True)

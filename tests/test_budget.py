@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
 import sys
 import tracemalloc
 from pathlib import Path
@@ -16,6 +18,7 @@ import sphere3d as s3
 import sphere3d.boundary.camera as film_edge_points
 import sphere3d.boundary.transforms as edge_samples
 import sphere3d.reparam.bisection as bisection
+import sphere3d.tasks as tasks
 from flatland.core.budget import (
     BYTES_PER_RAY,
     IMAGE_BYTES_PER_PIXEL,
@@ -29,7 +32,9 @@ from flatland.core.budget import (
 )
 from flatland.core.image import resolve_batches
 from flatland.core.validate import ValidationError
+from sphere3d import execution
 from sphere3d.boundary.edges import mesh_edges
+from sphere3d.film import reach
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.scene import load_scene
 from sphere3d.state import build_state
@@ -225,23 +230,44 @@ def test09_edge_samples_are_sliced_by_shading_points_and_secondary_is_refused_be
 @pytest.mark.parametrize(("spp", "cv_scope"), [(1, "pixel"), (4, "pixel"), (4, "batch")])
 @pytest.mark.parametrize("kind", ["gaussian", "tent", "box"])
 def test10_the_film_model_is_what_the_splat_film_allocates(spp, cv_scope, kind):
+    # per pixel and batch the images alone, whatever the film; the splat film's buffers (one tile's, here
+    # the whole 8 × 8 image) are its term, named by the film
     scene = load_scene({**_shadow(8), "camera": {**_shadow(8)["camera"], "filter": kind}})
     task = ImageTask(scene, None, spp, 0, resolve_batches(spp, None), cv_scope=cv_scope)
-    per_batch = spp // task.batches
-    held = sum(a.nbytes for a in task._splat_buffers(task.batches, per_batch) if a is not None)
-    assert task.pixel_bytes() - IMAGE_BYTES_PER_PIXEL == held / (64 * task.batches)
-    assert ImageTask(scene, None, spp, 0, task.batches, film="pixel").pixel_bytes() == IMAGE_BYTES_PER_PIXEL
+    (term,) = task.film_terms()
+    _, held = task._tile()
+    assert held == 64
+    assert sum(a.nbytes for a in task._splat_buffers(held) if a is not None) == term.at_once
+    assert (term.field, term.value) == ("film", "splat")
+    pixel = ImageTask(scene, None, spp, 0, task.batches, film="pixel")
+    assert task.pixel_bytes() == pixel.pixel_bytes() == IMAGE_BYTES_PER_PIXEL
+    assert pixel.film_terms() == ()
 
 
-def test11_the_splat_film_of_a_large_image_is_refused_by_its_size_the_pixel_film_not():
-    # 4096² pixels at 2 spp: two batches of four stencil quantities of 5 × 5 float64 per pixel (27 GiB)
+def test11_the_splat_film_holds_a_tile_of_rows_whatever_the_image_height(monkeypatch):
+    # 4096 pixels wide: the same buffers for 1024 rows as for 4096, within TILE_BYTES (or a chunk per
+    # thread) and the 2h + 1 rows the next tile's neighbours need
+    _, h = reach("gaussian")
+    for spp in (1, 16):
+        held = []
+        for height in (1024, 4096):
+            scene = load_scene({**_shadow(4096), "camera": {**_shadow(4096)["camera"], "height": height}})
+            task = ImageTask(scene, None, spp, 0, resolve_batches(spp, None))
+            held.append(task.film_terms()[0].at_once)
+        b = task._stencil_bytes()
+        tile = max(tasks.TILE_BYTES, execution.workers() * task.chunk_pixels * b)
+        assert held[0] == held[1] <= tile + (2 * h + 1) * 4096 * b
+    # 4096² at 2 spp was refused for 27 GiB of stencils; now the images' 2 GiB and a tile
+    check_request(_request(_shadow(4096), "naive", 2))
+    # a film whose tile would not fit is refused naming the film (a tile of every chunk: 27 GiB)
+    monkeypatch.setattr(tasks, "TILE_BYTES", 2**50)
     with pytest.raises(
         ValidationError,
-        match=r"^camera\.width: 16777216 pixels × 2 batches .* 27\.\d GiB for the per-batch images and film",
+        match=r"^film: film=splat \(each sample in every pixel its filter covers\): the stencils of 16777216 "
+        r"pixels \(1024 memory chunks .*\) need about 25\.\d GiB at once \(27\.\d GiB in all\)",
     ):
         s3.render(_shadow(4096), spp=2, progress=False)
     check_request(_request(_shadow(4096), "naive", 2, film="pixel"))
-    check_request(_request(_shadow(4096), "naive", 1))  # 1 spp: two quantities, one batch (7.3 GiB)
 
 
 @pytest.mark.parametrize(
@@ -264,3 +290,62 @@ def test12_the_estimate_bounds_the_peak_of_small_renders(monkeypatch, method, sp
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert peak <= estimate
+
+
+@pytest.mark.parametrize(
+    ("method", "spp", "kind", "size"),
+    [(None, 1, "gaussian", (37, 23)), ("reparam", 4, "tent", (23, 37)), ("boundary", 2, "gaussian", (9, 31))],
+)
+def test13_the_splat_film_s_tiles_do_not_change_the_image(monkeypatch, method, spp, kind, size):
+    # 64 samples per memory chunk (16 to 64 pixels: several chunks per row, or rows per chunk); one tile
+    # of all of them, against tiles of one chunk (TILE_BYTES = 1, one thread): the same sums, same order
+    width, height = size
+    scene = {
+        **_shadow(1),
+        "camera": {**_shadow(1)["camera"], "width": width, "height": height, "filter": kind},
+    }
+    monkeypatch.setattr(tasks, "CHUNK", 64)
+
+    def images() -> list[np.ndarray]:
+        if method is None:
+            image = s3.render(scene, spp=spp, progress=False)
+            return [image.value, image.stderr]
+        image = s3.render_gradient(scene, PARAM, method=method, spp=spp, progress=False)
+        return [image.value, image.derivative, image.value_stderr, image.derivative_stderr]
+
+    task = ImageTask(load_scene(scene), PARAM, spp, 0, resolve_batches(spp, None))
+    assert task._tile()[0] * task.chunk_pixels >= width * height  # one tile
+    whole = images()
+    monkeypatch.setattr(tasks, "TILE_BYTES", 1)
+    monkeypatch.setattr(execution, "WORKERS", 1)
+    assert task._tile()[0] == 1 and -(-width * height // task.chunk_pixels) > 5  # a tile per chunk
+    for a, b in zip(whole, images(), strict=True):
+        assert np.array_equal(a, b)
+
+
+def test14_a_large_splat_render_fits_without_the_whole_image_s_stencils():
+    # 1024² at 1 spp in a fresh process whose address space may grow, after a small render (threads,
+    # their heaps, Embree), by the stencils of the whole image only (2 × 25 float64 per pixel, 400 MiB):
+    # what the film alone held before its tiles; the render needs the chunks, a tile and the image
+    # (4096² at 1 spp: 7.3 GiB -> 0.7 GiB peak RSS, 50 s -> 25 s on 2 cores; too long for the suite)
+    script = """
+import json, resource
+from pathlib import Path
+import sphere3d as s3
+from sphere3d.tasks import ImageTask
+scene = json.loads((Path(s3.__file__).parent / "scenes" / "hard_shadow.json").read_text())
+s3.render(scene, spp=1, progress=False)
+scene["camera"]["width"] = scene["camera"]["height"] = 1024
+stencils = ImageTask(s3.load_scene(scene), None, 1, 0, 1)._stencil_bytes() * 1024**2
+assert stencils == 2 * 25 * 8 * 1024**2
+size = next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith("VmSize"))
+resource.setrlimit(resource.RLIMIT_AS, (size + stencils, size + stencils))
+image = s3.render(scene, spp=1, progress=False)
+print(image.value.shape, float(image.value.mean()))
+"""
+    env = {**os.environ, "SPHERE3D_THREADS": "2"}
+    done = subprocess.run(
+        [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.startswith("(1024, 1024) ")
