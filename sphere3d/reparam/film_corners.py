@@ -56,14 +56,17 @@ __all__ = ["silhouette_corners"]
 @dataclass(frozen=True)
 class _Corners:
     """Visible moving vertices where two or more discontinuity edges meet: film images ``point``
-    (k, 2), velocity ``a_dot`` (k, 2), their edges' image directions sorted by angle ``angle``
-    (k, K; padded with +inf), the count of edges ``count`` (k,), per sector between consecutive
-    edges the map's linear derivative ``b_dot`` (k, K, 2, 2), and a k-d tree over the images."""
+    (k, 2), velocity ``a_dot`` (k, 2), the count of their edges ``count`` (k,) and where theirs
+    begin in the flat arrays ``start`` (k,); per edge, corner by corner, the angle of its image's
+    direction ``angle`` (H,), ascending within a corner, and the map's linear derivative ``b_dot``
+    (H, 2, 2) of the sector from that edge to the next; a k-d tree over the images. Ragged: H is
+    the sum of the counts, whatever a vertex's valence."""
 
     point: np.ndarray
     a_dot: np.ndarray
-    angle: np.ndarray
     count: np.ndarray
+    start: np.ndarray
+    angle: np.ndarray
     b_dot: np.ndarray
     tree: cKDTree | None
 
@@ -84,7 +87,7 @@ def _least_norm_turns(e: np.ndarray, e_dot: np.ndarray) -> np.ndarray:
 def _corner_table(state: SceneState) -> _Corners:
     """Once per state: the visible vertices where two or more discontinuity edges seen from the camera
     meet (silhouette edges, and creases between two faces on one side), whose image moves, with
-    their fans of maps (module docstring)."""
+    their fans of maps (module docstring). O(E log E) time, O(E) memory."""
     cam = state.camera
     o = np.asarray(detach(cam.origin), dtype=np.float64)
     edges = mesh_edges(state.triangles, state.shape_of)
@@ -93,8 +96,9 @@ def _corner_table(state: SceneState) -> _Corners:
     # silhouettes, and creases where the radiance jumps (flat-shaded, reflecting) seen between two faces
     jumps = np.flatnonzero(camera_candidates(state, edges) & (edges.silhouette(o) | (s1 * s2 > 0.0)))
     empty = _Corners(
-        *(np.zeros((0, *shape)) for shape in ((2,), (2,), (1,), ())), np.zeros((0, 1, 2, 2)), None
-    )
+        np.zeros((0, 2)), np.zeros((0, 2)), *(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0),
+        np.zeros((0, 2, 2)), None,
+    )  # fmt: skip
     if not jumps.size:
         return empty
     a, b = edges.endpoints(state.triangles)
@@ -104,31 +108,33 @@ def _corner_table(state: SceneState) -> _Corners:
     corner_ids = np.flatnonzero(counts >= 2)
     if not corner_ids.size:
         return empty
-    k_max = int(counts[corner_ids].max())
-    # the half-ends at each corner (padded with its first): half-end j is edge jumps[j % m] at its a (j < m)
+    # the half-ends at the corners, grouped by corner: half-end j is edge jumps[j % m] at its a (j < m)
     order = np.argsort(vid, kind="stable")
-    first = np.searchsorted(vid[order], corner_ids)
-    slot = np.minimum(np.arange(k_max), counts[corner_ids, None] - 1)
-    half = order[first[:, None] + slot]  # (k, K)
+    at_corner = counts[vid[order]] >= 2
+    half = order[at_corner]  # (H,)
+    corner = np.repeat(np.arange(corner_ids.size), counts[corner_ids])  # the half-ends' corners
+    first = np.concatenate([[0], np.cumsum(counts[corner_ids])[:-1]])
     edge = jumps[half % m]
     at_a = half < m
-    vertex = np.where(at_a[:, :1, None], a[edge[:, :1]], b[edge[:, :1]])[:, 0]  # Dual (k, 3)
-    far = np.where(at_a[..., None], b[edge], a[edge])  # Dual (k, K, 3): the edges' other ends
+    lead = edge[first]  # one half-end per corner gives its vertex
+    vertex = np.where(at_a[first, None], a[lead], b[lead])  # Dual (k, 3)
+    far = np.where(at_a[:, None], b[edge], a[edge])  # Dual (H, 3): the edges' other ends
     vx, vy = cam.film(vertex - cam.origin)
     fx, fy = cam.film(far - cam.origin)
     point = np.stack([np.asarray(detach(vx)), np.asarray(detach(vy))], axis=-1)
     v_dot = np.stack([np.asarray(tangent(vx)), np.asarray(tangent(vy))], axis=-1)
-    e = np.stack([np.asarray(detach(fx)), np.asarray(detach(fy))], axis=-1) - point[:, None]
-    e_dot = np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=-1) - v_dot[:, None]
+    e = np.stack([np.asarray(detach(fx)), np.asarray(detach(fy))], axis=-1) - point[corner]
+    e_dot = np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=-1) - v_dot[corner]
     forward = np.asarray(cam.forward, dtype=np.float64)
     v0 = np.asarray(detach(vertex)) - o
     far_depth = (np.asarray(detach(far)) - o) @ forward
-    moves = np.any(v_dot != 0.0, axis=1) | np.any(e_dot != 0.0, axis=(1, 2))
+    per_corner = lambda bad: np.bincount(corner, weights=bad, minlength=corner_ids.size) > 0  # noqa: E731
+    moves = np.any(v_dot != 0.0, axis=1) | per_corner(np.any(e_dot != 0.0, axis=1))
     ok = (
         moves
         & (v0 @ forward > 0.0)
-        & np.all(far_depth > 0.0, axis=1)
-        & np.all(np.sum(e * e, axis=-1) > 0.0, axis=1)
+        & ~per_corner(far_depth <= 0.0)
+        & ~per_corner(np.sum(e * e, axis=-1) <= 0.0)
     )
     if ok.any():  # hidden behind other geometry: the ray to the vertex stops short of it
         dist = np.linalg.norm(v0[ok], axis=1)
@@ -136,19 +142,22 @@ def _corner_table(state: SceneState) -> _Corners:
         ok[np.flatnonzero(ok)] = hits.t >= dist * (1.0 - 1e-6)
     if not ok.any():
         return empty
-    point, v_dot, e, e_dot, count = point[ok], v_dot[ok], e[ok], e_dot[ok], counts[corner_ids][ok]
-    # the edges by the angle of their images about the vertex; padding (repeats) sorted last
-    angle = np.arctan2(e[..., 1], e[..., 0])
-    angle = np.where(np.arange(k_max) < count[:, None], angle, np.inf)
-    by_angle = np.argsort(angle, axis=1)
-    angle = np.take_along_axis(angle, by_angle, axis=1)
-    e = np.take_along_axis(e, by_angle[..., None], axis=1)
-    e_dot = np.take_along_axis(e_dot, by_angle[..., None], axis=1)
-    # sector s lies between edge s and edge s + 1 (cyclically among the corner's count edges)
-    nxt = (np.arange(k_max) + 1) % count[:, None]
-    pair = np.stack([e, np.take_along_axis(e, nxt[..., None], axis=1)], axis=2)  # (k, K, 2, 2)
-    pair_dot = np.stack([e_dot, np.take_along_axis(e_dot, nxt[..., None], axis=1)], axis=2)
-    return _Corners(point, v_dot, angle, count, _least_norm_turns(pair, pair_dot), cKDTree(point))
+    keep = ok[corner]
+    renumber = np.cumsum(ok) - 1
+    corner, e, e_dot = renumber[corner[keep]], e[keep], e_dot[keep]
+    count = counts[corner_ids][ok]
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    # each corner's edges by the angle of their images about the vertex
+    angle = np.arctan2(e[:, 1], e[:, 0])
+    by_angle = np.lexsort((angle, corner))
+    angle, e, e_dot = angle[by_angle], e[by_angle], e_dot[by_angle]
+    # sector s lies between edge s and the next (cyclically among the corner's edges)
+    position = np.arange(angle.size) - start[corner]
+    nxt = start[corner] + (position + 1) % count[corner]
+    pair = np.stack([e, e[nxt]], axis=1)  # (H, 2, 2)
+    pair_dot = np.stack([e_dot, e_dot[nxt]], axis=1)
+    point, v_dot = point[ok], v_dot[ok]
+    return _Corners(point, v_dot, count, start, angle, _least_norm_turns(pair, pair_dot), cKDTree(point))
 
 
 def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: np.ndarray) -> AffineFilm:
@@ -169,10 +178,16 @@ def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: 
     k = k[rows]
     rel = at[rows] - corners.point[k]
     phi = np.arctan2(rel[:, 1], rel[:, 0])
-    # the sector: after the last edge whose angle is <= phi (before the first: the last sector, cyclic)
-    below = np.sum(corners.angle[k] <= phi[:, None], axis=1)
+    # the sector: after the last edge whose angle is <= phi (before the first: the last sector, cyclic),
+    # by a binary search in each corner's run of ascending angles
+    lo, hi = corners.start[k], corners.start[k] + corners.count[k]
+    while np.any(lo < hi):
+        mid = (lo + hi) // 2
+        right = (lo < hi) & (corners.angle[np.minimum(mid, corners.angle.size - 1)] <= phi)
+        lo, hi = np.where(right, mid + 1, lo), np.where(right | (lo >= hi), hi, mid)
+    below = lo - corners.start[k]
     sector = np.where(below > 0, below - 1, corners.count[k] - 1)
     out.mask[rows] = True
     out.a_dot[rows], out.centre[rows] = corners.a_dot[k], corners.point[k]
-    out.b_dot[rows] = corners.b_dot[k, sector]
+    out.b_dot[rows] = corners.b_dot[corners.start[k] + sector]
     return out

@@ -307,6 +307,10 @@ def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.
     return rows[outside <= reach * (1.0 + 1e-9) + HULL_MARGIN]
 
 
+HULL_EDGES = 64
+"""Film hulls with more edges are replaced by the polygon of this many fixed edge normals that holds them
+(:func:`_film_hull`): the rows × edges test of :func:`_reaching_motion` stays bounded whatever the mesh;
+looser, so a few more rows are probed, with the same result."""
 HULL_MARGIN = 1e-6
 """Pixels added to the probes' reach in :func:`_reaching_motion` (rounding of the film points, of
 float32 rays and of Qhull's joggle, 1e-11 relative)."""
@@ -331,10 +335,17 @@ def _film_hull(state: SceneState) -> tuple | None:
     if np.any(np.sum(v * np.asarray(detach(cam.forward)), axis=1) <= 0.0):
         return None
     fx, fy = (np.asarray(detach(f)) for f in cam.film(v))
+    points = np.column_stack([fx, fy])
     try:
-        edges = ConvexHull(np.column_stack([fx, fy]), qhull_options="QJ").equations
+        hull = ConvexHull(points, qhull_options="QJ")
     except QhullError:  # fewer than 3 distinct points: the box alone
-        edges = None
+        return (fx.min(), fx.max(), fy.min(), fy.max()), None
+    edges = hull.equations
+    if len(edges) > HULL_EDGES:  # a fine mesh's hull: the polygon of HULL_EDGES fixed normals holding it
+        phi = 2.0 * np.pi * np.arange(HULL_EDGES) / HULL_EDGES
+        normals = np.column_stack([np.cos(phi), np.sin(phi)])
+        offsets = -np.max(points[hull.vertices] @ normals.T, axis=0)  # n·p + d <= 0 for every vertex
+        edges = np.column_stack([normals, offsets])
     return (fx.min(), fx.max(), fy.min(), fy.max()), edges
 
 

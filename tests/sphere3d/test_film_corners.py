@@ -8,6 +8,11 @@ unbiased against :func:`sphere3d.closed_form.triangle_image`.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -77,3 +82,63 @@ def test03_triangles_whose_corners_the_ring_reaches_are_unbiased(motion, size, a
     lost = cf.share_lost(GRADIENT_METHODS.run("reparam", task).derivative, case.derivative())
     q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, len(CELLS)), BATCHES - 1)
     assert abs(lost.mean) <= q * lost.stderr, (lost.mean, lost.stderr)
+
+
+def _cone(segments: int) -> dict:
+    """An open flat-shaded cone of ``segments`` faces as the occluder, seen from the side: its apex is a
+    corner of about ``segments / 2`` visible creases, every rim vertex one of a boundary edge and creases."""
+    phi = 2.0 * np.pi * np.arange(segments) / segments
+    rim = np.stack([0.3 * np.cos(phi), 0.3 * np.sin(phi), np.zeros(segments)], axis=1)
+    vertices = np.concatenate([rim, [[0.0, 0.0, 0.5]]]).tolist()
+    faces = [[i, (i + 1) % segments, segments] for i in range(segments)]
+    return {
+        "name": "cone",
+        "camera": {"position": [0.0, -3.0, 1.6], "look_at": [0.0, 0.0, 0.25], "fov": 0.5,
+                   "width": 8, "height": 8},
+        "sky": 1.0,
+        "shapes": [{"name": "occluder", "type": "mesh", "vertices": vertices, "faces": faces, "albedo": 0.5}],
+    }  # fmt: skip
+
+
+def test04_a_sample_finds_its_sector_among_many_edges():
+    """At the apex of a 64-face cone (30-odd edges in one fan), the sector chosen for a sample is the
+    one after the last edge whose image's angle is at most the sample's, counted directly."""
+    state = build_state(load_scene(_cone(64)), "occluder.rotate.x", variable(0.0))
+    corners = _corner_table(state)
+    k = int(np.argmax(corners.count))
+    assert corners.count[k] > 20
+    run = corners.angle[corners.start[k] : corners.start[k] + corners.count[k]]
+    assert np.all(np.diff(run) >= 0.0)
+    phi = np.random.default_rng(3).uniform(-np.pi, np.pi, 200)
+    v = corners.point[k]
+    at = v + 1e-3 * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    out = silhouette_corners(state, np.repeat(v[None], phi.size, axis=0), 0.85, at)
+    below = np.sum(run[None] <= np.arctan2(at[:, 1] - v[1], at[:, 0] - v[0])[:, None], axis=1)
+    sector = np.where(below > 0, below - 1, corners.count[k] - 1)
+    assert out.mask.all()
+    assert np.array_equal(out.b_dot, corners.b_dot[corners.start[k] + sector])
+
+
+def test05_the_corner_table_grows_with_the_edges_not_with_corners_times_valence():
+    """A 20 000-face cone: its apex holds about 10 000 edges and its rim 20 000 corners, so a table
+    padded to the largest fan would hold 2·10⁸ sectors (6 GB of maps); the ragged one runs in a process
+    limited to 3 GiB of address space."""
+    code = textwrap.dedent(
+        """
+        import resource
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+        from flatland.core.dual import variable
+        from sphere3d.reparam.film_corners import _corner_table
+        from sphere3d.scene import load_scene
+        from sphere3d.state import build_state
+        from tests.sphere3d.test_film_corners import _cone
+        scene = load_scene(_cone(20_000))
+        corners = _corner_table(build_state(scene, "occluder.rotate.x", variable(0.0)))
+        print(int(corners.count.max()), int(corners.count.size))
+        """
+    )
+    root = Path(__file__).resolve().parents[2]
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, cwd=root)
+    assert run.returncode == 0, run.stderr[-2000:]
+    largest, corners = map(int, run.stdout.split())
+    assert largest > 5_000 and corners > 10_000
