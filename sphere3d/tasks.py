@@ -183,13 +183,21 @@ class ImageTask:
         return -(-self.shape[0] * self.shape[1] // self.chunk_pixels)
 
     def _chunk(
-        self, state: Any, transforms: Transforms, c: int, out: tuple | None = None, offset: int = 0
+        self,
+        state: Any,
+        transforms: Transforms,
+        c: int,
+        out: tuple | None = None,
+        offset: int = 0,
+        chunk_pixels: int | None = None,
     ) -> np.ndarray | None:
         """Memory chunk c's samples: their per-batch means (pixel film), or their stencils written to
-        ``out``, whose first column is pixel ``offset`` (splat film)."""
+        ``out``, whose first column is pixel ``offset`` (splat film). Chunks of ``chunk_pixels`` pixels
+        (default :attr:`chunk_pixels`: a worker of a cluster is given its client's)."""
         height, width = self.shape
         batches, per_batch = self.batches, self.spp // self.batches
-        pix = np.arange(c * self.chunk_pixels, min(height * width, (c + 1) * self.chunk_pixels))
+        size = chunk_pixels or self.chunk_pixels
+        pix = np.arange(c * size, min(height * width, (c + 1) * size))
         # sample order: batch, pixel, sample; sample s of batch b is its pixel's j = b * per_batch + s
         b_idx, p_idx, s_idx = np.meshgrid(np.arange(batches), pix, np.arange(per_batch), indexing="ij")
         draws = Draws.of(self.seed, (p_idx * self.spp + b_idx * per_batch + s_idx).ravel())
@@ -204,14 +212,17 @@ class ImageTask:
         est = pixel_samples(state, transforms, rows, cols, u, draws)
         return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
-    def _chunk_range(self, state: Any, transforms: Transforms, first: int, stop: int) -> Any:
-        """Memory chunks ``first`` to ``stop`` (exclusive) on this machine's threads: their per-batch means
-        (pixel film), or the stencils of their pixels (splat film, :meth:`_splat_buffers`)."""
-        chunk = functools.partial(self._chunk, state, transforms)
+    def _chunk_range(
+        self, state: Any, transforms: Transforms, first: int, stop: int, chunk_pixels: int
+    ) -> Any:
+        """Memory chunks ``first`` to ``stop`` (exclusive) of ``chunk_pixels`` pixels, on this machine's
+        threads: their per-batch means (pixel film), or the stencils of their pixels (splat film,
+        :meth:`_splat_buffers`)."""
+        chunk = functools.partial(self._chunk, state, transforms, chunk_pixels=chunk_pixels)
         if self.film != "splat":
             return execution.map_chunks(chunk, range(first, stop), counted=False)
         pixels = self.shape[0] * self.shape[1]
-        lo, hi = first * self.chunk_pixels, min(pixels, stop * self.chunk_pixels)
+        lo, hi = first * chunk_pixels, min(pixels, stop * chunk_pixels)
         out = self._splat_buffers(hi - lo)
         execution.map_chunks(functools.partial(chunk, out=out, offset=lo), range(first, stop), counted=False)
         return out
@@ -233,7 +244,7 @@ class ImageTask:
         chunks = self._chunk_count()
         tiles = execution.tile_count(chunks)
         items = list(itertools.pairwise([k * chunks // tiles for k in range(tiles)] + [chunks]))
-        results = execution.map_tiles(_remote, (self, theta, transforms), [*items, None])
+        results = execution.map_tiles(_remote, (self, theta, transforms, self.chunk_pixels), [*items, None])
         extra, results = results[-1], results[:-1]
         if self.film != "splat":
             tally = _tally(list(np.concatenate([p for parts in results for p in parts], axis=1)), self.shape)
@@ -433,15 +444,15 @@ class ImageTask:
         execution.map_chunks(band, range(-(-len(rows) // step)), counted=False)
 
 
-def _remote(shared: tuple[ImageTask, Any, Transforms], item: tuple[int, int] | None) -> Any:
+def _remote(shared: tuple[ImageTask, Any, Transforms, int], item: tuple[int, int] | None) -> Any:
     """One task of :meth:`ImageTask._on_cluster` on a worker: with ``item`` = (first, stop) the
-    :meth:`~ImageTask._chunk_range` of those chunks, with None the per-image term ``pixel_extra``;
-    both from a scene state built here."""
-    task, theta, transforms = shared
+    :meth:`~ImageTask._chunk_range` of those chunks (the client's chunk size), with None the per-image
+    term ``pixel_extra``; both from a scene state built here."""
+    task, theta, transforms, chunk_pixels = shared
     state = build_state(task.scene, task.param, theta, task.tracer)
     if item is None:
         return transforms.pixel_extra(task, state)
-    return task._chunk_range(state, transforms, *item)
+    return task._chunk_range(state, transforms, *item, chunk_pixels)
 
 
 @dataclass(frozen=True)

@@ -82,7 +82,8 @@ def test01_render_on_the_cluster_is_bit_identical_to_the_local_render(scheduler,
     local = render(_scene(), spp=SPP, seed=3, film=film, progress=False)
     remote = render(_scene(), spp=SPP, seed=3, film=film, progress=False, scheduler=scheduler)
     assert _same(local, remote)
-    assert sorted(TILES, key=str) == sorted([(32 * k, 32 * k + 32) for k in range(8)] + [None], key=str)
+    # 8 tiles of 2 memory chunks (32 pixels each), and the per-image term
+    assert sorted(TILES, key=str) == sorted([(2 * k, 2 * k + 2) for k in range(8)] + [None], key=str)
 
 
 @pytest.mark.parametrize("method", METHODS)
