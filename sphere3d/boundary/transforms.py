@@ -27,7 +27,7 @@ DRAW_CHUNK = 1 << 18
 per point): its memory is bounded whatever ``secondary``, down to one point's draws."""
 DRAW_BYTES = 1024
 """Bytes per edge sample of a slice at most: its uniforms, its sub-arc's choice and ends, the point on
-the edge (a Dual), the two rays beside the arc and their hits."""
+the edge (a Dual), the four rays beside the arc and their hits."""
 
 
 def draw_points(secondary: int) -> int:

@@ -58,9 +58,11 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
 
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
     only discontinuities (see :mod:`sphere3d.boundary.edges` for what is not handled: partly
-    overlapping edges, surfaces cutting through each other), up to the $O(δ)$ offsets
-    of the rays traced beside the edges. Cost: two rays per edge point on the film,
-    and per shading point ``2 secondary`` rays plus a silhouette test against every edge.
+    overlapping edges, surfaces cutting through each other), up to the offsets of the rays
+    traced beside the edges ($O(δ)$ on the film, $O(δ^2)$ at shading points, extrapolated).
+    Cost: two rays per edge point on the film, and per shading point ``4 secondary`` rays (both
+    sides of the arc at two offsets) plus the silhouette test against the edges the edge tree
+    finds (:mod:`sphere3d.boundary.edge_tree`).
     """
     plain = build_state(task.scene, task.param, 0.0, task.tracer)
     edges = mesh_edges(plain.triangles, plain.shape_of)
@@ -71,7 +73,7 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
 def memory(task: ImageTask | PointTask, options: Mapping[str, Any]) -> tuple[Term, ...]:
     r"""Memory model of :func:`boundary`: what ``secondary`` (k) and ``rate`` add to a request.
 
-    ``secondary``: 2k rays per shading point (one per camera sample, or per sample at a point), traced
+    ``secondary``: 4k rays per shading point (one per camera sample, or per sample at a point), traced
     in slices: at once :func:`~sphere3d.boundary.transforms.draw_bytes` for a memory chunk's shading
     points.
     ``rate``: per batch $N = \lceil \mathrm{rate} · (\mathrm{spp}/\mathrm{batches}) · Λ \rceil$ film edge
@@ -86,7 +88,7 @@ def memory(task: ImageTask | PointTask, options: Mapping[str, Any]) -> tuple[Ter
     chunk = min(task.chunk_pixels, pixels) * task.spp if image else min(CHUNK, task.n // task.batches)
     block = f"{min(chunk, draw_points(k))} shading points × {k} edge samples"
     edge_samples = Term(
-        "secondary", k, "edge samples per shading point", block, draw_bytes(k, chunk), rays=2 * k * samples
+        "secondary", k, "edge samples per shading point", block, draw_bytes(k, chunk), rays=4 * k * samples
     )
     if not image:
         return (edge_samples,)
