@@ -209,11 +209,14 @@ def test08_film_edge_points_are_chunked_and_rate_is_refused_for_its_rays(monkeyp
 
 
 def test09_edge_samples_are_sliced_by_shading_points_and_secondary_is_refused_beyond_one_point():
-    # slices of DRAW_CHUNK // k points: the old MemoryError case (10^5 samples at every point of a
-    # chunk) now holds two points' samples; one point's k samples are what no slicing bounds
-    request = _request("shadow", "boundary", 64, secondary=10**5)
+    # slices of DRAW_CHUNK // k points (at least one): the old MemoryError case (10^5 samples at every
+    # point of a chunk; half as many here, within the ray limit at four rays each) now holds one
+    # point's samples, what no slicing bounds
+    k = 5 * 10**4
+    request = _request("shadow", "boundary", 64, secondary=k)
     (edge,) = [t for t in request.terms if t.field == "secondary"]
-    assert edge.at_once == 2 * 10**5 * edge_samples.DRAW_BYTES
+    assert edge_samples.draw_points(k) == max(1, edge_samples.DRAW_CHUNK // k)
+    assert edge.at_once == edge_samples.draw_points(k) * k * edge_samples.DRAW_BYTES
     check_request(request)
     with pytest.raises(
         ValidationError,

@@ -22,9 +22,11 @@ from sphere3d.state import SceneState, build_state
 
 __all__ = ["DRAW_BYTES", "DRAW_CHUNK", "BoundaryTransforms", "draw_bytes", "draw_points"]
 
-DRAW_CHUNK = 1 << 18
+DRAW_CHUNK = 1 << 14
 """Edge samples of shading points per slice of :meth:`BoundaryTransforms.shading_extra` (``secondary``
-per point): its memory is bounded whatever ``secondary``, down to one point's draws."""
+per point): its memory is bounded whatever ``secondary``, down to one point's draws. The slice also
+bounds the silhouette pairs held at once (:func:`~sphere3d.boundary.shading._pairs`: the points'
+silhouette edges that reach the emitters, tens per point on a mesh of 10⁵ triangles)."""
 DRAW_BYTES = 1024
 """Bytes per edge sample of a slice at most: its uniforms, its sub-arc's choice and ends, the point on
 the edge (a Dual), the four rays beside the arc and their hits."""
