@@ -31,7 +31,7 @@ from sphere3d import execution, tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.methods._common import MEMORY_MODELS
 from sphere3d.scene import check_vector, load_scene
-from sphere3d.state import COORD_MAX
+from sphere3d.state import COORD_MAX, scene_term
 from sphere3d.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
@@ -96,9 +96,10 @@ def _request(task: ImageTask | PointTask, options: dict[str, Any], method: str |
     """What the call will hold and trace (:class:`~flatland.core.budget.Request`): the image
     (:meth:`~sphere3d.tasks.ImageTask.pixel_bytes`) and its film's working set
     (:meth:`~sphere3d.tasks.ImageTask.film_terms`), the rays, and what the method's options add (its
-    memory model, :data:`~sphere3d.methods._common.MEMORY_MODELS`)."""
+    memory model, :data:`~sphere3d.methods._common.MEMORY_MODELS`), and the scene's per-triangle tables
+    (:func:`~sphere3d.state.scene_term`)."""
     model = MEMORY_MODELS.get(method or "")
-    terms = model(task, options) if model else ()
+    terms = (*(model(task, options) if model else ()), scene_term(task.scene))  # and the scene's tables
     rays = 3 if model else rays_per_sample(options)  # a model counts its options' rays itself
     if isinstance(task, ImageTask):
         pixels, spp, field = task.scene.camera.width * task.scene.camera.height, task.spp, "spp"

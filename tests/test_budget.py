@@ -18,6 +18,7 @@ import sphere3d as s3
 import sphere3d.boundary.camera as film_edge_points
 import sphere3d.boundary.transforms as edge_samples
 import sphere3d.reparam.bisection as bisection
+import sphere3d.state as state_module
 import sphere3d.tasks as tasks
 from flatland.core.budget import (
     BYTES_PER_RAY,
@@ -37,7 +38,7 @@ from sphere3d.boundary.edges import mesh_edges
 from sphere3d.film import reach
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.scene import load_scene
-from sphere3d.state import build_state
+from sphere3d.state import SCENE_BYTES_PER_TRIANGLE, build_state
 from sphere3d.tasks import ImageTask
 
 SPHERE_SHADOW = json.loads((Path(s3.__file__).parent / "scenes" / "shadow.json").read_text())
@@ -352,3 +353,17 @@ print(image.value.shape, float(image.value.mean()))
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.startswith("(1024, 1024) ")
+
+
+def test15_the_scene_s_triangles_are_counted_and_refused_named():
+    """The scene's per-triangle tables are a term of every request (``shapes``: its triangle count); a
+    scene whose tables alone exceed the limit is refused before any state is built, naming it."""
+    scene = load_scene("hard_shadow")
+    triangles = sum(len(shape.mesh.faces) for shape in scene.shapes)
+    for method in ("reparam", "boundary"):
+        (term,) = [t for t in _request("hard_shadow", method).terms if t.field == "shapes"]
+        assert term.value == triangles and term.at_once == triangles * SCENE_BYTES_PER_TRIANGLE
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(state_module, "SCENE_BYTES_PER_TRIANGLE", MEMORY_LIMIT // triangles + 1)
+        with pytest.raises(ValidationError, match=rf"^shapes: shapes={triangles} \(triangles in the scene\)"):
+            s3.render_gradient("hard_shadow", PARAM, method="naive", spp=1, progress=False)
