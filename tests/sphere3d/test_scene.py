@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import copy
 import json
+import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -17,7 +19,7 @@ from flatland.core.validate import ValidationError
 from sphere3d import shapes
 from sphere3d.sampling import triangle_area
 from sphere3d.scene import list_scenes, load_scene
-from sphere3d.state import build_state, euler_matrix
+from sphere3d.state import build_state, euler_matrix, per_state
 
 
 def _area(mesh):
@@ -406,3 +408,32 @@ def test10_a_recentred_mesh_turns_and_scales_about_its_centre(tmp_path, source, 
         raw = {"name": "box", "type": "mesh", **mesh, "center": False, "rotate": [0.0, 0.0, np.pi]}
         v = np.asarray(detach(build_state(load_scene(base | {"shapes": [raw]})).triangles)).reshape(-1, 3)
         np.testing.assert_allclose(0.5 * (v.min(axis=0) + v.max(axis=0)), [-5.0, -9.5, -2.5], atol=1e-12)
+
+
+def test11_a_per_state_table_is_built_once_when_threads_ask_at_once():
+    """Four threads ask for one state's table together: one builds it, the others wait and get the same
+    object; a build that fails fails for every thread that asked, and none is left waiting."""
+    calls = []
+
+    def build(state):
+        calls.append(1)
+        time.sleep(0.05)
+        return np.arange(3)
+
+    table = per_state(build)
+    state = build_state(load_scene("hard_shadow"))
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda _: table(state), range(4)))
+    assert len(calls) == 1 and all(r is results[0] for r in results)
+
+    def broken(state):
+        calls.append(1)
+        time.sleep(0.05)
+        raise RuntimeError("no table")
+
+    failing = per_state(broken)
+    calls.clear()
+    with ThreadPoolExecutor(4) as pool:
+        futures = [pool.submit(failing, state) for _ in range(4)]
+        errors = [f.exception(timeout=10) for f in futures]
+    assert all(isinstance(e, RuntimeError) for e in errors) and 1 <= len(calls) <= 4
