@@ -11,7 +11,9 @@ Where a moving vertex V, at which two or more discontinuity edges seen from the 
 (silhouette edges, :meth:`sphere3d.boundary.edges.Edges.silhouette`, and the creases of flat-shaded
 shapes, :func:`sphere3d.boundary.camera.camera_candidates`: a smooth shape's interpolated normals
 make its creases no discontinuity, and its vertices slide under its silhouette), has its film
-image v inside the ring of a camera sample's probes, the sample's film map is affine on each sector
+image v inside the ring of a camera sample's probes, or two of its edges' images pass through the
+ring (near an acute corner, up to $r / \sin(α/2)$ from v for a ring of radius r and a sector of angle
+α), the sample's film map is affine on each sector
 between two consecutive edges' images about v: $A(u) = u + (θ - θ_0)(\dot v + \dot L_s (u - v))$,
 where $\dot L_s$ keeps both of the sector's bounding edges on their moved lines. With $e_i$ the
 image of edge i's direction from v and $\dot e_i$ its rate, a point $v + s e_i$ maps onto the moved
@@ -26,9 +28,10 @@ a refinement of the heuristic.
 
 Biased where the kernel also holds a discontinuity not through V (a static edge: a T-junction at
 the corner, which keeps its own rule, :mod:`sphere3d.reparam.junctions`; an edge of another
-shape), and not applied beyond the ring's reach from V, where two of its edges may still share a
-kernel (near an acute corner) and a crease is followed by a point of one face (the probes pair
-different shapes only). So the box of ``hard_shadow_cube`` turning about its centre keeps most
+shape), and not applied where the ring holds one edge of V only, nor along a crease far from its
+ends, which is followed by a point of one face (the probes pair different shapes only): a 4 px
+triangle tilting, seen at 30 degrees, keeps a few per cent (the atlas). So the box of
+``hard_shadow_cube`` turning about its centre keeps most
 of its bias (about a quarter of its gradient image's RMS, at a corner on the ground's far edge
 and along a crease): the vertices' reach holds few of its samples.
 
@@ -69,6 +72,13 @@ class _Corners:
     angle: np.ndarray
     b_dot: np.ndarray
     tree: cKDTree | None
+    edge: np.ndarray
+    """(H, 2): each edge's image from the vertex to its other end."""
+    sine: float
+    """The sine of half the narrowest sector (below π) of every corner: a kernel disc of radius r
+    reaches two edges of a corner only within r / sine of its vertex."""
+    longest: float
+    """The longest edge image (pixels)."""
 
 
 def _least_norm_turns(e: np.ndarray, e_dot: np.ndarray) -> np.ndarray:
@@ -97,7 +107,7 @@ def _corner_table(state: SceneState) -> _Corners:
     jumps = np.flatnonzero(camera_candidates(state, edges) & (edges.silhouette(o) | (s1 * s2 > 0.0)))
     empty = _Corners(
         np.zeros((0, 2)), np.zeros((0, 2)), *(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0),
-        np.zeros((0, 2, 2)), None,
+        np.zeros((0, 2, 2)), None, np.zeros((0, 2)), 1.0, 0.0,
     )  # fmt: skip
     if not jumps.size:
         return empty
@@ -157,25 +167,50 @@ def _corner_table(state: SceneState) -> _Corners:
     pair = np.stack([e, e[nxt]], axis=1)  # (H, 2, 2)
     pair_dot = np.stack([e_dot, e_dot[nxt]], axis=1)
     point, v_dot = point[ok], v_dot[ok]
-    return _Corners(point, v_dot, count, start, angle, _least_norm_turns(pair, pair_dot), cKDTree(point))
+    gap = np.append(angle[1:], 0.0) - angle  # to the next edge; the last of each corner wraps around
+    gap = np.where(position + 1 < count[corner], gap, angle[start[corner]] + 2.0 * np.pi - angle)
+    narrow = gap[gap < np.pi]
+    sine = float(np.sin(0.5 * narrow.min())) if narrow.size else 1.0
+    longest = float(np.sqrt(np.max(np.sum(e * e, axis=1))))
+    maps = _least_norm_turns(pair, pair_dot)
+    return _Corners(point, v_dot, count, start, angle, maps, cKDTree(point), e, max(sine, 1e-6), longest)
 
 
 def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: np.ndarray) -> AffineFilm:
     """Per kernel centre (n, 2), pixels: the map of the nearest visible moving vertex where two or more
-    discontinuity edges meet, whose film image lies within ``reach`` pixels (the ring's radius), in
-    the sector (between two of its edges) that holds the sample's own film point ``at`` (n, 2);
-    none elsewhere.
+    discontinuity edges meet, whose film image lies within ``reach`` pixels (the ring's radius) or two
+    of whose edges' images pass within ``reach`` of the centre (searched up to ``reach / sine`` of the
+    narrowest sector, :class:`_Corners`), in the sector (between two of its edges) that holds the
+    sample's own film point ``at`` (n, 2); none elsewhere.
 
-    One k-d tree query per centre (:func:`_corner_table` builds the tree once per state).
+    One k-d tree query per centre (:func:`_corner_table` builds the tree once per state), and for the
+    centres beyond ``reach`` of their vertex a distance to each of its edges.
     """
     n = len(centre)
     out = AffineFilm.none(n)
     corners = _corner_table(state)
     if corners.tree is None or n == 0:
         return out
-    dist, k = corners.tree.query(centre, distance_upper_bound=reach)
+    # the nearest vertex from which two of its edges can reach the disc (module docstring)
+    search = min(reach / corners.sine, reach + corners.longest)
+    dist, k = corners.tree.query(centre, distance_upper_bound=search)
     rows = np.flatnonzero(np.isfinite(dist))
     k = k[rows]
+    far = dist[rows] > reach
+    if far.any():  # beyond reach of the vertex: follow it only where two of its edges pass within reach
+        f = np.flatnonzero(far)
+        each = np.repeat(f, corners.count[k[f]])
+        first = np.repeat(
+            corners.start[k[f]] - np.cumsum(np.append(0, corners.count[k[f]][:-1])), corners.count[k[f]]
+        )
+        idx = first + np.arange(each.size)
+        seg = corners.edge[idx]
+        rel = centre[rows[each]] - corners.point[k[each]]
+        t = np.clip(np.sum(rel * seg, axis=1) / np.maximum(np.sum(seg * seg, axis=1), 1e-300), 0.0, 1.0)
+        near = np.hypot(*(rel - t[:, None] * seg).T) <= reach
+        two = np.bincount(each, weights=near, minlength=k.size) >= 2
+        keep = ~far | two
+        rows, k = rows[keep], k[keep]
     rel = at[rows] - corners.point[k]
     phi = np.arctan2(rel[:, 1], rel[:, 0])
     # the sector: after the last edge whose angle is <= phi (before the first: the last sector, cyclic),

@@ -142,3 +142,27 @@ def test05_the_corner_table_grows_with_the_edges_not_with_corners_times_valence(
     assert run.returncode == 0, run.stderr[-2000:]
     largest, corners = map(int, run.stdout.split())
     assert largest > 5_000 and corners > 10_000
+
+
+def test06_two_edges_of_an_acute_corner_in_a_ring_are_followed_beyond_the_vertex_s_reach():
+    """A 4 px triangle seen at 30 degrees: on the bisector of its narrowest sector, a kernel disc of
+    radius r farther than r from the vertex still holds both edges up to r / sin(α/2): it gets that
+    sector's map; beyond, where at most one edge is in the disc, none (with maps only within r of a
+    vertex, neither got one)."""
+    case = Case("sphere3d film", "rotate x (tilt)", 4.0, 30.0, "gaussian")
+    state = build_state(load_scene(case.scene()), case.param, variable(0.0))
+    corners = _corner_table(state)
+    k = int(np.argmax(corners.count))  # any corner; its narrowest sector below π
+    run = slice(corners.start[k], corners.start[k] + corners.count[k])
+    angle = corners.angle[run]
+    gap = np.diff(np.append(angle, angle[0] + 2.0 * np.pi))
+    s = int(np.argmin(gap))
+    half = 0.5 * gap[s]
+    bisector = angle[s] + half
+    r = 0.3
+    inside = corners.point[k] + r / np.sin(half) * 0.9 * np.array([np.cos(bisector), np.sin(bisector)])
+    outside = corners.point[k] + r / np.sin(half) * 1.5 * np.array([np.cos(bisector), np.sin(bisector)])
+    assert np.sin(half) < 0.9  # an acute enough corner for the case to exist
+    out = silhouette_corners(state, np.stack([inside, outside]), r, np.stack([inside, outside]))
+    assert out.mask.tolist() == [True, False]
+    assert np.array_equal(out.b_dot[0], corners.b_dot[corners.start[k] + s])
