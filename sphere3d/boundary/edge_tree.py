@@ -28,14 +28,23 @@ pass: it is conservative by construction (a node's bounds hold its edges' bounds
 
 Construction, O(E log E) per state: the edges sorted by the Morton code of their midpoints (30 bits),
 leaves of :data:`LEAF` consecutive edges, a complete binary tree above them (heap order: node i has
-children 2i and 2i + 1), each node's bounds merged from its children's. A query walks the tree
-breadth first for a block of points at once (vectorized over (point, node) pairs; blocks of
-:data:`QUERY_POINTS` points bound the pairs held), so its cost grows with the pairs it keeps at each
-level, about the silhouette edges near the emitters' directions, not with the mesh.
+children 2i and 2i + 1), each node's bounds merged from its children's; each edge's two planes
+$n_k·p = n_k·a$ stored in leaf order beside it.
+
+Query (:meth:`EdgeTree.silhouettes`): every point walks the tree depth first, dropping the nodes
+the culls reject, and at the leaves it reaches runs the exact silhouette test on each edge (the
+signs of $n_1·(o - a)$ and $n_2·(o - a)$ differ, or the edge is open). Its cost grows with the nodes
+it visits, about the silhouette edges near the emitters' directions (O(√E) on a fine closed mesh,
+times log E), not with the mesh. A walk is one branch per node, which array operations over
+(point, node) pairs do at tens of ns a test; :func:`walk` is plain Python compiled by Numba
+(``nogil``: the render's worker threads walk at once), its pairs written to buffers that grow by
+doubling, so memory holds the pairs found, never points × edges. The compiled code is cached on
+disk (first use on a machine: about a second to compile).
 """
 
 from __future__ import annotations
 
+import functools
 import threading
 import weakref
 from collections.abc import Callable
@@ -46,14 +55,14 @@ import numpy as np
 from sphere3d.boundary.edges import Edges
 from sphere3d.vector import dot, norm
 
-__all__ = ["LEAF", "QUERY_POINTS", "SLACK", "EdgeTree", "edge_tree"]
+__all__ = ["LEAF", "SLACK", "EdgeTree", "edge_tree", "walk"]
 
 LEAF = 8
 """Edges per leaf."""
 SLACK = 1e-9
 """Kept in every cull's cosine comparison beyond the bounds (their rounding is about 1e-15)."""
-QUERY_POINTS = 1024
-"""Points walked down the tree at once."""
+PAIRS_PER_POINT = 64
+"""First size of the pair buffers of :meth:`EdgeTree.silhouettes`, per point (doubled when full)."""
 
 
 def _morton(points: np.ndarray) -> np.ndarray:
@@ -89,6 +98,10 @@ class EdgeTree:
         D: the leaves are nodes 2^D to 2^(D+1) - 1.
     cos_spread, sin_spread : ndarray, shape (2^(D+1),)
         cos α and sin α.
+    planes : ndarray, shape (2^D L, 8)
+        Per slot of ``order``: $n_1$, $n_1·a$, $n_2$, $n_2·a$ of its edge (0 for padding).
+    always : ndarray of bool, shape (2^D L,)
+        Per slot: an open or non-manifold edge (a silhouette from every point).
     """
 
     order: np.ndarray
@@ -99,6 +112,8 @@ class EdgeTree:
     depth: int
     cos_spread: np.ndarray
     sin_spread: np.ndarray
+    planes: np.ndarray
+    always: np.ndarray
 
     @staticmethod
     def build(edges: Edges, subset: np.ndarray) -> EdgeTree:
@@ -151,68 +166,125 @@ class EdgeTree:
         lo, hi = np.where(filled[:, None], lo, 0.0), np.where(filled[:, None], hi, 0.0)
         centre = 0.5 * (lo + hi)
         radius = np.where(filled, 0.5 * norm(hi - lo), -1.0)
-        return EdgeTree(order, centre, radius, axis, spread, depth, np.cos(spread), np.sin(spread))
+        slot, real = order.clip(0), (order >= 0)[:, None]
+        n1, n2, a = edges.n1[slot], edges.n2[slot], edges.a[slot]
+        planes = np.concatenate([n1, dot(n1, a)[:, None], n2, dot(n2, a)[:, None]], axis=1)
+        planes = np.where(real, planes, 0.0)
+        always = edges.always[slot] & (order >= 0)
+        return EdgeTree(
+            order, centre, radius, axis, spread, depth, np.cos(spread), np.sin(spread), planes, always
+        )
 
-    def _keep(self, o: np.ndarray, node: np.ndarray, emitters: tuple[np.ndarray, float] | None) -> np.ndarray:
-        """Whether node ``node`` may hold a pair with point ``o`` (both (n, ...)): the two culls, in
-        cosines (module docstring; ``SLACK`` covers their rounding)."""
-        v = o - self.centre[node]
-        dist = norm(v)
-        r = self.radius[node]
-        outside = dist > r
-        safe = np.where(outside, dist, 1.0)
-        sin_b = np.where(outside, np.maximum(r, 0.0), 0.0) / safe  # β: the sphere's angular radius
-        cos_b = np.sqrt(1.0 - sin_b * sin_b)
-        cos_phi = dot(self.axis[node], v) / safe  # φ: from the cone's axis to the direction to o
-        # cos(π/2 - α - β) = sin(α + β): |cos φ| above it puts every n·(o - p) on one side
-        sin_a, cos_a = self.sin_spread[node], self.cos_spread[node]
-        sin_ab, cos_ab = sin_a * cos_b + cos_a * sin_b, cos_a * cos_b - sin_a * sin_b
-        cull = (cos_ab > 0.0) & (np.abs(cos_phi) > sin_ab + SLACK)  # α + β < π/2 and φ clear of π/2 by it
-        if emitters is not None:
-            centre, radius = emitters
-            to = centre - o
-            d_to = norm(to)
-            far = d_to > radius
-            sin_e = radius / np.where(far, d_to, 1.0)
-            cos_e = np.sqrt(np.maximum(0.0, 1.0 - sin_e * sin_e))
-            # the angle from o between the two spheres' centres beyond β + (the emitters' angular radius)
-            cos_gap = -dot(v, to) / (safe * np.where(far, d_to, 1.0))
-            cos_sum = cos_b * cos_e - sin_b * sin_e  # cos(β + γ), γ + β < π as both are below π/2
-            cull |= far & (cos_gap < cos_sum - SLACK)
-        return (r >= 0.0) & ~(outside & cull)
-
-    def candidates(
-        self,
-        o: np.ndarray,
-        emitters: tuple[np.ndarray, float] | None = None,
-        test: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
-    ) -> tuple[np.ndarray, np.ndarray, int]:
-        """(rows, edges, tests): a superset of the pairs (point ``o[row]``, edge) whose edge may be a
-        silhouette seen from the point and, given the emitters' bounding sphere ``(centre, radius)``,
-        may reach their image (module docstring), grouped by blocks of points; with ``test`` (rows,
-        edges) -> mask, only the pairs it keeps. ``tests`` counts the (point, node) tests of the walk.
-        Memory: the pairs of one level of the walk and the candidates of :data:`QUERY_POINTS` points
-        at a time."""
+    def silhouettes(
+        self, o: np.ndarray, emitters: tuple[np.ndarray, float] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, edges): every pair (point ``o[row]``, edge of the tree) where the edge is a silhouette
+        seen from the point (the exact test), kept by the culls (module docstring) given the
+        emitters' bounding sphere ``(centre, radius)``; grouped by point, in leaf order within one.
+        Memory: the pairs found (buffers doubled when full)."""
+        o = np.ascontiguousarray(o, dtype=np.float64)
+        emit = np.array([0.0, 0.0, 0.0, -1.0]) if emitters is None else np.array([*emitters[0], emitters[1]])
+        size = max(PAIRS_PER_POINT, PAIRS_PER_POINT * len(o))
         rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-        tests = 0
-        for lo in range(0, len(o), QUERY_POINTS):
-            p = np.arange(lo, min(lo + QUERY_POINTS, len(o)))
-            node = np.ones(p.size, dtype=np.int64)
-            for level in range(self.depth + 1):
-                keep = self._keep(o[p], node, emitters)
-                tests += keep.size
-                p, node = p[keep], node[keep]
-                if level < self.depth:  # both children of every node kept
-                    p, node = np.repeat(p, 2), (2 * node[:, None] + np.arange(2)).ravel()
-            edge = self.order.reshape(-1, LEAF)[node - (1 << self.depth)]  # (pairs, LEAF)
-            real = edge >= 0
-            r, c = np.repeat(p, LEAF)[real.ravel()], edge[real]
-            if test is not None:
-                keep = test(r, c)
-                r, c = r[keep], c[keep]
-            rows.append(r)
-            cols.append(c)
-        return np.concatenate(rows), np.concatenate(cols), tests
+        done = 0
+        while done < len(o):
+            r, c = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+            stop, count = _compiled()(
+                o, done, emit, self.centre, self.radius, self.axis, self.cos_spread, self.sin_spread,
+                self.depth, self.order, self.planes, self.always, r, c,
+            )  # fmt: skip
+            rows.append(r[:count])
+            cols.append(c[:count])
+            if stop == done:  # one point's pairs do not fit: a larger buffer
+                size *= 2
+            done = stop
+        return np.concatenate(rows), np.concatenate(cols)
+
+
+def walk(
+    o: np.ndarray,
+    start: int,
+    emit: np.ndarray,
+    centre: np.ndarray,
+    radius: np.ndarray,
+    axis: np.ndarray,
+    cos_spread: np.ndarray,
+    sin_spread: np.ndarray,
+    depth: int,
+    order: np.ndarray,
+    planes: np.ndarray,
+    always: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+) -> tuple[int, int]:
+    """The depth-first walk of :meth:`EdgeTree.silhouettes` for the points ``o[start:]``, written as
+    scalar Python for Numba: the pairs found go to ``rows``, ``cols`` until they are full. Returns
+    (the first point not walked, the pairs written); a point whose pairs do not all fit is not
+    walked. ``emit``: the emitters' sphere (centre, radius), radius < 0 for none. The culls are
+    those of the module docstring, in cosines, each comparison kept by :data:`SLACK`."""
+    capacity = rows.shape[0]
+    stack = np.empty(2 * depth + 2, dtype=np.int64)  # depth first: at most one sibling per level waits
+    first_leaf = 1 << depth
+    count = 0
+    for i in range(start, o.shape[0]):
+        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+        # the emitters' angular radius γ seen from o (the cone cull only where o is outside their sphere)
+        tx, ty, tz = emit[0] - ox, emit[1] - oy, emit[2] - oz
+        d_to = np.sqrt(tx * tx + ty * ty + tz * tz)
+        far = emit[3] >= 0.0 and d_to > emit[3]
+        sin_e = emit[3] / d_to if far else 0.0
+        cos_e = np.sqrt(max(0.0, 1.0 - sin_e * sin_e))
+        begin = count
+        stack[0] = 1
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            r = radius[node]
+            if r < 0.0:  # an empty node
+                continue
+            vx, vy, vz = ox - centre[node, 0], oy - centre[node, 1], oz - centre[node, 2]
+            dist = np.sqrt(vx * vx + vy * vy + vz * vz)
+            if dist > r:  # a node whose sphere holds o is kept
+                sin_b = r / dist  # β: the sphere's angular radius
+                cos_b = np.sqrt(1.0 - sin_b * sin_b)
+                # φ from the cone's axis to the direction to o: |cos φ| > sin(α + β) with α + β < π/2
+                # puts every n·(o - p) of the node on one side (no silhouette)
+                cos_phi = (axis[node, 0] * vx + axis[node, 1] * vy + axis[node, 2] * vz) / dist
+                sin_a, cos_a = sin_spread[node], cos_spread[node]
+                narrow = cos_a * cos_b - sin_a * sin_b > 0.0  # α + β < π/2
+                if narrow and abs(cos_phi) > sin_a * cos_b + cos_a * sin_b + SLACK:
+                    continue
+                # the angle from o between the node's and the emitters' centres beyond β + γ
+                cos_gap = -(vx * tx + vy * ty + vz * tz) / (dist * d_to) if far else 1.0
+                if cos_gap < cos_b * cos_e - sin_b * sin_e - SLACK:
+                    continue
+            if node < first_leaf:  # the left child first: pairs in leaf order
+                stack[top] = 2 * node + 1
+                stack[top + 1] = 2 * node
+                top += 2
+                continue
+            base = (node - first_leaf) * LEAF
+            for j in range(base, base + LEAF):
+                if order[j] < 0:  # padding ends a leaf
+                    break
+                front1 = ox * planes[j, 0] + oy * planes[j, 1] + oz * planes[j, 2] > planes[j, 3]
+                front2 = ox * planes[j, 4] + oy * planes[j, 5] + oz * planes[j, 6] > planes[j, 7]
+                if always[j] or front1 != front2:  # n1·(o - a) and n2·(o - a) of opposite signs
+                    if count == capacity:
+                        return i, begin  # point i does not fit: resume from it
+                    rows[count] = i
+                    cols[count] = order[j]
+                    count += 1
+    return o.shape[0], count
+
+
+@functools.cache
+def _compiled() -> Callable:
+    """:func:`walk` compiled by Numba (imported here, on first use: the import alone takes a second)."""
+    import numba
+
+    return numba.njit(cache=True, nogil=True)(walk)
 
 
 _TREES: dict[int, tuple[weakref.ref, dict[bytes, EdgeTree]]] = {}

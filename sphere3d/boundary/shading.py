@@ -38,13 +38,11 @@ behind ω on the edge is found in the plane of the arc; $\dot ω$ comes from for
 per draw: at δ = :data:`EPS_ANGLE` and at 2δ, extrapolated to δ → 0); $L_i$ along a ray is
 deterministic, so the jump is exact up to $O(δ^2)$.
 
-The candidate pairs come from a tree over the edges (:mod:`sphere3d.boundary.edge_tree`: bounding
-spheres and normal cones, culled by facing and by the emitters' cone), walked for a first block of
-points; where that walk costs more than testing every edge (:data:`NODE_COST`: few edges, or
-no emitter cone to cull by under a sky), the rest of the points scan every edge in blocks of at most
-:data:`MAX_PAIRS` pairs. Both keep exactly the pairs of the exact tests, so the choice changes the
-time, never a number. The pairs found grow with the silhouette edges each point sees (about the
-square root of a fine mesh's edges), not with all of them.
+The silhouette pairs come from a tree over the edges (:mod:`sphere3d.boundary.edge_tree`: bounding
+spheres and normal cones, culled by facing and by the emitters' cone, then the exact test on the
+edges of the leaves reached): exactly the pairs of testing every (point, edge) pair, found in a
+time that grows with the silhouette edges each point sees (about the square root of a fine mesh's
+edges), not with all of them.
 """
 
 from __future__ import annotations
@@ -52,12 +50,12 @@ from __future__ import annotations
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from sphere3d.boundary.edge_tree import QUERY_POINTS, edge_tree
+from sphere3d.boundary.edge_tree import edge_tree
 from sphere3d.boundary.edges import Edges
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "MAX_PAIRS", "NODE_COST", "shading_edge_term"]
+__all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "shading_edge_term"]
 
 EPS_ANGLE = 1e-6
 """Angle δ (radians) between the sampled edge direction and the nearer rays traced beside it (the others
@@ -65,12 +63,6 @@ at 2δ). One pair alone has a bias of order δ / (feature angle · tan(corner an
 ray on one side crosses the corner's other edge; the two pairs' extrapolation cancels its first order
 (:func:`shading_edge_term`), leaving O(δ²). Below about 1e-7 the rays' float32 rounding (Embree)
 takes over."""
-MAX_PAIRS = 1 << 16
-"""Shading points × edges of one block of the silhouette test (its arrays stay in cache: 5 × faster
-than blocks of 2^20 on 65536 points × 1925 edges)."""
-NODE_COST = 30
-"""A (point, node) test of the edge tree costs about this many (point, edge) tests of the scan (two
-matrix products): :func:`_pairs` scans where the tree would walk more than 1/NODE_COST tests per edge."""
 MAX_EMITTER_TRIANGLES = 64
 """Emitter triangles up to which the arcs are clipped to the emitters' images (cost: pairs × this)."""
 
@@ -119,65 +111,29 @@ def _reach(edges: Edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, boun
     return (d_mid <= half_edge) | (d_to <= radius) | (np.arccos(np.clip(cos, -1.0, 1.0)) <= spread)
 
 
-def _scan(
-    edges: Edges, o: np.ndarray, subset: np.ndarray, c1: np.ndarray, c2: np.ndarray
-) -> tuple[np.ndarray, ...]:
-    """(rows, edges): the silhouette pairs of points ``o`` and the edges ``subset``, by testing every pair:
-    two matrix products per block of points (at most :data:`MAX_PAIRS` pairs)."""
-    rows, cols = [], []
-    step = max(1, MAX_PAIRS // subset.size)
-    n1, n2 = np.ascontiguousarray(edges.n1[subset].T), np.ascontiguousarray(edges.n2[subset].T)
-    always, c1, c2 = edges.always[subset], c1[subset], c2[subset]
-    for lo in range(0, len(o), step):  # blocks of points: (points x edges) stays bounded
-        blk = o[lo : lo + step]
-        r, c = np.nonzero(always | ((blk @ n1 > c1) != (blk @ n2 > c2)))  # n·o > n·a: in front
-        rows.append(r + lo)
-        cols.append(subset[c])
-    return np.concatenate(rows), np.concatenate(cols)
-
-
-def _pairs(edges: Edges, o, n0, moving, point_moves, bounds) -> tuple[np.ndarray, ...]:
-    r"""The (point, edge) pairs where the edge is a silhouette seen from the point, moves or is seen
-    from a moving point, may meet the emitters (under a black sky) and rises above the point's
-    horizon: their rows, edges, clipped ends (relative to ``o``), parameters s0 and s1, and the
-    arc angle γ.
-
-    The silhouette test runs on the pairs of the edge tree, or of the scan where that is cheaper (module
-    docstring); everything else is computed on the pairs that pass it only. A pair whose edge and
-    point are both fixed has $m·\dot ω = 0$ exactly, and a pair whose arc cannot meet an emitter's
-    image has $f = 0$ on both sides: culled here, so they are never drawn.
-    """
+def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np.ndarray, np.ndarray]:
+    r"""Every silhouette pair (rows, edges) of the points ``o`` whose edge moves or is seen from a
+    moving point, sorted by point, then edge: a fixed point walks the tree over the moving edges, a
+    moving point the tree over every edge (a pair of a fixed edge and a fixed point has
+    $m·\dot ω = 0$)."""
     near = None if bounds is None else (bounds[1], bounds[2])
-    c1, c2 = dot(edges.a, edges.n1), dot(edges.a, edges.n2)
-
-    def silhouette(r: np.ndarray, c: np.ndarray) -> np.ndarray:
-        # n₁·(o - a) and n₂·(o - a) of opposite signs (or an open edge)
-        p = o[r]
-        return edges.always[c] | ((dot(p, edges.n1[c]) > c1[c]) != (dot(p, edges.n2[c]) > c2[c]))
-
-    rows, cols = [], []
+    rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
     for group, edge_mask in ((~point_moves, moving), (point_moves, np.ones_like(moving))):
-        points = np.flatnonzero(group)  # a fixed point sees moving edges only, a moving point every edge
-        subset = np.flatnonzero(edge_mask)
-        if not points.size or not subset.size:
-            continue
-        # the tree on a first block of points; the scan of every edge instead where it would cost less
-        tree, first = edge_tree(edges, edge_mask), points[:QUERY_POINTS]
-        r, c, tests = tree.candidates(o[first], near, lambda r, c, at=first: silhouette(at[r], c))
-        rows.append(first[r])
-        cols.append(c)
-        rest = points[first.size :]
-        if not rest.size:
-            continue
-        if tests * NODE_COST < first.size * subset.size:
-            r, c, _ = tree.candidates(o[rest], near, lambda r, c, at=rest: silhouette(at[r], c))
-        else:
-            r, c = _scan(edges, o[rest], subset, c1, c2)
-        rows.append(rest[r])
-        cols.append(c)
-    rows, cols = np.concatenate(rows or [np.zeros(0, int)]), np.concatenate(cols or [np.zeros(0, int)])
+        points = np.flatnonzero(group)
+        if points.size and edge_mask.any():
+            r, c = edge_tree(edges, edge_mask).silhouettes(o[points], near)
+            rows.append(points[r])
+            cols.append(c)
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
     by_pair = np.lexsort((cols, rows))  # by point, then edge
-    rows, cols = rows[by_pair], cols[by_pair]
+    return rows[by_pair], cols[by_pair]
+
+
+def _arcs(edges: Edges, o, n0, rows, cols, bounds) -> tuple[np.ndarray, ...]:
+    r"""The pairs (point ``o[row]``, edge) whose arc may meet the emitters (under a black sky) and
+    rises above the point's horizon: their rows, edges, clipped ends (relative to ``o``),
+    parameters s0 and s1, and the arc angle γ. A pair whose arc cannot meet an emitter's image has
+    $f = 0$ on both sides: culled here, so it is never drawn."""
     if bounds is not None:
         keep = _reach(edges, o, rows, cols, bounds)
         rows, cols = rows[keep], cols[keep]
@@ -244,7 +200,8 @@ def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np
     on their images' borders: ``unclipped``); otherwise the whole arc above the horizon.
     """
     m = len(o)
-    rows, cols, qa, qb, s0, s1, gamma = _pairs(edges, o, n0, moving, point_moves, bounds)
+    rows, cols = _found(edges, o, moving, point_moves, bounds)
+    rows, cols, qa, qb, s0, s1, gamma = _arcs(edges, o, n0, rows, cols, bounds)
     lo, hi = np.zeros((rows.size, 1)), gamma[:, None]
     if bounds is not None and len(bounds[0]) <= MAX_EMITTER_TRIANGLES:
         clip = ~unclipped[cols]

@@ -42,8 +42,8 @@ def draw_bytes(secondary: int, points: int) -> int:
     (a memory chunk's): $\min(m, s) · k · b$ for k = ``secondary`` draws per point, s =
     :func:`draw_points` points per slice and b = :data:`DRAW_BYTES`; at most
     $\max(\mathrm{DRAW\_CHUNK}, k) · b$, one point's k draws being what no slicing bounds. The
-    silhouette test's blocks (:data:`~sphere3d.boundary.shading.MAX_PAIRS`, the edge tree's
-    :data:`~sphere3d.boundary.edge_tree.QUERY_POINTS`) are apart from it."""
+    silhouette pairs of a slice's points (:meth:`~sphere3d.boundary.edge_tree.EdgeTree.silhouettes`,
+    tens per point) are apart from it."""
     return min(points, draw_points(secondary)) * secondary * DRAW_BYTES
 
 

@@ -1,10 +1,11 @@
-"""The edge tree (:mod:`sphere3d.boundary.edge_tree`): conservative culls, the same pairs, the same images.
+"""The edge tree (:mod:`sphere3d.boundary.edge_tree`): exactly the silhouette pairs, compiled as written.
 
-The tree only chooses which (shading point, edge) pairs the boundary term's exact tests see, so
-(1) its candidates must hold every pair the exact tests keep (checked against the scan of every pair
-on an icosphere, from points all around it and on the ground below, with and without the emitters'
-cone), and (2) an image must not depend on whether the tree or the scan found the pairs (bit for
-bit). (3) Memory: on a mesh whose (points × edges) table would need 16 GB, a boundary and a reparam
+The tree's walk chooses which (shading point, edge) pairs the exact silhouette test sees and runs it,
+so (1) the pairs it returns must be exactly those of testing every pair (on an icosphere, from points
+all around it and on the ground below; with the emitters' cone, a superset of those that reach it),
+(2) the compiled walk must return what the Python it is compiled from returns, and (3) the pairs and
+an image must not depend on the size of the buffers the walk fills (a full buffer resumes the walk).
+(4) Memory: on a mesh whose (points × edges) table would need 16 GB, a boundary and a reparam
 gradient run in a process limited to a few GiB of address space.
 """
 
@@ -20,7 +21,7 @@ import numpy as np
 import pytest
 
 import sphere3d as s3
-from sphere3d.boundary import shading
+from sphere3d.boundary import edge_tree, shading
 from sphere3d.boundary.edge_tree import EdgeTree
 from sphere3d.boundary.edges import mesh_edges
 from sphere3d.state import build_state
@@ -43,59 +44,66 @@ def _points(rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([ground, near, far])
 
 
-@pytest.mark.parametrize("emitters", [True, False], ids=["emitter_cone", "no_cone"])
-def test01_candidates_hold_every_silhouette_pair(emitters):
-    state = build_state(s3.load_scene(_hard_shadow(3)))
+def _setup(subdivisions: int, seed: int):
+    state = build_state(s3.load_scene(_hard_shadow(subdivisions)))
     edges = mesh_edges(state.triangles, state.shape_of)
-    o = _points(np.random.default_rng(5))
     bounds = shading._emitter_bounds(state)
+    return state, edges, _points(np.random.default_rng(seed)), (bounds[1], bounds[2]), bounds
+
+
+@pytest.mark.parametrize("emitters", [True, False], ids=["emitter_cone", "no_cone"])
+def test01_the_walk_finds_exactly_the_silhouette_pairs(emitters):
+    _, edges, o, cone, bounds = _setup(3, 5)
     sil = edges.silhouette(o)  # (points, edges): the exact test, every pair
-    if emitters:
-        r, c = np.nonzero(sil)
-        keep = shading._reach(edges, o, r, c, bounds)
-        sil[:] = False
-        sil[r[keep], c[keep]] = True
     exact = set(zip(*np.nonzero(sil), strict=True))
     tree = EdgeTree.build(edges, np.arange(len(edges)))
-    rows, cols, tests = tree.candidates(o, (bounds[1], bounds[2]) if emitters else None)
+    rows, cols = tree.silhouettes(o, cone if emitters else None)
     found = set(zip(rows.tolist(), cols.tolist(), strict=True))
-    assert exact and exact <= found  # conservative: no pair the exact tests keep is lost
-    assert len(found) < 0.5 * sil.size  # and it culls: fewer than half of all pairs
-    assert tests < 0.5 * sil.size
+    assert len(found) == rows.size  # no pair twice
+    if not emitters:
+        assert found == exact
+        return
+    # the cone only drops pairs whose arc cannot reach the emitters (the exact reach test's)
+    r, c = np.nonzero(sil)
+    reach = set(zip(*(x[shading._reach(edges, o, r, c, bounds)] for x in (r, c)), strict=True))
+    assert reach and reach <= found <= exact
+    assert len(found) < 0.8 * len(exact)  # and it does cull
 
 
-def test02_the_tree_keeps_the_same_pairs_as_the_scan():
-    state = build_state(s3.load_scene(_hard_shadow(4)))
-    edges = mesh_edges(state.triangles, state.shape_of)
-    o = _points(np.random.default_rng(6))
-    n0 = np.tile([0.0, 0.0, 1.0], (len(o), 1))
-    moving = state.shape_of[edges.face] == 2
-    point_moves = np.arange(len(o)) % 7 == 0  # some points see every edge
-    bounds = shading._emitter_bounds(state)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(shading, "NODE_COST", 0.0)  # the tree for every block
-        tree = shading._pairs(edges, o, n0, moving, point_moves, bounds)
-        mp.setattr(shading, "NODE_COST", np.inf)  # the scan after the first block
-        mp.setattr(shading, "QUERY_POINTS", 1)
-        scan = shading._pairs(edges, o, n0, moving, point_moves, bounds)
-    assert len(tree[0]) > 100
-    for a, b in zip(tree, scan, strict=True):
-        assert np.array_equal(a, b)
+def test02_the_compiled_walk_returns_what_its_python_returns():
+    _, edges, o, cone, _ = _setup(2, 6)
+    o = o[::7]  # the Python walk is slow: a few hundred points
+    subset = np.flatnonzero(np.arange(len(edges)) % 3 != 0)  # a tree over a subset, with padding
+    tree = EdgeTree.build(edges, subset)
+    compiled = tree.silhouettes(o, cone)
+    emit = np.array([*cone[0], cone[1]])
+    rows, cols = np.empty(len(o) * len(edges), dtype=np.int64), np.empty(len(o) * len(edges), dtype=np.int64)
+    stop, count = edge_tree.walk(
+        np.ascontiguousarray(o), 0, emit, tree.centre, tree.radius, tree.axis, tree.cos_spread,
+        tree.sin_spread, tree.depth, tree.order, tree.planes, tree.always, rows, cols,
+    )  # fmt: skip
+    assert stop == len(o) and count > 50
+    assert np.array_equal(compiled[0], rows[:count]) and np.array_equal(compiled[1], cols[:count])
+    assert set(cols[:count].tolist()) <= set(subset.tolist())
 
 
-def test03_an_image_is_the_same_whether_the_tree_or_the_scan_finds_the_pairs():
+def test03_pairs_and_images_do_not_depend_on_the_buffers():
+    _, edges, o, cone, _ = _setup(4, 7)
+    tree = EdgeTree.build(edges, np.arange(len(edges)))
     scene = s3.load_scene(_hard_shadow(3))
-    images = []
-    for cost in (0.0, np.inf):
+    results = []
+    for size in (edge_tree.PAIRS_PER_POINT, 1):  # 1: full after the first point's pairs, many resumes
         with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(shading, "NODE_COST", cost)
-            mp.setattr(shading, "QUERY_POINTS", 1)
+            mp.setattr(edge_tree, "PAIRS_PER_POINT", size)
+            pairs = tree.silhouettes(o, cone)
             g = s3.render_gradient(
                 scene, "occluder.translate.x", method="boundary", spp=4, seed=2, progress=False
             )
-        images.append(g.derivative)
-    assert np.any(images[0] != 0.0)
-    assert np.array_equal(images[0], images[1])
+        results.append((pairs, g.derivative))
+    (a, image_a), (b, image_b) = results
+    assert a[0].size > 100 and np.any(image_a != 0.0)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert np.array_equal(image_a, image_b)
 
 
 LIMIT_GIB = 3
