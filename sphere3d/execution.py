@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextvars
 import ctypes
 import functools
+import itertools
 import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
@@ -43,6 +44,7 @@ __all__ = [
     "map_chunks",
     "map_tiles",
     "tile_count",
+    "tile_ranges",
     "workers",
 ]
 
@@ -226,6 +228,13 @@ def tile_count(chunks: int) -> int:
     worker thread it has now (at least one tile, at most one per chunk)."""
     threads = sum(client().nthreads().values())
     return max(1, min(chunks, TILES_PER_THREAD * threads))
+
+
+def tile_ranges(chunks: int) -> list[tuple[int, int]]:
+    """``chunks`` memory chunks cut into :func:`tile_count` tiles of whole chunks, as (first, stop) pairs in
+    order (stop exclusive), their sizes differing by one chunk at most."""
+    tiles = tile_count(chunks)
+    return list(itertools.pairwise([k * chunks // tiles for k in range(tiles)] + [chunks]))
 
 
 def map_tiles(func: Callable[[Any, Any], Any], shared: Any, items: Sequence[Any]) -> list[Any]:

@@ -9,11 +9,12 @@ Every entry point takes ``progress``: a tqdm bar on standard error, advanced per
 samples, shown after a couple of seconds when stderr is a terminal (None, the default),
 always (True) or never (False); it changes no number (:mod:`flatland.core.progress`).
 
-:func:`render` and :func:`render_gradient` also take ``scheduler``, the address of a
-``dask.distributed`` scheduler (as a study's ``scheduler``; the optional ``cluster`` extra): the
-image's memory chunks then run as tiles on that cluster's workers, each building its own scene
-state and tracer from the pickled scene, and the image is assembled here, bit for bit the image of
-a local run (:func:`sphere3d.execution.cluster`, :meth:`sphere3d.tasks.ImageTask._on_cluster`); the
+:func:`render`, :func:`render_gradient` and :func:`irradiance` also take ``scheduler``, the address of
+a ``dask.distributed`` scheduler (as a study's ``scheduler``; the optional ``cluster`` extra): the
+memory chunks of the image (or of the point's samples) then run as tiles on that cluster's workers,
+each building its own scene state and tracer from the pickled scene, and the image (or estimate) is
+assembled here, bit for bit that of a local run (:func:`sphere3d.execution.cluster`,
+:meth:`sphere3d.tasks.ImageTask._on_cluster`, :meth:`sphere3d.tasks.PointTask._on_cluster`); the
 progress bar then advances per finished tile.
 """
 
@@ -32,7 +33,7 @@ from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.methods._common import MEMORY_MODELS
 from sphere3d.scene import check_vector, load_scene
 from sphere3d.state import COORD_MAX, scene_term
-from sphere3d.tasks import ImageTask, PointTask, Tally
+from sphere3d.tasks import ImageTask, PointTask
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
@@ -126,11 +127,6 @@ def _resolve(method: str, task: ImageTask | PointTask, options: dict[str, Any]) 
     return spec, resolved
 
 
-def _run(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Tally, dict[str, Any]]:
-    spec, resolved = _resolve(method, task, options)
-    return spec.func(task, **resolved), resolved
-
-
 def render_gradient(
     scene: Any,
     param: str,
@@ -205,6 +201,7 @@ def irradiance(
     seed: int = 0,
     batches: int | None = None,
     progress: bool | None = None,
+    scheduler: str | None = None,
     **options: Any,
 ) -> Estimate:
     r"""Irradiance $E = ∫ L_i(ω) \cos θ\, dω$ at a fixed point and normal, and its derivative.
@@ -214,12 +211,35 @@ def irradiance(
     point and normal do not move with θ. Used for closed-form checks (a black
     triangle under a constant sky: $E = L (π - \mathrm{Lambert's\ polygon\ formula})$).
 
+    Parameters
+    ----------
+    point, normal : sequence of 3 floats
+        The point (within ±:data:`~sphere3d.state.COORD_MAX`) and its normal (not zero; normalized here).
+    param : str, optional
+        A parameter of the scene to differentiate by; None (default): the value only (derivative 0).
+    method : {"naive", "finite_difference", "boundary", "reparam"}
+        The gradient method (with ``param``), and ``**options`` its options, as in :func:`render_gradient`.
+    n : int
+        Samples, >= 1.
+    seed, batches, progress
+        As in :func:`render`, ``batches`` dividing ``n``; the bar advances per chunk (per tile on a cluster).
+    scheduler : str, optional
+        Address of a ``dask.distributed`` scheduler, e.g. ``"tcp://10.0.0.5:8786"`` (needs the
+        ``cluster`` extra): the chunks run as tiles on its workers and the estimate is bit for bit
+        that of a local run (module docstring); None (default): on this machine's threads.
+
     Returns
     -------
     Estimate
         Value and derivative with standard errors over ``batches`` batches of ``n / batches``.
-        With ``param=None`` only the value is estimated (derivative 0). ``progress``: a
-        progress bar per chunk, as in :func:`render`.
+        With ``param=None`` only the value is estimated (derivative 0).
+
+    Raises
+    ------
+    ValidationError
+        One error naming the field and value: unknown scene field, parameter, method or option, a
+        point out of range, a zero normal, n < 1, batches not dividing n, a bad ``scheduler`` (as in
+        :func:`render`).
     """
     scene = load_scene(scene)
     param = scene.check_param(param) if param is not None else None
@@ -237,12 +257,11 @@ def irradiance(
     seed = check_seed("seed", seed)
     batches = resolve_batches(n, batches, "n")
     task = PointTask(scene, param, point, normal, n, seed, batches)
-    with _bar(f"irradiance {method if param is not None else ''}".rstrip(), progress):
-        if param is None:
-            _check_budget(task, {})
-            tally, resolved = task.evaluate(0.0), {}
-        else:
-            tally, resolved = _run(method, task, options)
-    return Estimate.from_batches(
-        tally.value, tally.derivative, n, method if param is not None else "", resolved
-    )
+    if param is None:
+        _check_budget(task, {})
+        spec, resolved = None, {}
+    else:
+        spec, resolved = _resolve(method, task, options)  # every argument checked before a cluster is reached
+    with execution.cluster(scheduler), _bar(f"irradiance {method if spec else ''}".rstrip(), progress):
+        tally = task.evaluate(0.0) if spec is None else spec.func(task, **resolved)
+    return Estimate.from_batches(tally.value, tally.derivative, n, method if spec else "", resolved)

@@ -11,13 +11,12 @@ whatever the method, and anything a method draws in addition is keyed on the sam
 index under other stream names (``"kernel.film"``, ``"kernel.bsdf"``, ``"probes.emitter"``,
 ...; see :class:`flatland.core.rng.Draws`). Results therefore do not depend on
 :data:`CHUNK` or on the number of threads (:mod:`sphere3d.execution`), nor on which machines of a
-Dask cluster compute which tiles of chunks (:meth:`ImageTask._on_cluster`).
+Dask cluster compute which tiles of chunks (:meth:`ImageTask._on_cluster`, :meth:`PointTask._on_cluster`).
 """
 
 from __future__ import annotations
 
 import functools
-import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -231,7 +230,7 @@ class ImageTask:
         """:meth:`evaluate`'s chunks as tiles on the Dask cluster of :func:`~sphere3d.execution.client`.
 
         The memory chunks are this process's (:attr:`chunk_pixels`); a tile is a run of whole chunks
-        (:func:`~sphere3d.execution.tile_count` of them), computed on a worker by :meth:`_chunk_range`
+        (:func:`~sphere3d.execution.tile_ranges`), computed on a worker by :meth:`_chunk_range`
         from the pickled task, θ and transforms, the worker building its own scene state and tracer.
         Each chunk thus computes the same numbers as in a local run; the tiles' stencils fill the
         columns of one buffer for the whole image, from which :meth:`_splat_rows` makes every row by
@@ -241,9 +240,7 @@ class ImageTask:
         """
         height, width = self.shape
         batches, per_batch = self.batches, self.spp // self.batches
-        chunks = self._chunk_count()
-        tiles = execution.tile_count(chunks)
-        items = list(itertools.pairwise([k * chunks // tiles for k in range(tiles)] + [chunks]))
+        items = execution.tile_ranges(self._chunk_count())
         results = execution.map_tiles(_remote, (self, theta, transforms, self.chunk_pixels), [*items, None])
         extra, results = results[-1], results[:-1]
         if self.film != "splat":
@@ -444,15 +441,16 @@ class ImageTask:
         execution.map_chunks(band, range(-(-len(rows) // step)), counted=False)
 
 
-def _remote(shared: tuple[ImageTask, Any, Transforms, int], item: tuple[int, int] | None) -> Any:
-    """One task of :meth:`ImageTask._on_cluster` on a worker: with ``item`` = (first, stop) the
-    :meth:`~ImageTask._chunk_range` of those chunks (the client's chunk size), with None the per-image
-    term ``pixel_extra``; both from a scene state built here."""
-    task, theta, transforms, chunk_pixels = shared
+def _remote(shared: tuple[ImageTask | PointTask, Any, Transforms, int], item: tuple[int, int] | None) -> Any:
+    """One task of :meth:`ImageTask._on_cluster` or :meth:`PointTask._on_cluster` on a worker: with
+    ``item`` = (first, stop) the ``_chunk_range`` of those chunks (the client's chunk size: pixels of an
+    image, samples at a point), with None the per-image term ``pixel_extra``; both from a scene state
+    built here."""
+    task, theta, transforms, chunk_size = shared
     state = build_state(task.scene, task.param, theta, task.tracer)
     if item is None:
         return transforms.pixel_extra(task, state)
-    return task._chunk_range(state, transforms, *item, chunk_pixels)
+    return task._chunk_range(state, transforms, *item, chunk_size)
 
 
 @dataclass(frozen=True)
@@ -473,25 +471,53 @@ class PointTask:
         return ()
 
     def evaluate(self, theta: Any, transforms: Transforms | None = None) -> Tally:
-        """Estimate E at the point with the parameter offset by ``theta`` under ``transforms``."""
+        """Estimate E at the point with the parameter offset by ``theta`` under ``transforms``.
+
+        A batch's samples are memory chunks of :data:`CHUNK` (batch-major), every sample's numbers keyed
+        on its index; a batch's mean is its chunks' sums added in chunk order, wherever they were
+        computed. Inside :func:`sphere3d.execution.cluster` the chunks run on a Dask cluster
+        (:meth:`_on_cluster`).
+        """
         transforms = transforms or Identity()
-        state = build_state(self.scene, self.param, theta, self.tracer)
         per_batch = self.n // self.batches
-        starts = range(0, per_batch, CHUNK)  # memory chunks of one batch
-        k = len(starts)
+        k = -(-per_batch // CHUNK)  # memory chunks per batch
+        if execution.client() is not None:
+            sums = self._on_cluster(theta, transforms, self.batches * k)
+        else:
+            state = build_state(self.scene, self.param, theta, self.tracer)
+            chunk = functools.partial(self._chunk, state, transforms, CHUNK)
+            sums = execution.map_chunks(chunk, range(self.batches * k))
+        return _tally([sum(sums[b * k : (b + 1) * k]) / per_batch for b in range(self.batches)], ())
 
-        def job(i: int) -> Any:  # chunk c of batch b
-            b, c = divmod(i, k)
-            size = min(CHUNK, per_batch - starts[c])
-            x = np.broadcast_to(np.array(self.point), (size, 3)).copy()
-            nrm = np.broadcast_to(np.array(self.normal), (size, 3)).copy()
-            if state.dual:
-                x, nrm = Dual(x), Dual(nrm)
-            # sample j = b * per_batch + starts[c] + s of the point: its numbers are keyed on j
-            draws = Draws.of(self.seed, b * per_batch + starts[c] + np.arange(size))
-            u = draws.uniforms("samples", 5)
-            return np.sum(irradiance_samples(Shading.at(state, x, nrm, draws), u, transforms))
+    def _chunk(self, state: Any, transforms: Transforms, size: int, i: int) -> Any:
+        """The sum of the estimates of memory chunk ``i = b * k + c``: chunk c of batch b, k chunks of
+        ``size`` samples per batch."""
+        per_batch = self.n // self.batches
+        b, c = divmod(i, -(-per_batch // size))
+        count = min(size, per_batch - c * size)
+        x, nrm = (np.broadcast_to(np.array(v), (count, 3)).copy() for v in (self.point, self.normal))
+        if state.dual:
+            x, nrm = Dual(x), Dual(nrm)
+        # sample j = b * per_batch + c * size + s of the point: its numbers are keyed on j
+        draws = Draws.of(self.seed, b * per_batch + c * size + np.arange(count))
+        u = draws.uniforms("samples", 5)
+        return np.sum(irradiance_samples(Shading.at(state, x, nrm, draws), u, transforms))
 
-        sums = execution.map_chunks(job, range(self.batches * k))  # batch-major
-        means = [sum(sums[b * k : (b + 1) * k]) / per_batch for b in range(self.batches)]
-        return _tally(means, ())
+    def _chunk_range(self, state: Any, transforms: Transforms, first: int, stop: int, size: int) -> list[Any]:
+        """The sums of memory chunks ``first`` to ``stop`` (exclusive) of ``size`` samples (:meth:`_chunk`),
+        on this machine's threads."""
+        chunk = functools.partial(self._chunk, state, transforms, size)
+        return execution.map_chunks(chunk, range(first, stop), counted=False)
+
+    def _on_cluster(self, theta: Any, transforms: Transforms, chunks: int) -> list[Any]:
+        """The sums of :meth:`evaluate`'s ``chunks`` memory chunks, as tiles on the Dask cluster of
+        :func:`~sphere3d.execution.client`.
+
+        The chunks are this process's (:data:`CHUNK` samples); a tile is a run of whole chunks
+        (:func:`~sphere3d.execution.tile_ranges`), computed on a worker by :meth:`_chunk_range` from the
+        pickled task, θ and transforms, the worker building its own scene state and tracer. Each chunk's
+        sum is thus that of a local run, and :meth:`evaluate` adds them in the local order: the estimate
+        is bit for bit the local one.
+        """
+        tiles = execution.map_tiles(_remote, (self, theta, transforms, CHUNK), execution.tile_ranges(chunks))
+        return [s for tile in tiles for s in tile]

@@ -1,13 +1,16 @@
-"""``render`` and ``render_gradient`` on a Dask cluster: the same arrays, bit for bit, as a local run.
+"""``render``, ``render_gradient`` and ``irradiance`` on a Dask cluster: the same numbers, bit for bit,
+as a local run.
 
 A ``dask.distributed.LocalCluster`` of two single-threaded workers runs the tiles
-(:meth:`sphere3d.tasks.ImageTask._on_cluster`). Its workers are threads of this process, started
-in a tenth of a second where two worker processes took 6-7 s to start on a 2-core machine; dask does
-not pickle what is scattered to such workers, so the module's fixture makes every tile pickle its
-payload (the task with its scene, θ and the method's transforms) as a worker process receives it
-(:func:`_pickled`), and test09 (slow) runs two worker processes. Chunks are made small
-(``tasks.CHUNK``: 16 pixels of 4 spp) so that a 16 × 16 film is 16 chunks in 8 tiles; the local
-runs use the same chunks (results do not depend on them: test_methods test10, test_film_splat test06).
+(:meth:`sphere3d.tasks.ImageTask._on_cluster`, :meth:`sphere3d.tasks.PointTask._on_cluster`). Its
+workers are threads of this process, started in a tenth of a second where two worker processes took
+6-7 s to start on a 2-core machine; dask does not pickle what is scattered to such workers, so the
+module's fixture makes every tile pickle its payload (the task with its scene, θ and the method's
+transforms) as a worker process receives it (:func:`_pickled`), and test09 (slow) runs two worker
+processes. Chunks are made small (``tasks.CHUNK``: 16 pixels of 4 spp) so that a 16 × 16 film is 16
+chunks in 8 tiles, and the 1024 samples of a point in 4 batches are 16 chunks of 64 in 8 tiles; the
+local runs use the same chunks (results do not depend on them: test_methods test10, test_film_splat
+test06).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import dask  # noqa: E402
 from flatland.core.validate import ValidationError  # noqa: E402
 from sphere3d import execution, tasks  # noqa: E402
 from sphere3d.__main__ import main  # noqa: E402
-from sphere3d.render import render, render_gradient  # noqa: E402
+from sphere3d.render import irradiance, render, render_gradient  # noqa: E402
 from sphere3d.scene import load_scene  # noqa: E402
 from tests.tiers import SLOW  # noqa: E402
 
@@ -37,6 +40,8 @@ METHODS = ("naive", "reparam", "boundary", "finite_difference")
 SPP = 4
 CHUNK = 16 * SPP
 """Samples per memory chunk: 16 pixels, so the 256 pixels are 16 chunks, 8 tiles on 2 worker threads."""
+POINT = {"point": [0.6, -0.1, 0.0], "normal": [0.0, 0.0, 1.0], "n": 1024, "batches": 4}
+"""A point in the occluder's penumbra on the ground: 4 batches of 256 samples, 4 memory chunks each."""
 
 
 def _scene() -> dict:
@@ -185,3 +190,45 @@ def test09_worker_processes_give_the_same_arrays(monkeypatch):
         )  # fmt: skip
     assert _same(local, remote)
     assert execution.client() is None  # the call's client is closed with it
+
+
+def test10_the_irradiance_on_the_cluster_is_bit_identical_to_the_local_one(scheduler, monkeypatch):
+    """The value alone (no ``param``): its 16 memory chunks go to the cluster as 8 tiles of 2 (batch-major:
+    tile k holds chunks 2k and 2k + 1), the bar advancing per finished tile."""
+    local = irradiance(_scene(), **POINT, seed=3, progress=False)
+    TILES.clear()
+    monkeypatch.setattr(tqdm, "tqdm", Recorder)
+    Recorder.made = []
+    remote = irradiance(_scene(), **POINT, seed=3, progress=True, scheduler=scheduler)
+    assert _same(local, remote) and remote.value > 0.0
+    assert sorted(TILES) == [(2 * k, 2 * k + 2) for k in range(8)]  # no per-image term at a point
+    (bar,) = Recorder.made
+    assert bar.n == 8 and set(bar.totals) == {8}
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test11_every_gradient_method_of_the_irradiance_on_the_cluster_is_bit_identical(scheduler, method):
+    """Each chunk's sum is computed on a worker, the batches' sums added here in the local order; finite
+    differences make three estimates. naive misses the shadow's moving edge: its derivative is 0 here."""
+    local = irradiance(_scene(), **POINT, param=PARAM, method=method, seed=5, progress=False)
+    TILES.clear()
+    remote = irradiance(
+        _scene(), **POINT, param=PARAM, method=method, seed=5, progress=False, scheduler=scheduler
+    )
+    assert _same(local, remote) and TILES  # computed by the workers
+    assert (remote.derivative != 0.0) == (method != "naive")  # the comparison sees a gradient
+
+
+def test12_the_irradiance_checks_scheduler_and_its_other_arguments_as_render_gradient_does():
+    """The errors of test05 and test07: a bad address names ``scheduler``, a bad option itself."""
+    for bad, message in [
+        ("nonsense", "scheduler: cannot connect to 'nonsense': missing port number in address 'nonsense'"),
+        (8786, "scheduler: must be a dask.distributed scheduler address such as 'tcp://host:8786', got 8786"),
+    ]:
+        for param in (None, PARAM):
+            with pytest.raises(ValidationError) as e:
+                irradiance(_scene(), **POINT, param=param, progress=False, scheduler=bad)
+            assert e.value.field == "scheduler" and str(e.value) == message
+    with pytest.raises(ValidationError) as e:
+        irradiance(_scene(), **POINT, param=PARAM, method="reparam", kappa=-1.0, scheduler="nonsense")
+    assert e.value.field == "kappa"
