@@ -5,7 +5,9 @@ triangles, 64 × 64 pixels, 16 spp, d/d ``occluder.translate.x``, seed 1), and a
 the same sphere subdivided 7 times (327 680 triangles) with each vertex moved along its radius by
 a smooth random field (:func:`bumpy_sphere`; smooth-shaded as ``hard_shadow``'s sphere, its
 silhouette and shadow ragged). Each run is a fresh process (``python -m benchmarks.bench_complexity
-TRIANGLES METHOD``) reporting its wall time (the call only, after the imports) and its peak
+TRIANGLES METHOD``) reporting its wall time (the call only, after the imports and a warm-up call
+on a 4 × 4 px image of the coarsest mesh: what a method loads once per process, such as the edge
+tree's compiled walk, is not the scene's cost) and its peak
 resident set size (``getrusage``); all the cores the renderer uses (``SPHERE3D_THREADS``), and
 reparam and boundary again on one thread at 81 920 triangles, to show how the chunks share the
 cores.
@@ -93,10 +95,18 @@ def scene(subdivisions: int) -> dict:
 
 
 def _one(subdivisions: int, method: str) -> dict:
-    """One run in this process (the subprocess's work): seconds and peak MB."""
+    """One run in this process (the subprocess's work): seconds and peak MB, after a warm-up."""
     from sphere3d import load_scene, render, render_gradient
 
     loaded = load_scene(scene(subdivisions))
+    # warm-up, not timed: a 4 x 4 px call of the same method on the coarsest mesh imports what the
+    # method imports on first use and loads its compiled code (Numba's, from the disk cache)
+    small = scene(0)
+    small["camera"]["width"] = small["camera"]["height"] = 4
+    if method == "render":
+        render(load_scene(small), spp=1, seed=1, progress=False)
+    else:
+        render_gradient(load_scene(small), PARAM, method=method, spp=1, seed=1, progress=False)
     start = time.perf_counter()
     if method == "render":
         render(loaded, spp=SPP, seed=1, progress=False)

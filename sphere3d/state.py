@@ -36,6 +36,7 @@ __all__ = [
     "SceneState",
     "build_state",
     "check_world",
+    "plain_state",
     "scene_term",
 ]
 
@@ -267,6 +268,34 @@ def per_state(build: Callable[[SceneState], T]) -> Callable[[SceneState], T]:
     return functools.update_wrapper(cached, build)
 
 
+_PLAIN: dict[tuple, tuple[weakref.ref, SceneState]] = {}
+_PLAIN_LOCK = threading.Lock()
+
+
+def _last_plain(scene: Scene, param: str | None, tracer: str) -> SceneState | None:
+    with _PLAIN_LOCK:
+        hit = _PLAIN.get((id(scene), param, tracer))
+    return hit[1] if hit is not None and hit[0]() is scene else None
+
+
+def plain_state(scene: Scene, param: str | None = None, tracer: str = "embree") -> SceneState:
+    """``build_state(scene, param, 0.0, tracer)``, the last one built kept while its scene lives.
+
+    A gradient method asks for the state at θ0 more than once (the boundary method's memory model,
+    its edges, its film term), and the gradient's Dual state has the same detached triangles:
+    :func:`build_state` takes this state's tracer for it instead of building the same one again.
+    One state is kept (the last asked for), so memory holds at most one scene's extra state.
+    """
+    state = _last_plain(scene, param, tracer)
+    if state is None:
+        state = build_state(scene, param, 0.0, tracer)
+        key = (id(scene), param, tracer)
+        with _PLAIN_LOCK:
+            _PLAIN.clear()
+            _PLAIN[key] = (weakref.ref(scene, lambda _, cache=_PLAIN: cache.pop(key, None)), state)
+    return state
+
+
 def _offset(values: tuple[float, ...], index: int, theta: Any) -> Any:
     """``values`` as a vector with ``theta`` added to component ``index``."""
     return np.stack([float(v) + theta if i == index else float(v) for i, v in enumerate(values)])
@@ -414,6 +443,15 @@ def build_state(
         emitters=emitters,
         emitter_area=emitter_area,
         camera=camera,
-        tracer=make_tracer(plain, shape_of, tracer),
+        tracer=_tracer(scene, param, plain, shape_of, tracer),
         epsilon=1e-4 * max(extent, 1e-3),
     )
+
+
+def _tracer(scene: Scene, param: str | None, plain: np.ndarray, shape_of: np.ndarray, backend: str) -> Any:
+    """The tracer of :func:`plain_state`'s kept state where its triangles are these (a Dual state at θ0,
+    a finite difference at 0), else a new one."""
+    kept = _last_plain(scene, param, backend)
+    if kept is not None and np.array_equal(np.asarray(detach(kept.triangles)), plain):
+        return kept.tracer
+    return make_tracer(plain, shape_of, backend)

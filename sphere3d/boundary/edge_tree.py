@@ -18,13 +18,14 @@ $n·(o - p)$ of the node (n in the cone, p in the sphere) has the sign of $\cos(
     all positive if $φ + α + β < π/2$, all negative if $φ - α - β > π/2$,
 
 and then no edge of the node is a silhouette seen from o (both faces on one side). Under a black
-sky an edge's arc counts only where it meets the emitters' image (:func:`sphere3d.boundary.shading._reach`):
-the node is dropped when the cone from o around its sphere misses the cone around the emitters'
-bounding sphere (centre e, radius R), i.e. when the angle between $c - o$ and $e - o$ exceeds
-$β + \arcsin(R / |e - o|)$. Both tests compare cosines with a slack of :data:`SLACK` over rounding;
-a node whose sphere holds o is kept. As every edge's own tests (:func:`sphere3d.boundary.shading._pairs`)
-are run afterwards on the pairs found here, the tree changes which pairs are tested, never which
-pass: it is conservative by construction (a node's bounds hold its edges' bounds).
+sky an edge's arc counts only where it meets the emitters' image (the shading term's arcs are
+clipped to it, :mod:`sphere3d.boundary.shading`): the node is dropped when the cone from o around
+its sphere misses the cone around the emitters' bounding sphere (centre e, radius R), i.e. when
+the angle between $c - o$ and $e - o$ exceeds $β + \arcsin(R / |e - o|)$. Both tests compare
+cosines with a slack of :data:`SLACK` over rounding; a node whose sphere holds o is kept. At a
+leaf every edge gets the exact tests: the silhouette test, and the same cone test with the edge's
+own sphere (midpoint, half its length), in angles. The culls are conservative (a node's bounds
+hold its edges' bounds), so the pairs found are exactly those of the exact tests on every pair.
 
 Construction, O(E log E) per state: the edges sorted by the Morton code of their midpoints (30 bits),
 leaves of :data:`LEAF` consecutive edges, a complete binary tree above them (heap order: node i has
@@ -102,6 +103,8 @@ class EdgeTree:
         Per slot of ``order``: $n_1$, $n_1·a$, $n_2$, $n_2·a$ of its edge (0 for padding).
     always : ndarray of bool, shape (2^D L,)
         Per slot: an open or non-manifold edge (a silhouette from every point).
+    spheres : ndarray, shape (2^D L, 4)
+        Per slot: its edge's bounding sphere, midpoint and half length.
     """
 
     order: np.ndarray
@@ -114,6 +117,7 @@ class EdgeTree:
     sin_spread: np.ndarray
     planes: np.ndarray
     always: np.ndarray
+    spheres: np.ndarray
 
     @staticmethod
     def build(edges: Edges, subset: np.ndarray) -> EdgeTree:
@@ -171,16 +175,30 @@ class EdgeTree:
         planes = np.concatenate([n1, dot(n1, a)[:, None], n2, dot(n2, a)[:, None]], axis=1)
         planes = np.where(real, planes, 0.0)
         always = edges.always[slot] & (order >= 0)
+        spheres = np.concatenate(
+            [0.5 * (edges.a + edges.b)[slot], 0.5 * norm(edges.b - edges.a)[slot, None]], axis=1
+        )
         return EdgeTree(
-            order, centre, radius, axis, spread, depth, np.cos(spread), np.sin(spread), planes, always
+            order,
+            centre,
+            radius,
+            axis,
+            spread,
+            depth,
+            np.cos(spread),
+            np.sin(spread),
+            planes,
+            always,
+            spheres,
         )
 
     def silhouettes(
         self, o: np.ndarray, emitters: tuple[np.ndarray, float] | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """(rows, edges): every pair (point ``o[row]``, edge of the tree) where the edge is a silhouette
-        seen from the point (the exact test), kept by the culls (module docstring) given the
-        emitters' bounding sphere ``(centre, radius)``; grouped by point, in leaf order within one.
+        seen from the point and, given the emitters' bounding sphere ``(centre, radius)``, its cone
+        from the point meets theirs (the exact tests, module docstring); grouped by point, in leaf
+        order within one.
         Memory: the pairs found (buffers doubled when full)."""
         o = np.ascontiguousarray(o, dtype=np.float64)
         emit = np.array([0.0, 0.0, 0.0, -1.0]) if emitters is None else np.array([*emitters[0], emitters[1]])
@@ -191,7 +209,7 @@ class EdgeTree:
             r, c = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
             stop, count = _compiled()(
                 o, done, emit, self.centre, self.radius, self.axis, self.cos_spread, self.sin_spread,
-                self.depth, self.order, self.planes, self.always, r, c,
+                self.depth, self.order, self.planes, self.always, self.spheres, r, c,
             )  # fmt: skip
             rows.append(r[:count])
             cols.append(c[:count])
@@ -214,6 +232,7 @@ def walk(
     order: np.ndarray,
     planes: np.ndarray,
     always: np.ndarray,
+    spheres: np.ndarray,
     rows: np.ndarray,
     cols: np.ndarray,
 ) -> tuple[int, int]:
@@ -270,12 +289,22 @@ def walk(
                     break
                 front1 = ox * planes[j, 0] + oy * planes[j, 1] + oz * planes[j, 2] > planes[j, 3]
                 front2 = ox * planes[j, 4] + oy * planes[j, 5] + oz * planes[j, 6] > planes[j, 7]
-                if always[j] or front1 != front2:  # n1·(o - a) and n2·(o - a) of opposite signs
-                    if count == capacity:
-                        return i, begin  # point i does not fit: resume from it
-                    rows[count] = i
-                    cols[count] = order[j]
-                    count += 1
+                if not always[j] and front1 == front2:  # n1·(o - a) and n2·(o - a) of one sign
+                    continue
+                if far:
+                    # the edge's cone from o (its sphere: midpoint, half length h) meets the emitters'
+                    # (angle between the centres <= arcsin(h / |mid|) + γ), or o lies in its sphere
+                    mx, my, mz = spheres[j, 0] - ox, spheres[j, 1] - oy, spheres[j, 2] - oz
+                    d_mid = np.sqrt(mx * mx + my * my + mz * mz)
+                    if d_mid > spheres[j, 3]:
+                        cos = min(1.0, max(-1.0, (mx * tx + my * ty + mz * tz) / (d_mid * d_to)))
+                        if np.arccos(cos) > np.arcsin(spheres[j, 3] / d_mid) + np.arcsin(sin_e):
+                            continue
+                if count == capacity:
+                    return i, begin  # point i does not fit: resume from it
+                rows[count] = i
+                cols[count] = order[j]
+                count += 1
     return o.shape[0], count
 
 

@@ -32,10 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from flatland.core.dual import detach
+from sphere3d.state import SceneState, per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import dot
 
-__all__ = ["COPLANAR_TOL", "Edges", "mesh_edges", "row_ids"]
+__all__ = ["COPLANAR_TOL", "Edges", "mesh_edges", "row_ids", "state_edges"]
 
 COPLANAR_TOL = 1e-9
 """Two faces are coplanar (their common edge is no crease) when ``1 - n₁·n₂ <= COPLANAR_TOL``."""
@@ -161,3 +162,9 @@ def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
         n1=n1,
         n2=n2,
     )
+
+
+@per_state
+def state_edges(state: SceneState) -> Edges:
+    """:func:`mesh_edges` of a state's triangles, once per state (kept while it lives)."""
+    return mesh_edges(state.triangles, state.shape_of)

@@ -21,7 +21,7 @@ the Reynolds transport theorem
 
 $ω^∓ = ω ∓ δ m$ just beside the arc, dℓ its arc length (radians). The first term is the
 ``naive`` estimator. For the second, only the silhouette edges that can contribute are
-candidates (:func:`_pairs`): an edge that does not move, seen from a point that does not
+candidates (:func:`_found`): an edge that does not move, seen from a point that does not
 move, has $m·\dot ω = 0$ exactly (with ``occluder.translate.x`` the emitter's own border, most of
 the candidates' length); and under a black sky f
 vanishes outside the emitters' directions on both sides of every arc, so an arc counts only
@@ -52,6 +52,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.boundary.edge_tree import edge_tree
 from sphere3d.boundary.edges import Edges
+from sphere3d.state import per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 
@@ -65,6 +66,12 @@ ray on one side crosses the corner's other edge; the two pairs' extrapolation ca
 takes over."""
 MAX_EMITTER_TRIANGLES = 64
 """Emitter triangles up to which the arcs are clipped to the emitters' images (cost: pairs × this)."""
+
+
+@per_state
+def _moving_vertices(state) -> np.ndarray:
+    """(T, 3): whether each triangle's vertex has a nonzero tangent (once per state)."""
+    return np.any(tangent(state.triangles) != 0.0, axis=-1)
 
 
 def _incident(state, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -85,7 +92,7 @@ def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
 
     Only when the sky is black (and not the parameter): then f is 0 outside the emitters'
     directions on both sides of any edge, so the arcs can be restricted to the emitters'
-    spherical images without changing any expectation (:func:`_pairs`, :func:`_clip_to_emitters`).
+    spherical images without changing any expectation (:func:`_found`, :func:`_clip_to_emitters`).
     None (no restriction) otherwise or without emitters.
     """
     sky = float(detach(state.sky)) != 0.0 or state.sky_varies
@@ -97,25 +104,11 @@ def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
     return triangles, centre, radius
 
 
-def _reach(edges: Edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, bounds) -> np.ndarray:
-    """Whether the cone from o around each edge's bounding sphere meets the cone around the
-    emitters' bounding sphere (pairs whose arcs cannot meet an emitter's image: False)."""
-    _, centre, radius = bounds
-    mid = 0.5 * (edges.a + edges.b)[cols] - o[rows]
-    half_edge = 0.5 * norm(edges.b - edges.a)[cols]
-    to = centre - o[rows]
-    d_mid, d_to = norm(mid), norm(to)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos = dot(mid, to) / (d_mid * d_to)
-        spread = np.arcsin(np.minimum(1.0, half_edge / d_mid)) + np.arcsin(np.minimum(1.0, radius / d_to))
-    return (d_mid <= half_edge) | (d_to <= radius) | (np.arccos(np.clip(cos, -1.0, 1.0)) <= spread)
-
-
 def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np.ndarray, np.ndarray]:
     r"""Every silhouette pair (rows, edges) of the points ``o`` whose edge moves or is seen from a
-    moving point, sorted by point, then edge: a fixed point walks the tree over the moving edges, a
-    moving point the tree over every edge (a pair of a fixed edge and a fixed point has
-    $m·\dot ω = 0$)."""
+    moving point and whose arc may meet the emitters (under a black sky), sorted by point, in the
+    edge tree's order within one: a fixed point walks the tree over the moving edges, a moving point
+    the tree over every edge (a pair of a fixed edge and a fixed point has $m·\dot ω = 0$)."""
     near = None if bounds is None else (bounds[1], bounds[2])
     rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
     for group, edge_mask in ((~point_moves, moving), (point_moves, np.ones_like(moving))):
@@ -124,19 +117,17 @@ def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np
             r, c = edge_tree(edges, edge_mask).silhouettes(o[points], near)
             rows.append(points[r])
             cols.append(c)
+    if len(rows) == 2:  # one group: already by point
+        return rows[1], cols[1]
     rows, cols = np.concatenate(rows), np.concatenate(cols)
-    by_pair = np.lexsort((cols, rows))  # by point, then edge
-    return rows[by_pair], cols[by_pair]
+    by_point = np.argsort(rows, kind="stable")
+    return rows[by_point], cols[by_point]
 
 
-def _arcs(edges: Edges, o, n0, rows, cols, bounds) -> tuple[np.ndarray, ...]:
-    r"""The pairs (point ``o[row]``, edge) whose arc may meet the emitters (under a black sky) and
-    rises above the point's horizon: their rows, edges, clipped ends (relative to ``o``),
-    parameters s0 and s1, and the arc angle γ. A pair whose arc cannot meet an emitter's image has
-    $f = 0$ on both sides: culled here, so it is never drawn."""
-    if bounds is not None:
-        keep = _reach(edges, o, rows, cols, bounds)
-        rows, cols = rows[keep], cols[keep]
+def _arcs(edges: Edges, o, n0, rows, cols) -> tuple[np.ndarray, ...]:
+    r"""The pairs (point ``o[row]``, edge) with their arcs clipped to the point's horizon: rows,
+    edges, clipped ends (relative to ``o``), parameters s0 and s1, and the arc angle γ (0 for an arc
+    below the horizon)."""
     qa_all, e = edges.a[cols] - o[rows], (edges.b - edges.a)[cols]
     ha = dot(qa_all, n0[rows])
     hb = ha + dot(e, n0[rows])
@@ -201,7 +192,7 @@ def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np
     """
     m = len(o)
     rows, cols = _found(edges, o, moving, point_moves, bounds)
-    rows, cols, qa, qb, s0, s1, gamma = _arcs(edges, o, n0, rows, cols, bounds)
+    rows, cols, qa, qb, s0, s1, gamma = _arcs(edges, o, n0, rows, cols)
     lo, hi = np.zeros((rows.size, 1)), gamma[:, None]
     if bounds is not None and len(bounds[0]) <= MAX_EMITTER_TRIANGLES:
         clip = ~unclipped[cols]
@@ -258,8 +249,8 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
         return out
     o = shading.origin
     n0 = np.asarray(detach(shading.n), dtype=np.float64)
-    a, b = edges.endpoints(state.triangles)
-    moving = np.any(tangent(a) != 0.0, axis=-1) | np.any(tangent(b) != 0.0, axis=-1)
+    vertex_moves = _moving_vertices(state)
+    moving = vertex_moves[edges.face, edges.ia] | vertex_moves[edges.face, edges.ib]
     point_moves = np.any(tangent(shading.x) != 0.0, axis=-1)
     unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
     per_point = u.shape[2]
@@ -282,7 +273,8 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     den = dot(cross(qb - qa, w), normal)  # 0 only for an arc of zero angle, never drawn (rounding aside)
     t = -dot(cross(qa, w), normal) / np.where(den != 0.0, den, 1.0)
     s = s0 + np.clip(t, 0.0, 1.0) * (s1 - s0)
-    point = a[k] + s[:, None] * (b[k] - a[k])
+    a, b = edges.take(k).endpoints(state.triangles)
+    point = a + s[:, None] * (b - a)
     x = shading.x[live]
     # from the ray origin o = x + ε n (value), moving with x (tangent)
     seen = point - (x + Dual(o[live] - detach(x)) if isinstance(x, Dual) else o[live])

@@ -18,14 +18,14 @@ from sphere3d.boundary.camera import camera_edge_term
 from sphere3d.boundary.edges import Edges
 from sphere3d.boundary.shading import shading_edge_term
 from sphere3d.integrator import Identity, Shading
-from sphere3d.state import SceneState, build_state
+from sphere3d.state import SceneState, plain_state
 
 __all__ = ["DRAW_BYTES", "DRAW_CHUNK", "BoundaryTransforms", "draw_bytes", "draw_points"]
 
 DRAW_CHUNK = 1 << 14
 """Edge samples of shading points per slice of :meth:`BoundaryTransforms.shading_extra` (``secondary``
 per point): its memory is bounded whatever ``secondary``, down to one point's draws. The slice also
-bounds the silhouette pairs held at once (:func:`~sphere3d.boundary.shading._pairs`: the points'
+bounds the silhouette pairs held at once (:func:`~sphere3d.boundary.shading._found`: the points'
 silhouette edges that reach the emitters, tens per point on a mesh of 10⁵ triangles)."""
 DRAW_BYTES = 1024
 """Bytes per edge sample of a slice at most: its uniforms, its sub-arc's choice and ends, the point on
@@ -84,7 +84,7 @@ class BoundaryTransforms(Identity):
         (:func:`~sphere3d.boundary.camera.camera_edge_term`), for an image task with tangents."""
         if not state.dual or not hasattr(task, "spp"):
             return None
-        plain = build_state(task.scene, task.param, 0.0, task.tracer)
+        plain = plain_state(task.scene, task.param, task.tracer)
         per_batch = task.spp // task.batches
         return np.stack(
             [

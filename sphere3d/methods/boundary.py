@@ -16,10 +16,10 @@ from flatland.core.contract import Option
 from flatland.core.dual import variable
 from flatland.core.validate import check_int, check_positive
 from sphere3d.boundary.camera import POINT_CHUNK, POINT_RAYS, film_edges, point_bytes, point_count
-from sphere3d.boundary.edges import mesh_edges
+from sphere3d.boundary.edges import state_edges
 from sphere3d.boundary.transforms import BoundaryTransforms, draw_bytes, draw_points
 from sphere3d.methods._common import GRADIENT_METHODS, memory_model
-from sphere3d.state import build_state
+from sphere3d.state import plain_state
 from sphere3d.tasks import CHUNK, ImageTask, PointTask, Tally
 
 __all__ = ["RATE", "SECONDARY", "boundary", "memory"]
@@ -64,8 +64,7 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     sides of the arc at two offsets) plus the silhouette test against the edges the edge tree
     finds (:mod:`sphere3d.boundary.edge_tree`).
     """
-    plain = build_state(task.scene, task.param, 0.0, task.tracer)
-    edges = mesh_edges(plain.triangles, plain.shape_of)
+    edges = state_edges(plain_state(task.scene, task.param, task.tracer))
     return task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary, rate))
 
 
@@ -93,8 +92,8 @@ def memory(task: ImageTask | PointTask, options: Mapping[str, Any]) -> tuple[Ter
     if not image:
         return (edge_samples,)
     rate = options.get("rate", RATE)
-    plain = build_state(task.scene, task.param, 0.0, task.tracer)
-    length = film_edges(plain, plain, mesh_edges(plain.triangles, plain.shape_of)).length  # Λ_e
+    plain = plain_state(task.scene, task.param, task.tracer)
+    length = film_edges(plain, plain, state_edges(plain)).length  # Λ_e
     n = int(point_count(rate * (task.spp // task.batches), length).sum())
     block = f"{min(n, POINT_CHUNK)} film edge points"
     what = "film edge points per pixel of edge and sample"

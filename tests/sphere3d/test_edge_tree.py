@@ -2,7 +2,7 @@
 
 The tree's walk chooses which (shading point, edge) pairs the exact silhouette test sees and runs it,
 so (1) the pairs it returns must be exactly those of testing every pair (on an icosphere, from points
-all around it and on the ground below; with the emitters' cone, a superset of those that reach it),
+all around it and on the ground below; with the emitters' cone, the silhouette and the reach test),
 (2) the compiled walk must return what the Python it is compiled from returns, and (3) the pairs and
 an image must not depend on the size of the buffers the walk fills (a full buffer resumes the walk).
 (4) Memory: on a mesh whose (points × edges) table would need 16 GB, a boundary and a reparam
@@ -51,6 +51,19 @@ def _setup(subdivisions: int, seed: int):
     return state, edges, _points(np.random.default_rng(seed)), (bounds[1], bounds[2]), bounds
 
 
+def _reach(edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, bounds) -> np.ndarray:
+    """The exact reach test, every pair: the cone from o around the edge's bounding sphere (midpoint,
+    half length) meets the cone around the emitters' bounding sphere, or o lies in either sphere."""
+    _, centre, radius = bounds
+    mid = 0.5 * (edges.a + edges.b)[cols] - o[rows]
+    half = 0.5 * np.linalg.norm(edges.b - edges.a, axis=-1)[cols]
+    to = centre - o[rows]
+    d_mid, d_to = np.linalg.norm(mid, axis=-1), np.linalg.norm(to, axis=-1)
+    cos = np.einsum("ij,ij->i", mid, to) / (d_mid * d_to)
+    spread = np.arcsin(np.minimum(1.0, half / d_mid)) + np.arcsin(np.minimum(1.0, radius / d_to))
+    return (d_mid <= half) | (d_to <= radius) | (np.arccos(np.clip(cos, -1.0, 1.0)) <= spread)
+
+
 @pytest.mark.parametrize("emitters", [True, False], ids=["emitter_cone", "no_cone"])
 def test01_the_walk_finds_exactly_the_silhouette_pairs(emitters):
     _, edges, o, cone, bounds = _setup(3, 5)
@@ -63,11 +76,10 @@ def test01_the_walk_finds_exactly_the_silhouette_pairs(emitters):
     if not emitters:
         assert found == exact
         return
-    # the cone only drops pairs whose arc cannot reach the emitters (the exact reach test's)
     r, c = np.nonzero(sil)
-    reach = set(zip(*(x[shading._reach(edges, o, r, c, bounds)] for x in (r, c)), strict=True))
-    assert reach and reach <= found <= exact
-    assert len(found) < 0.8 * len(exact)  # and it does cull
+    reach = set(zip(*(x[_reach(edges, o, r, c, bounds)] for x in (r, c)), strict=True))
+    assert found == reach
+    assert len(found) < 0.8 * len(exact)  # the reach test drops pairs
 
 
 def test02_the_compiled_walk_returns_what_its_python_returns():
@@ -80,7 +92,7 @@ def test02_the_compiled_walk_returns_what_its_python_returns():
     rows, cols = np.empty(len(o) * len(edges), dtype=np.int64), np.empty(len(o) * len(edges), dtype=np.int64)
     stop, count = edge_tree.walk(
         np.ascontiguousarray(o), 0, emit, tree.centre, tree.radius, tree.axis, tree.cos_spread,
-        tree.sin_spread, tree.depth, tree.order, tree.planes, tree.always, rows, cols,
+        tree.sin_spread, tree.depth, tree.order, tree.planes, tree.always, tree.spheres, rows, cols,
     )  # fmt: skip
     assert stop == len(o) and count > 50
     assert np.array_equal(compiled[0], rows[:count]) and np.array_equal(compiled[1], cols[:count])
