@@ -222,6 +222,10 @@ class Members:
     paired : bool
         Two members combined with the paired-sample control variate
         (:func:`~flatland.core.translation.paired_combine`).
+    baseline : ndarray, shape (r,), optional
+        With one member and ``weights``: a radiance $c$ per sample, known before θ moves and
+        depending on the kernel's centre ω only (not on μ). Its control variate (theory/kernels)
+        is subtracted: $c\, (q - \mathrm{detach}(q)) / p(μ)$ with $q = p(Rμ)\, w$, value 0.
     """
 
     rotated: Any
@@ -230,6 +234,7 @@ class Members:
     weights: Any = None
     scale: Any = None
     paired: bool = False
+    baseline: np.ndarray | None = None
 
 
 class Transforms(Protocol):
@@ -352,6 +357,13 @@ def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Tr
         mu_r, hits_r = (mu, hits) if rows is None else (mu[rows], hits.take(rows))
         f = sub.evaluate_bsdf(mu_r, members.rotated, hits_r)
         est = f / p if members.weights is None else f * members.weights / p
+        if members.baseline is not None:
+            # ∫ p(R_ω μ) k(R_ω μ, ω) |J| dμ = ∫ p(y) k(y, ω) dy for every ω: the tangent of
+            # q = p(Rμ) w (the cosine density at the rotated direction, about the detached normal,
+            # times the kernel weight) has zero mean given ω, and c(ω) q / p(μ) is a control
+            # variate for f w / p wherever the integrand is c cos θ around the kernel's centre
+            q = np.maximum(dot(detach(sub.n), members.rotated), 0.0) * INV_PI * members.weights
+            est = est - members.baseline * (q - detach(q)) / p
     else:  # one or two members per sample, traced here
         e = []
         for d, rotated, w, scale in zip(

@@ -42,7 +42,7 @@ KAPPA_MAX = 1e15
 """Largest vMF concentration: the kernel's width shows in cosines near 1 as 1 - cos σ = 1/(2κ),
 which float64 resolves only down to about 1e-16 (κ = 1e15: 5e-16); beyond it the samples and the
 weight κ (Rμ·ω - 1) are rounding."""
-_DEFAULT_ONLY = {"spread": 3.0, "refine": REFINE, "paired": False}
+_DEFAULT_ONLY = {"spread": 3.0, "refine": REFINE, "paired": False, "baseline": True}
 """Options of the default variant only, with their defaults (the paper variant has none of them)."""
 
 
@@ -69,6 +69,7 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("refine", REFINE, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
+    Option("baseline", True, check_bool),
 )
 def reparam(
     task: ImageTask | PointTask,
@@ -80,6 +81,7 @@ def reparam(
     spread: float,
     refine: int,
     paired: bool,
+    baseline: bool,
 ) -> Tally:
     r"""Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
@@ -115,6 +117,10 @@ def reparam(
     ``paired``            False      two kernel samples share one rotation in the       bool
                                      cosine strategy (default variant; the paper
                                      variant always pairs)
+    ``baseline``          True       the cosine strategy's control variate: the         bool
+                                     kernel weights' score scaled by the radiance
+                                     the kernel's centre sees (theory/kernels;
+                                     default variant)
     ====================  =========  =================================================  ======================
 
     Constants of the default variant that change results, each in the module that uses it:
@@ -143,7 +149,7 @@ def reparam(
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
     probes = PROBES[variant] if probes is None else probes
     if variant == "paper":
-        given = {"spread": spread, "refine": refine, "paired": paired}
+        given = {"spread": spread, "refine": refine, "paired": paired, "baseline": baseline}
         for name, value in given.items():
             if value != _DEFAULT_ONLY[name]:
                 raise ValidationError(name, f"is an option of variant 'default', not 'paper', got {value!r}")
@@ -151,7 +157,9 @@ def reparam(
             raise ValidationError("kappa", "the paper variant convolves: pass kappa > 0")
         transforms: Any = PaperTransforms(kappa, kappa_film, probes, emitter_probes)
     else:
-        transforms = ReparamTransforms(kappa, kappa_film, probes, emitter_probes, spread, refine, paired)
+        transforms = ReparamTransforms(
+            kappa, kappa_film, probes, emitter_probes, spread, refine, paired, baseline=baseline
+        )
     return task.evaluate(variable(0.0), transforms)
 
 

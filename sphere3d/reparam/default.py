@@ -45,7 +45,7 @@ __all__ = ["ReparamTransforms"]
 class ReparamTransforms(Identity):
     r"""The rotations of the three integrals of :mod:`sphere3d.integrator` (defaults: the method's).
 
-    The last five switches turn one extension off each, for the tests and studies that measure
+    The last six switches turn one extension off each, for the tests and studies that measure
     what it adds (the method itself always uses them).
 
     Attributes
@@ -93,6 +93,10 @@ class ReparamTransforms(Identity):
         Where a moving silhouette vertex's film image lies inside a camera sample's ring of probes,
         follow both its silhouette edges by an affine map of the film
         (:mod:`sphere3d.reparam.film_corners`).
+    baseline : bool
+        The cosine strategy's control variate: $c(ω)\, \dot q / p(μ)$ subtracted, $c(ω) = π L(ω)$
+        the sky radiance where the kernel centre's probe sees the sky (theory page *kernels*,
+        :class:`~sphere3d.integrator.Members`); with a sky, every cosine sample gets its rotation.
     """
 
     kappa: float | None = 1000.0
@@ -107,6 +111,7 @@ class ReparamTransforms(Identity):
     film_junctions: bool = True
     film_shapes: bool = True
     film_corners: bool = True
+    baseline: bool = True
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
@@ -128,8 +133,9 @@ class ReparamTransforms(Identity):
         extra = emitter_edge_term(shading.state, shading, rotation) if self.emitter_edges else None
         return EmitterChange(rotation, rows, extra)
 
-    def _probe_rotation(self, shading: Shading, centre: np.ndarray) -> Rotation:
-        """One rotation per shading point from a ring of probes around the kernel ``centre``.
+    def _probe_rotation(self, shading: Shading, centre: np.ndarray) -> tuple[Rotation, np.ndarray]:
+        """One rotation per shading point from a ring of probes around the kernel ``centre``, and
+        whether the centre's probe sees the sky (above the horizon, no hit).
 
         Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
@@ -151,9 +157,11 @@ class ReparamTransforms(Identity):
         normal = detach(shading.n)
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
         spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(self.kappa))
-        return follow_probes(
+        sky = ~hits.hit[:, 0] & (dot(d[:, 0], normal) > 0.0)
+        rotation = follow_probes(
             shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
         )
+        return rotation, sky
 
     def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
         r"""$w = k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$ in log space: value exactly 1
@@ -164,23 +172,32 @@ class ReparamTransforms(Identity):
         """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
         if self.paired:  # evaluated at the two members only
             return self._paired(shading, mu)
-        # samples whose integrand is 0 with zero derivative need no rotation (and no probes)
-        live = np.flatnonzero(shading.contributes(mu, hits))
+        # samples whose integrand is 0 with zero derivative need no rotation (and no probes), unless
+        # the control variate's c(ω) may be nonzero (a sky): its zero mean needs every sample
+        sky = (float(detach(shading.state.sky)) != 0.0) or shading.state.sky_varies
+        everywhere = self.baseline and self.kappa is not None and sky
+        live = np.arange(len(mu)) if everywhere else np.flatnonzero(shading.contributes(mu, hits))
         sub, mu_l = shading.take(live), mu[live]
         if self.kappa is None:
-            return Members(self._probe_rotation(sub, mu_l).apply(mu_l), live)
+            return Members(self._probe_rotation(sub, mu_l)[0].apply(mu_l), live)
         # kernel centre ω ~ k(·, μ) around the primary sample μ: the joint density of (μ, ω) is
         # the paper's "ω ~ p, μ ~ k(·, ω)" read the other way (k symmetric), and μ stays the
         # naive sample, so the primal is bit-identical to the naive one
         centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, self.kappa)
-        rotated = self._probe_rotation(sub, centre).apply(mu_l)
+        rotation, sky = self._probe_rotation(sub, centre)
+        rotated = rotation.apply(mu_l)
         # f(Rμ) k(Rμ, ω) / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
-        return Members(rotated, live, weights=self._kernel_weight(rotated, centre))
+        weights = self._kernel_weight(rotated, centre)
+        if not self.baseline:
+            return Members(rotated, live, weights=weights)
+        # the radiance the kernel's centre sees (the sky, or 0): the control variate's c(ω), π L(ω)
+        baseline = np.where(sky, np.pi * float(detach(sub.state.sky)), 0.0)
+        return Members(rotated, live, weights=weights, baseline=baseline)
 
     def _paired(self, shading: Shading, mu: np.ndarray) -> Members:
         r"""The paper's order: outer $ω = μ \sim p$, two kernel samples share one rotation
         (theory/kernels)."""
-        rotation = self._probe_rotation(shading, mu)
+        rotation = self._probe_rotation(shading, mu)[0]
         u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
         members, rotated, weights, mass = [], [], [], []
         for j in range(2):  # the two members of each pair (not a loop over samples)

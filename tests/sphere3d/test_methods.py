@@ -44,6 +44,7 @@ def test01_api_exports_and_methods():
         "spread": 3.0,
         "refine": 3,
         "paired": False,
+        "baseline": True,
     }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
