@@ -9,7 +9,10 @@ discontinuity where one rotation per integral cannot (Loubet et al. 2019, Sec. 4
   with the emitters' own edges held fixed by their boundary term
   (:mod:`sphere3d.boundary.emitters`);
 - ``bsdf``: the vMF convolution of the cosine-sampled integral, the probes on a ring around the
-  kernel's centre, snapped onto the edge they straddle (:mod:`sphere3d.reparam.snaps`).
+  kernel's centre, snapped onto the edge they straddle (:mod:`sphere3d.reparam.snaps`); a moving
+  shape inside the ring followed by an affine map of the gnomonic chart
+  (:mod:`sphere3d.reparam.shading_affine`); the kernel weights' control variate (theory page
+  *kernels*).
 
 :mod:`sphere3d.reparam.paper` is the estimator as published; the theory page *extensions* lists
 what each extension adds and why.
@@ -22,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import detach
+from flatland.core.dual import Dual, detach
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
 from sphere3d.boundary.emitters import emitter_edge_term
@@ -31,6 +34,7 @@ from sphere3d.integrator import EmitterChange, Identity, Members, Shading
 from sphere3d.reparam.emitter_probes import PROBES, emitter_rotation
 from sphere3d.reparam.film_kernel import KAPPA_FILM, film_transform
 from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
+from sphere3d.reparam.shading_affine import inner_shape_map
 from sphere3d.reparam.snaps import angle_snap
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_cosine_hemisphere, sample_vmf, vmf_hemisphere_fraction
@@ -45,7 +49,7 @@ __all__ = ["ReparamTransforms"]
 class ReparamTransforms(Identity):
     r"""The rotations of the three integrals of :mod:`sphere3d.integrator` (defaults: the method's).
 
-    The last six switches turn one extension off each, for the tests and studies that measure
+    The last seven switches turn one extension off each, for the tests and studies that measure
     what it adds (the method itself always uses them).
 
     Attributes
@@ -93,6 +97,10 @@ class ReparamTransforms(Identity):
         Where a moving silhouette vertex's film image lies inside a camera sample's ring of probes,
         follow both its silhouette edges by an affine map of the film
         (:mod:`sphere3d.reparam.film_corners`).
+    shading_shapes : bool
+        Where a moving shape's image from the shading point lies inside a cosine kernel's ring of
+        probes, or is thin and reaches into it, follow it by an affine map of the gnomonic chart
+        about the kernel's centre (:mod:`sphere3d.reparam.shading_affine`).
     baseline : bool
         The cosine strategy's control variate: $c(ω)\, \dot q / p(μ)$ subtracted, $c(ω) = π L(ω)$
         the sky radiance where the kernel centre's probe sees the sky (theory page *kernels*,
@@ -112,6 +120,7 @@ class ReparamTransforms(Identity):
     film_shapes: bool = True
     film_corners: bool = True
     baseline: bool = True
+    shading_shapes: bool = True
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
@@ -186,8 +195,17 @@ class ReparamTransforms(Identity):
         centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, self.kappa)
         rotation, sky = self._probe_rotation(sub, centre)
         rotated = rotation.apply(mu_l)
-        # f(Rμ) k(Rμ, ω) / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
+        jacobian = None
+        if self.shading_shapes:
+            # a moving shape inside the kernel's ring: the chart's map that follows all its edges
+            shape = inner_shape_map(sub, mu_l, centre, vmf_spread_angle(self.kappa, self.spread))
+            if shape.mask.any():
+                rotated = Dual(rotated.value, np.where(shape.mask[:, None], shape.mu_dot, rotated.tangent))
+                jacobian = Dual(np.ones(len(mu_l)), shape.log_jacobian_dot)  # |J_T|: value 1
+        # f(Tμ) k(Tμ, ω) |J_T| / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
         weights = self._kernel_weight(rotated, centre)
+        if jacobian is not None:
+            weights = weights * jacobian
         if not self.baseline:
             return Members(rotated, live, weights=weights)
         # the radiance the kernel's centre sees (the sky, or 0): the control variate's c(ω), π L(ω)

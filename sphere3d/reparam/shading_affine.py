@@ -1,0 +1,199 @@
+r"""A small shape inside a cosine kernel's ring: the map of the sphere that follows all its edges.
+
+The cosine strategy's rotations (:mod:`sphere3d.reparam.default`) follow one point of one edge,
+turning with it. A shape whose image from the shading point lies wholly inside the kernel's ring
+of probes, or is thinner than the ring however long, has all its silhouette edges (or both its
+long edges) in one kernel, moving apart when it scales, moves in depth or tilts: one rotation
+follows one of them, and most of dE/dθ is lost (the bias atlas, ``make bench``). For such a shape
+the sample's map is instead, in the gnomonic chart about the kernel's centre ω (frame t, b),
+
+    $g(y) = (y·t, y·b) / (y·ω)$,   $T(μ) = g^{-1}(A(g(μ)))$,
+    $A(u) = u + (θ - θ_0)(\dot a + \dot B (u - \bar u))$,
+
+with $\dot a$, $\dot B$ the least-squares fit of the motion of the shape's anchor points' charts
+$u_i$ (their mean $\bar u$): $\dot a$ the mean of the $\dot u_i$, $\dot B = C_{\dot u u} C_{uu}^{-1}$,
+as on the film (:mod:`sphere3d.reparam.film_affine`). The gnomonic chart maps great circles to
+lines, so an edge's image is a segment of the chart, and an affine A that carries a triangle's
+three vertices carries its three edges, under every motion: for one triangle (its vertices the
+anchors) the map is exact. For a shape of more vertices it follows the anchors to first order.
+
+A shape of one triangle gets the map wherever a kernel's ring reaches its image, small or not:
+its three edges and their corners are then followed together (one rotation follows one edge, or
+a corner's two edges by a compromise turn).
+
+A change of variables of the sphere: the sample is evaluated at T(μ) (value μ, tangent
+$\dot T(μ)$), its weight carries the Jacobian $|J_T| = \det A\, ((1 + |u|^2)/(1 + |A u|^2))^{3/2}$
+(the chart's area element is $du / (1 + |u|^2)^{3/2}$): value 1, derivative
+$\mathrm{tr}\,\dot B - 3\, u·\dot u / (1 + |u|^2)$. As with the rotation, the map depends on the
+kernel's centre only, so the kernel convolution stays unbiased where that shape's edges are the
+only discontinuities in the kernel (another shape's edge in it is dragged by the map, as the
+rotation drags all but the edge it follows). Loubet et al. 2019, Sec. 4.1-4.3: a change of
+variables per kernel, chosen by geometry instead of by one probe's point.
+
+Anchors: a shape's vertices when it has at most :data:`MAX_ANCHORS`, else its extreme vertices
+along the 13 axes of a cube's faces, edges and corners (26 directions): they span its extent and
+move with it, and the cost per sample stays bounded whatever the mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import Dual, detach, tangent
+from sphere3d.state import SceneState, per_state
+from sphere3d.vector import frame
+
+__all__ = ["MAX_ANCHORS", "ShadingAffine", "inner_shape_map"]
+
+MAX_ANCHORS = 32
+"""Shapes with at most this many distinct vertices are fitted from all of them (a triangle: exact)."""
+DEGENERATE = 1e-12
+"""Relative size of the smallest eigenvalue of the anchors' chart scatter below which the image
+counts as a segment (a triangle seen edge-on) and no map is fitted."""
+_AXES = np.array(
+    [[x, y, z] for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if (x, y, z) > (0, 0, 0)],
+    dtype=np.float64,
+)
+"""The 13 directions of a cube's faces, edges and corners (one of each ± pair)."""
+
+
+@dataclass(frozen=True)
+class _Shapes:
+    """Per moving shape: its index, bounding sphere at θ0, anchor points (Dual, padded by repeats) and
+    whether it is one triangle."""
+
+    shape: np.ndarray
+    centre: np.ndarray
+    radius: np.ndarray
+    anchors: Any  # Dual (k, A, 3)
+    single: np.ndarray
+
+
+@per_state
+def _moving_shapes(state: SceneState) -> _Shapes:
+    """Once per state: the shapes whose vertices carry a tangent, their spheres and anchors. O(vertices)."""
+    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+    values, tangents, shapes, centres, radii, single = [], [], [], [], [], []
+    for s in np.unique(state.shape_of[moving]):  # a handful of shapes, each vectorized
+        corners = state.triangles[state.shape_of == s].reshape(-1, 3)
+        plain = np.asarray(detach(corners))
+        _, first = np.unique(plain, axis=0, return_index=True)  # distinct vertices
+        if first.size > MAX_ANCHORS:
+            proj = plain[first] @ _AXES.T
+            first = first[np.unique(np.concatenate([proj.argmin(axis=0), proj.argmax(axis=0)]))]
+        pick = np.resize(first, MAX_ANCHORS)  # padded by repeats: the fit's weights change, not its span
+        lo, hi = plain.min(axis=0), plain.max(axis=0)
+        centre = 0.5 * (lo + hi)
+        values.append(plain[pick])
+        tangents.append(np.asarray(tangent(corners))[pick])
+        shapes.append(int(s))
+        centres.append(centre)
+        radii.append(float(np.max(np.linalg.norm(plain - centre, axis=1))))
+        single.append(len(corners) == 3)
+    if not shapes:
+        none = Dual(np.zeros((0, MAX_ANCHORS, 3)))
+        return _Shapes(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), none, np.zeros(0, dtype=bool))
+    anchors = Dual(np.array(values), np.array(tangents))
+    return _Shapes(np.array(shapes), np.array(centres), np.array(radii), anchors, np.array(single))
+
+
+@dataclass(frozen=True)
+class ShadingAffine:
+    """Where the chart's map replaces the rotation (``mask`` over the kernels), and its tangents:
+    ``mu_dot`` (n, 3) the evaluation direction's, ``log_jacobian_dot`` (n,) the weight's."""
+
+    mask: np.ndarray
+    mu_dot: np.ndarray
+    log_jacobian_dot: np.ndarray
+
+
+def _chart(d: Any, centre: np.ndarray, t: np.ndarray, b: np.ndarray) -> tuple[Any, Any]:
+    """Gnomonic coordinates of directions ``d`` (..., 3) about unit ``centre`` (frame t, b)."""
+    depth = d[..., 0] * centre[..., 0] + d[..., 1] * centre[..., 1] + d[..., 2] * centre[..., 2]
+    x = d[..., 0] * t[..., 0] + d[..., 1] * t[..., 1] + d[..., 2] * t[..., 2]
+    y = d[..., 0] * b[..., 0] + d[..., 1] * b[..., 1] + d[..., 2] * b[..., 2]
+    return x / depth, y / depth
+
+
+def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: float) -> ShadingAffine:
+    """The map of the module docstring for the kernels (centres ``centre`` (n, 3), samples ``mu``)
+    whose ring of angular radius ``reach`` holds a moving shape's image, or a thin image reaching
+    into it, or reaches a shape of one triangle (for which the map is exact everywhere); the
+    nearest such shape, seen from the point (a ray toward its centre hits it).
+
+    Cost: (kernels × moving shapes) comparisons, then (kernels with a shape × anchors).
+    """
+    n = len(mu)
+    out = ShadingAffine(np.zeros(n, dtype=bool), np.zeros((n, 3)), np.zeros(n))
+    shapes = _moving_shapes(shading.state)
+    if not len(shapes.shape) or n == 0:
+        return out
+    x = np.asarray(detach(shading.x), dtype=np.float64)
+    to = shapes.centre[None] - x[:, None]  # (n, k, 3)
+    dist = np.linalg.norm(to, axis=-1)
+    outside = dist > shapes.radius
+    half = np.arcsin(np.minimum(1.0, shapes.radius / np.maximum(dist, 1e-300)))  # angular radius
+    cos = np.einsum("nkx,nx->nk", to, centre) / np.maximum(dist, 1e-300)
+    gap = np.arccos(np.clip(cos, -1.0, 1.0))
+    # inside the ring wholly, or near it and thin (tested on the chart below)
+    near = outside & (gap - half < reach) & (half < 0.5 * np.pi)
+    best = np.argmin(np.where(near, gap, np.inf), axis=1)
+    rows = np.flatnonzero(near[np.arange(n), best])
+    if not rows.size:
+        return out
+    k = best[rows]
+    c, m = centre[rows], mu[rows]
+    t, b = frame(c)
+    p = shapes.anchors[k] - (shading.x[rows][:, None] if isinstance(shading.x, Dual) else x[rows][:, None])
+    length = np.sqrt(p[..., 0] * p[..., 0] + p[..., 1] * p[..., 1] + p[..., 2] * p[..., 2])
+    d = p / length[..., None]
+    front = np.all(np.einsum("rax,rx->ra", np.asarray(detach(d)), c) > 0.0, axis=1)  # in the chart
+    ux, uy = _chart(d, c[:, None], t[:, None], b[:, None])
+    u = np.stack([np.asarray(detach(ux)), np.asarray(detach(uy))], axis=-1)  # (r, A, 2)
+    u_dot = np.stack([np.asarray(tangent(ux)), np.asarray(tangent(uy))], axis=-1)
+    mean, rate = u.mean(axis=1), u_dot.mean(axis=1)
+    q = u - mean[:, None]
+    scatter = np.einsum("rai,raj->rij", q, q)
+    extent = np.trace(scatter, axis1=1, axis2=2)
+    eig, vec = np.linalg.eigh(scatter)
+    fitted = front & (extent > 0.0) & (eig[:, 0] > DEGENERATE * extent)
+    # the image inside the ring (every anchor within reach of the centre), or thin: narrower than the
+    # ring across its major axis, its core reaching into it
+    radius_chart = np.tan(reach)
+    inside = np.all(np.hypot(u[..., 0], u[..., 1]) < radius_chart, axis=1)
+    major = vec[:, :, 1]
+    across = np.einsum("rai,ri->ra", q, np.stack([-major[:, 1], major[:, 0]], axis=1))
+    along = np.einsum("rai,ri->ra", q, major)
+    width = across.max(axis=1) - across.min(axis=1)
+    s = np.clip(-np.einsum("ri,ri->r", mean, major), along.min(axis=1), along.max(axis=1))
+    core = np.hypot(*(mean + s[:, None] * major).T)  # the core segment's nearest point to the centre
+    thin = (width < 2.0 * radius_chart) & (core - 0.5 * width < radius_chart)
+    # one triangle is followed exactly wherever the ring reaches it
+    keep = fitted & (inside | thin | shapes.single[k])
+    # seen: the ray toward the shape's centre meets it first
+    hits = shading.state.tracer.intersect(shading.origin[rows], to[rows, k] / dist[rows, k, None])
+    keep &= hits.hit & (shading.state.shape_of[np.maximum(hits.triangle, 0)] == shapes.shape[k])
+    rows, keep_idx = rows[keep], np.flatnonzero(keep)
+    if not rows.size:
+        return out
+    c, m, t, b = c[keep_idx], m[keep_idx], t[keep_idx], b[keep_idx]
+    q, scatter, rate, mean = q[keep_idx], scatter[keep_idx], rate[keep_idx], mean[keep_idx]
+    # least squares: Σ (u̇_i - mean u̇)(u_i - ū)ᵀ (Σ (u_i - ū)(u_i - ū)ᵀ)⁻¹   (module docstring)
+    b_dot = np.einsum("rai,raj->rij", u_dot[keep_idx] - rate[:, None], q) @ np.linalg.inv(scatter)
+    # the sample's chart point and its velocity under A
+    depth = np.einsum("rx,rx->r", m, c)
+    um = np.stack([np.einsum("rx,rx->r", m, t), np.einsum("rx,rx->r", m, b)], axis=1) / depth[:, None]
+    um_dot = rate + np.einsum("rij,rj->ri", b_dot, um - mean)
+    # y = (c + u_x t + u_y b) / sqrt(1 + |u|²): its tangent under u̇
+    s2 = 1.0 + np.einsum("ri,ri->r", um, um)
+    y = (c + um[:, :1] * t + um[:, 1:] * b) / np.sqrt(s2)[:, None]
+    radial = np.einsum("ri,ri->r", um, um_dot) / s2
+    y_dot = (um_dot[:, :1] * t + um_dot[:, 1:] * b) / np.sqrt(s2)[:, None] - y * radial[:, None]
+    out.mask[rows] = True
+    out.mu_dot[rows] = y_dot
+    # log |J_T|: log det A - (3/2) log((1 + |A u|²) / (1 + |u|²)), its derivative at θ0
+    out.log_jacobian_dot[rows] = np.trace(b_dot, axis1=1, axis2=2) - 3.0 * radial
+    return out
