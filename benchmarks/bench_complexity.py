@@ -7,8 +7,8 @@ a smooth random field (:func:`bumpy_sphere`; smooth-shaded as ``hard_shadow``'s 
 silhouette and shadow ragged). Each run is a fresh process (``python -m benchmarks.bench_complexity
 TRIANGLES METHOD``) reporting its wall time (the call only, after the imports and a warm-up call
 on a 4 × 4 px image of the coarsest mesh: what a method loads once per process, such as the edge
-tree's compiled walk, is not the scene's cost) and its peak
-resident set size (``getrusage``); all the cores the renderer uses (``SPHERE3D_THREADS``), and
+tree's compiled walk, is not the scene's cost) and its peak resident set size (``getrusage``),
+the fastest of :data:`REPEATS` runs; all the cores the renderer uses (``SPHERE3D_THREADS``), and
 reparam and boundary again on one thread at 81 920 triangles, to show how the chunks share the
 cores.
 
@@ -56,6 +56,9 @@ SUBDIVISIONS = (2, 3, 4, 5, 6)
 BUMPY = 7
 """Subdivisions of the irregular mesh (327 680 triangles)."""
 METHODS = ("render", "naive", "reparam", "boundary", "finite_difference")
+REPEATS = 3
+"""Fresh-process runs per row; the row reports the fastest (other processes on a shared machine only
+ever slow a run down, so the minimum is the least disturbed) and the largest peak memory."""
 REGION_SEEDS = tuple(range(1, 13))
 REGION_SIZES = (4, 6)
 LEVEL = 0.01
@@ -117,12 +120,16 @@ def _one(subdivisions: int, method: str) -> dict:
 
 
 def _fresh(subdivisions: int, method: str, threads: int | None = None) -> dict:
+    """The fastest of :data:`REPEATS` fresh-process runs (and the largest peak memory of them)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     if threads is not None:
         env["SPHERE3D_THREADS"] = str(threads)
     cmd = [sys.executable, "-m", "benchmarks.bench_complexity", str(subdivisions), method]
-    out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    runs = []
+    for _ in range(REPEATS):
+        out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env, check=True)
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    return {"seconds": min(r["seconds"] for r in runs), "mb": max(r["mb"] for r in runs)}
 
 
 def _regions(subdivisions: int) -> dict[str, np.ndarray]:
