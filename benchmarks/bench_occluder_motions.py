@@ -14,7 +14,13 @@ Rows, per scene, motion and method, relative to the reference's RMS over the ima
   (the estimator of :func:`benchmarks.bench_hard_shadow.bias_floor`); 0 when the noise covers it.
   Finite differences' bias is their truncation at the default step;
 - **RMSE at 64 spp**: sqrt of the mean over seeds and pixels of (g - ref)², the reference's own
-  noise included (its share is the note's ``ref noise``).
+  noise included (its share is the note's ``ref noise``);
+- in the note, the bias's upper bound: the mean squared bias (the mean excess of
+  :func:`benchmarks.bench_hard_shadow.bias_excess`) plus its standard error over 8 × 8 pixel blocks
+  times the one-sided normal quantile at :data:`LEVEL` (Šidák over the rows), square-rooted, and
+  whether the bias is resolved (the excess beyond that quantile of its error). Where the gradient
+  is small against the noise (a smooth sphere turning about its centre), the bias row is noise and
+  its bound says how far it reaches.
 
 A bias row above a few percent of the RMS is a method missing part of that motion's derivative
 where its RMSE stops falling with more samples; ``finite_difference`` is the control whose bias is
@@ -24,9 +30,10 @@ its truncation only.
 from __future__ import annotations
 
 import numpy as np
+from scipy import stats
 
 from benchmarks import Row
-from benchmarks.bench_hard_shadow import bias_floor, rmse
+from benchmarks.bench_hard_shadow import bias_excess, bias_floor, rmse
 from sphere3d import render_gradient
 
 SCENES = ("hard_shadow", "hard_shadow_cube")
@@ -40,6 +47,8 @@ METHODS = ("reparam", "finite_difference")
 SEEDS = tuple(range(1, 9))
 SPP = 64
 REFERENCE_SPP, REFERENCE_SEED = 1024, 100
+LEVEL = 0.01
+"""Family-wise level of the bias bounds, Šidák over the rows."""
 
 
 def measure(scene: str, param: str) -> list[Row]:
@@ -54,7 +63,14 @@ def measure(scene: str, param: str) -> list[Row]:
         )
         bias = bias_floor(images, ref.derivative, ref.derivative_stderr) / scale
         error = rmse(images, ref.derivative) / scale
-        note = f"RMSE {error:.3f} at {SPP} spp; ref noise {noise:.3f}; gradient rms {scale:.3g}"
+        mean, se = bias_excess(images, ref.derivative, ref.derivative_stderr)
+        q = stats.norm.ppf((1.0 - LEVEL) ** (1.0 / (len(SCENES) * len(MOTIONS) * len(METHODS))))
+        bound = np.sqrt(max(0.0, mean + q * se)) / scale
+        resolved = "resolved" if mean > q * se else "not resolved"
+        note = (
+            f"bias <= {bound:.3f} ({resolved}); RMSE {error:.3f} at {SPP} spp; ref noise {noise:.3f};"
+            f" gradient rms {scale:.3g}"
+        )
         rows.append(Row("occluder motions", f"{scene} {param} {method}: bias / rms", bias, "", note))
     return rows
 
