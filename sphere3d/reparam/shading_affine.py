@@ -80,18 +80,20 @@ def _moving_shapes(state: SceneState) -> _Shapes:
     for s in np.unique(state.shape_of[moving]):  # a handful of shapes, each vectorized
         corners = state.triangles[state.shape_of == s].reshape(-1, 3)
         plain = np.asarray(detach(corners))
-        _, first = np.unique(plain, axis=0, return_index=True)  # distinct vertices
-        if first.size > MAX_ANCHORS:
-            proj = plain[first] @ _AXES.T
-            first = first[np.unique(np.concatenate([proj.argmin(axis=0), proj.argmax(axis=0)]))]
+        first = np.arange(0)
+        if len(plain) <= 4 * MAX_ANCHORS:  # a small mesh: its distinct vertices, if few enough
+            _, first = np.unique(plain, axis=0, return_index=True)
+        rows = np.ascontiguousarray(plain.T)  # (3, corners): each coordinate contiguous
+        if not 0 < first.size <= MAX_ANCHORS:  # the extreme corners along the axes (O(corners))
+            proj = _AXES @ rows
+            first = np.unique(np.concatenate([proj.argmin(axis=1), proj.argmax(axis=1)]))
         pick = np.resize(first, MAX_ANCHORS)  # padded by repeats: the fit's weights change, not its span
-        lo, hi = plain.min(axis=0), plain.max(axis=0)
-        centre = 0.5 * (lo + hi)
+        centre = 0.5 * (rows.min(axis=1) + rows.max(axis=1))
         values.append(plain[pick])
         tangents.append(np.asarray(tangent(corners))[pick])
         shapes.append(int(s))
         centres.append(centre)
-        radii.append(float(np.max(np.linalg.norm(plain - centre, axis=1))))
+        radii.append(float(np.sqrt(np.max(np.sum((rows - centre[:, None]) ** 2, axis=0)))))
         single.append(len(corners) == 3)
     if not shapes:
         none = Dual(np.zeros((0, MAX_ANCHORS, 3)))
