@@ -65,22 +65,25 @@ def bias_floor(images: np.ndarray, reference: np.ndarray, reference_stderr: np.n
     return float(np.sqrt(max(0.0, excess.mean())))
 
 
-BLOCK = 8
-"""Pixels per side of the blocks whose excess means are taken as independent in :func:`bias_excess`
-(the splat film spreads a sample over its neighbours: single pixels are not)."""
+def _excess(images: np.ndarray, reference: np.ndarray, reference_stderr: np.ndarray) -> float:
+    s = images.shape[0]
+    excess = (images.mean(axis=0) - reference) ** 2 - images.var(axis=0, ddof=1) / s - reference_stderr**2
+    return float(excess.mean())
 
 
 def bias_excess(
     images: np.ndarray, reference: np.ndarray, reference_stderr: np.ndarray
 ) -> tuple[float, float]:
     """The mean over pixels of the noise-subtracted squared error of :func:`bias_floor` (an unbiased
-    estimate of the mean squared per-pixel bias, possibly negative) and its standard error, from the
-    spread of its means over blocks of :data:`BLOCK` × :data:`BLOCK` pixels."""
+    estimate of the mean squared per-pixel bias, possibly negative) and its standard error: the
+    jackknife over the seeds (each left out in turn), so it measures the noise of the estimate,
+    whatever the pixels' correlations, and not how the bias varies over the image. The reference's
+    own noise enters every replicate alike and is not in it (the rows give its size)."""
     s = images.shape[0]
-    excess = (images.mean(axis=0) - reference) ** 2 - images.var(axis=0, ddof=1) / s - reference_stderr**2
-    h, w = (excess.shape[0] // BLOCK) * BLOCK, (excess.shape[1] // BLOCK) * BLOCK
-    blocks = excess[:h, :w].reshape(h // BLOCK, BLOCK, w // BLOCK, BLOCK).mean(axis=(1, 3)).ravel()
-    return float(excess.mean()), float(blocks.std(ddof=1) / np.sqrt(blocks.size))
+    full = _excess(images, reference, reference_stderr)
+    keep = ~np.eye(s, dtype=bool)
+    loo = np.array([_excess(images[keep[i]], reference, reference_stderr) for i in range(s)])
+    return full, float(np.sqrt((s - 1) / s * np.sum((loo - loo.mean()) ** 2)))
 
 
 def rmse(images: np.ndarray, reference: np.ndarray) -> float:

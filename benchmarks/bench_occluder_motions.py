@@ -16,9 +16,10 @@ Rows, per scene, motion and method, relative to the reference's RMS over the ima
 - **RMSE at 64 spp**: sqrt of the mean over seeds and pixels of (g - ref)², the reference's own
   noise included (its share is the note's ``ref noise``);
 - in the note, the bias's upper bound: the mean squared bias (the mean excess of
-  :func:`benchmarks.bench_hard_shadow.bias_excess`) plus its standard error over 8 × 8 pixel blocks
-  times the one-sided normal quantile at :data:`LEVEL` (Šidák over the rows), square-rooted, and
-  whether the bias is resolved (the excess beyond that quantile of its error). Where the gradient
+  :func:`benchmarks.bench_hard_shadow.bias_excess`) plus its jackknife standard error over the
+  seeds times the one-sided Student-t quantile (S - 1 degrees of freedom) at :data:`LEVEL`
+  (Šidák over the rows), square-rooted, and whether the bias is resolved (the excess beyond that
+  quantile of its error). Where the gradient
   is small against the noise (a smooth sphere turning about its centre), the bias row is noise and
   its bound says how far it reaches.
 
@@ -64,7 +65,7 @@ def measure(scene: str, param: str) -> list[Row]:
         bias = bias_floor(images, ref.derivative, ref.derivative_stderr) / scale
         error = rmse(images, ref.derivative) / scale
         mean, se = bias_excess(images, ref.derivative, ref.derivative_stderr)
-        q = stats.norm.ppf((1.0 - LEVEL) ** (1.0 / (len(SCENES) * len(MOTIONS) * len(METHODS))))
+        q = stats.t.ppf((1.0 - LEVEL) ** (1.0 / (len(SCENES) * len(MOTIONS) * len(METHODS))), len(SEEDS) - 1)
         bound = np.sqrt(max(0.0, mean + q * se)) / scale
         resolved = "resolved" if mean > q * se else "not resolved"
         note = (
