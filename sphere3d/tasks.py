@@ -259,8 +259,9 @@ class ImageTask:
 
     @property
     def chunk_pixels(self) -> int:
-        """Pixels per memory chunk: all samples of :data:`CHUNK` // spp pixels (at least one) at once."""
-        return max(1, CHUNK // self.spp)
+        """Pixels per memory chunk: at most :data:`CHUNK` // spp (at least one), fewer where that gives each
+        thread several chunks (:func:`sphere3d.execution.chunk_size`)."""
+        return execution.chunk_size(self.shape[0] * self.shape[1], self.spp, max(1, CHUNK // self.spp))
 
     def pixel_bytes(self) -> float:
         r"""Memory model of the image: bytes held per pixel and batch until the image is made.

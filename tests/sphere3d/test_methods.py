@@ -249,3 +249,31 @@ def test12_the_callers_floating_point_policy_holds_in_the_worker_threads(monkeyp
         execution._map_threads(divide, range(1, 4))
     with np.errstate(divide="ignore", invalid="ignore"):
         assert execution._map_threads(divide, range(1, 3)) == [np.inf, np.inf]
+
+
+@pytest.mark.parametrize("workers", [1, 2, 16])
+def test13_chunks_give_every_thread_several_and_change_no_number(monkeypatch, workers):
+    """``execution.chunk_size``: at most the memory limit, and small enough for CHUNKS_PER_THREAD chunks
+    per thread unless chunks would hold fewer than MIN_CHUNK samples; the image is the same bit for bit
+    whatever the threads (hence the chunks)."""
+    monkeypatch.setattr(execution, "WORKERS", workers)
+    for items, per_item, limit in [(4096, 16, 2048), (64, 16, 2048), (10**6, 1, 1 << 15), (7, 4096, 8)]:
+        size = execution.chunk_size(items, per_item, limit)
+        chunks = -(-items // size)
+        assert 1 <= size <= limit
+        if size < limit:  # not at the memory ceiling: balance or the floor decides
+            assert chunks >= execution.CHUNKS_PER_THREAD * workers or size * per_item >= execution.MIN_CHUNK
+            assert (
+                size - 1
+            ) * per_item < execution.MIN_CHUNK or chunks <= execution.CHUNKS_PER_THREAD * workers
+    d = _small("two_occluders", 16)
+    monkeypatch.setattr(execution, "MIN_CHUNK", 16)  # one pixel: the chunks follow the threads
+    monkeypatch.setattr(execution, "WORKERS", 1)
+    assert execution.chunk_size(256, 16, 2048) == 64
+    one = s3.render_gradient(d, "left.translate.x", method="boundary", spp=16, seed=5, progress=False)
+    monkeypatch.setattr(execution, "WORKERS", workers)
+    assert execution.chunk_size(256, 16, 2048) == -(-64 // workers)
+    task_chunks = s3.render_gradient(d, "left.translate.x", method="boundary", spp=16, seed=5, progress=False)
+    assert np.array_equal(one.value, task_chunks.value) and np.array_equal(
+        one.derivative, task_chunks.derivative
+    )
