@@ -21,11 +21,17 @@ and then no edge of the node is a silhouette seen from o (both faces on one side
 sky an edge's arc counts only where it meets the emitters' image (the shading term's arcs are
 clipped to it, :mod:`sphere3d.boundary.shading`): the node is dropped when the cone from o around
 its sphere misses the cone around the emitters' bounding sphere (centre e, radius R), i.e. when
-the angle between $c - o$ and $e - o$ exceeds $β + \arcsin(R / |e - o|)$. Both tests compare
-cosines with a slack of :data:`SLACK` over rounding; a node whose sphere holds o is kept. At a
-leaf every edge gets the exact tests: the silhouette test, and the same cone test with the edge's
-own sphere (midpoint, half its length), in angles. The culls are conservative (a node's bounds
-hold its edges' bounds), so the pairs found are exactly those of the exact tests on every pair.
+the angle between $c - o$ and $e - o$ exceeds $β + \arcsin(R / |e - o|)$. Given the emitter
+triangles (as many as the shading term clips to), the node is also dropped when its cone misses
+the image of every triangle o sees the front of: triangle $L_0 L_1 L_2$ covers the directions w with
+$w·\hat c_k ≥ 0$, $c_k = q_{k+1} × q_k$, $q_k = L_k - o$, and the cone about $u = (c - o)/|c - o|$
+lies beyond side k when $u·\hat c_k < -\sin β$. On a fine mesh the silhouette arcs near the light's
+directions can far outnumber those crossing its image. All tests compare cosines with
+a slack of :data:`SLACK` over rounding; a node whose sphere holds o is kept. At a leaf every edge
+gets the exact tests: the silhouette test, and the same cone tests with the edge's own sphere
+(midpoint, half its length). The culls are conservative (a node's bounds hold its edges' bounds),
+so the pairs found are exactly those of the exact tests on every pair; the pairs the image test
+drops have arcs wholly outside the emitters' images, which the shading term clips to nothing.
 
 Construction, O(E log E) per state: the edges sorted by the Morton code of their midpoints (30 bits),
 leaves of :data:`LEAF` consecutive edges, a complete binary tree above them (heap order: node i has
@@ -193,23 +199,29 @@ class EdgeTree:
         )
 
     def silhouettes(
-        self, o: np.ndarray, emitters: tuple[np.ndarray, float] | None = None
+        self,
+        o: np.ndarray,
+        emitters: tuple[np.ndarray, float] | None = None,
+        triangles: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """(rows, edges): every pair (point ``o[row]``, edge of the tree) where the edge is a silhouette
         seen from the point and, given the emitters' bounding sphere ``(centre, radius)``, its cone
-        from the point meets theirs (the exact tests, module docstring); grouped by point, in leaf
-        order within one.
+        from the point meets theirs and, given the emitter ``triangles`` (T, 3, 3), the image of one
+        of them the point sees the front of (the exact tests, module docstring); grouped by point, in
+        leaf order within one.
         Memory: the pairs found (buffers doubled when full)."""
         o = np.ascontiguousarray(o, dtype=np.float64)
         emit = np.array([0.0, 0.0, 0.0, -1.0]) if emitters is None else np.array([*emitters[0], emitters[1]])
+        tris = np.zeros((0, 3, 3)) if triangles is None or emitters is None else np.asarray(triangles, float)
         size = max(PAIRS_PER_POINT, PAIRS_PER_POINT * len(o))
         rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
         done = 0
         while done < len(o):
             r, c = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
             stop, count = _compiled()(
-                o, done, emit, self.centre, self.radius, self.axis, self.cos_spread, self.sin_spread,
-                self.depth, self.order, self.planes, self.always, self.spheres, r, c,
+                o, done, emit, np.ascontiguousarray(tris), self.centre, self.radius, self.axis,
+                self.cos_spread, self.sin_spread, self.depth, self.order, self.planes, self.always,
+                self.spheres, r, c,
             )  # fmt: skip
             rows.append(r[:count])
             cols.append(c[:count])
@@ -223,6 +235,7 @@ def walk(
     o: np.ndarray,
     start: int,
     emit: np.ndarray,
+    tris: np.ndarray,
     centre: np.ndarray,
     radius: np.ndarray,
     axis: np.ndarray,
@@ -239,9 +252,13 @@ def walk(
     """The depth-first walk of :meth:`EdgeTree.silhouettes` for the points ``o[start:]``, written as
     scalar Python for Numba: the pairs found go to ``rows``, ``cols`` until they are full. Returns
     (the first point not walked, the pairs written); a point whose pairs do not all fit is not
-    walked. ``emit``: the emitters' sphere (centre, radius), radius < 0 for none. The culls are
-    those of the module docstring, in cosines, each comparison kept by :data:`SLACK`."""
+    walked. ``emit``: the emitters' sphere (centre, radius), radius < 0 for none; ``tris``: the emitter
+    triangles (T, 3, 3), T = 0 for no triangle cull. The culls are those of the module docstring, in
+    cosines, each comparison kept by :data:`SLACK`."""
     capacity = rows.shape[0]
+    n_tris = tris.shape[0]
+    sides = np.empty((n_tris, 3, 3))  # per point: the unit normals ĉ of the triangles' images' sides
+    facing = np.empty(n_tris, dtype=np.bool_)
     stack = np.empty(2 * depth + 2, dtype=np.int64)  # depth first: at most one sibling per level waits
     first_leaf = 1 << depth
     count = 0
@@ -253,6 +270,19 @@ def walk(
         far = emit[3] >= 0.0 and d_to > emit[3]
         sin_e = emit[3] / d_to if far else 0.0
         cos_e = np.sqrt(max(0.0, 1.0 - sin_e * sin_e))
+        # seen from o, triangle L0 L1 L2 covers the directions w with w·(q_{k+1} × q_k) >= 0, q_k = L_k - o,
+        # where o sees its front (q0·(q2 × q1) > 0, as in the shading term's clip); else nothing
+        for t in range(n_tris):
+            for k in range(3):
+                k1 = (k + 1) % 3
+                ax, ay, az = tris[t, k1, 0] - ox, tris[t, k1, 1] - oy, tris[t, k1, 2] - oz
+                bx, by, bz = tris[t, k, 0] - ox, tris[t, k, 1] - oy, tris[t, k, 2] - oz
+                cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+                length = np.sqrt(cx * cx + cy * cy + cz * cz)
+                length = length if length > 0.0 else 1.0
+                sides[t, k, 0], sides[t, k, 1], sides[t, k, 2] = cx / length, cy / length, cz / length
+            q0x, q0y, q0z = tris[t, 0, 0] - ox, tris[t, 0, 1] - oy, tris[t, 0, 2] - oz
+            facing[t] = q0x * sides[t, 1, 0] + q0y * sides[t, 1, 1] + q0z * sides[t, 1, 2] > 0.0
         begin = count
         stack[0] = 1
         top = 1
@@ -278,6 +308,10 @@ def walk(
                 cos_gap = -(vx * tx + vy * ty + vz * tz) / (dist * d_to) if far else 1.0
                 if cos_gap < cos_b * cos_e - sin_b * sin_e - SLACK:
                     continue
+                # the cone about u = (c - o)/|c - o| of angular radius β meets no front triangle's image:
+                # for each, some side has u·ĉ < -sin β (the whole cone beyond its great circle)
+                if n_tris and not _meets(-vx / dist, -vy / dist, -vz / dist, sin_b, sides, facing):
+                    continue
             if node < first_leaf:  # the left child first: pairs in leaf order
                 stack[top] = 2 * node + 1
                 stack[top + 1] = 2 * node
@@ -300,6 +334,10 @@ def walk(
                         cos = min(1.0, max(-1.0, (mx * tx + my * ty + mz * tz) / (d_mid * d_to)))
                         if np.arccos(cos) > np.arcsin(spheres[j, 3] / d_mid) + np.arcsin(sin_e):
                             continue
+                    if n_tris and not _meets(
+                        mx / d_mid, my / d_mid, mz / d_mid, spheres[j, 3] / d_mid, sides, facing
+                    ):
+                        continue
                 if count == capacity:
                     return i, begin  # point i does not fit: resume from it
                 rows[count] = i
@@ -308,12 +346,31 @@ def walk(
     return o.shape[0], count
 
 
+def _meets(ux: float, uy: float, uz: float, sin_b: float, sides: np.ndarray, facing: np.ndarray) -> bool:
+    r"""Whether the cone about the unit vector u of angular radius β (``sin_b``) may meet the image of a
+    triangle seen from its front, given its sides' unit normals ``sides`` (T, 3, 3): not when for
+    every such triangle some side has $u·ĉ < -\sin β$ (beyond :data:`SLACK`)."""
+    for t in range(sides.shape[0]):
+        if not facing[t]:
+            continue
+        inside = True
+        for k in range(3):
+            if ux * sides[t, k, 0] + uy * sides[t, k, 1] + uz * sides[t, k, 2] < -sin_b - SLACK:
+                inside = False
+                break
+        if inside:
+            return True
+    return False
+
+
 @functools.cache
 def _compiled() -> Callable:
     """:func:`walk` compiled by Numba (imported here, on first use: the import alone takes a second)."""
     import numba
 
-    return numba.njit(cache=True, nogil=True)(walk)
+    jit = numba.njit(cache=True, nogil=True)
+    globals()["_meets"] = jit(_meets)  # walk calls the compiled one (resolved when walk compiles)
+    return jit(walk)
 
 
 _TREES: dict[int, tuple[weakref.ref, dict[bytes, EdgeTree]]] = {}

@@ -110,11 +110,13 @@ def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np
     edge tree's order within one: a fixed point walks the tree over the moving edges, a moving point
     the tree over every edge (a pair of a fixed edge and a fixed point has $m·\dot ω = 0$)."""
     near = None if bounds is None else (bounds[1], bounds[2])
+    # the emitters' images: the cull the clip makes exact (_clip_to_emitters), where the arcs are clipped
+    triangles = None if bounds is None or len(bounds[0]) > MAX_EMITTER_TRIANGLES else bounds[0]
     rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
     for group, edge_mask in ((~point_moves, moving), (point_moves, np.ones_like(moving))):
         points = np.flatnonzero(group)
         if points.size and edge_mask.any():
-            r, c = edge_tree(edges, edge_mask).silhouettes(o[points], near)
+            r, c = edge_tree(edges, edge_mask).silhouettes(o[points], near, triangles)
             rows.append(points[r])
             cols.append(c)
     if len(rows) == 2:  # one group: already by point

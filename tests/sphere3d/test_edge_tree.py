@@ -64,34 +64,57 @@ def _reach(edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, bounds) -> 
     return (d_mid <= half) | (d_to <= radius) | (np.arccos(np.clip(cos, -1.0, 1.0)) <= spread)
 
 
-@pytest.mark.parametrize("emitters", [True, False], ids=["emitter_cone", "no_cone"])
+def _meets_image(edges, o: np.ndarray, rows: np.ndarray, cols: np.ndarray, triangles) -> np.ndarray:
+    """The exact image test, every pair: the cone from o around the edge's bounding sphere is not
+    wholly beyond a side's great circle of every emitter triangle whose front o sees (sides' normals
+    $c_k = q_{k+1} × q_k$, $q_k = L_k - o$, front where $q_0·(q_2 × q_1) > 0$), or o lies in the sphere."""
+    mid = 0.5 * (edges.a + edges.b)[cols] - o[rows]
+    half = 0.5 * np.linalg.norm(edges.b - edges.a, axis=-1)[cols]
+    d_mid = np.linalg.norm(mid, axis=-1)
+    u, sin_b = mid / d_mid[:, None], half / d_mid
+    q = triangles[None] - o[rows][:, None, None, :]  # (pairs, T, 3, 3)
+    c = np.cross(q[:, :, [1, 2, 0]], q)
+    c = c / np.linalg.norm(c, axis=-1, keepdims=True)
+    front = np.einsum("ptk,ptk->pt", q[:, :, 0], c[:, :, 1]) > 0.0
+    beyond = np.einsum("pk,ptsk->pts", u, c) < -sin_b[:, None, None] - edge_tree.SLACK
+    return (d_mid <= half) | np.any(front & ~np.any(beyond, axis=2), axis=1)
+
+
+@pytest.mark.parametrize("emitters", ["none", "cone", "images"])
 def test01_the_walk_finds_exactly_the_silhouette_pairs(emitters):
     _, edges, o, cone, bounds = _setup(3, 5)
     sil = edges.silhouette(o)  # (points, edges): the exact test, every pair
     exact = set(zip(*np.nonzero(sil), strict=True))
     tree = EdgeTree.build(edges, np.arange(len(edges)))
-    rows, cols = tree.silhouettes(o, cone if emitters else None)
+    rows, cols = tree.silhouettes(
+        o, None if emitters == "none" else cone, bounds[0] if emitters == "images" else None
+    )
     found = set(zip(rows.tolist(), cols.tolist(), strict=True))
     assert len(found) == rows.size  # no pair twice
-    if not emitters:
+    if emitters == "none":
         assert found == exact
         return
     r, c = np.nonzero(sil)
-    reach = set(zip(*(x[_reach(edges, o, r, c, bounds)] for x in (r, c)), strict=True))
-    assert found == reach
+    keep = _reach(edges, o, r, c, bounds)
+    if emitters == "images":
+        keep &= _meets_image(edges, o, r, c, bounds[0])
+    assert found == set(zip(r[keep].tolist(), c[keep].tolist(), strict=True))
     assert len(found) < 0.8 * len(exact)  # the reach test drops pairs
+    if emitters == "images":  # the images drop pairs the cone keeps
+        assert len(found) < 0.9 * np.count_nonzero(_reach(edges, o, r, c, bounds))
 
 
 def test02_the_compiled_walk_returns_what_its_python_returns():
-    _, edges, o, cone, _ = _setup(2, 6)
+    _, edges, o, cone, bounds = _setup(2, 6)
     o = o[::7]  # the Python walk is slow: a few hundred points
     subset = np.flatnonzero(np.arange(len(edges)) % 3 != 0)  # a tree over a subset, with padding
     tree = EdgeTree.build(edges, subset)
-    compiled = tree.silhouettes(o, cone)
+    triangles = bounds[0]
+    compiled = tree.silhouettes(o, cone, triangles)
     emit = np.array([*cone[0], cone[1]])
     rows, cols = np.empty(len(o) * len(edges), dtype=np.int64), np.empty(len(o) * len(edges), dtype=np.int64)
     stop, count = edge_tree.walk(
-        np.ascontiguousarray(o), 0, emit, tree.centre, tree.radius, tree.axis, tree.cos_spread,
+        np.ascontiguousarray(o), 0, emit, triangles, tree.centre, tree.radius, tree.axis, tree.cos_spread,
         tree.sin_spread, tree.depth, tree.order, tree.planes, tree.always, tree.spheres, rows, cols,
     )  # fmt: skip
     assert stop == len(o) and count > 50
