@@ -51,6 +51,7 @@ disk (first use on a machine: about a second to compile).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import threading
 import weakref
@@ -62,9 +63,9 @@ import numpy as np
 from sphere3d.boundary.edges import Edges
 from sphere3d.vector import dot, norm
 
-__all__ = ["LEAF", "SLACK", "EdgeTree", "edge_tree", "walk"]
+__all__ = ["LEAF", "SLACK", "EdgeTree", "compiled", "edge_tree", "walk"]
 
-LEAF = 8
+LEAF = 32
 """Edges per leaf."""
 SLACK = 1e-9
 """Kept in every cull's cosine comparison beyond the bounds (their rounding is about 1e-15)."""
@@ -111,6 +112,10 @@ class EdgeTree:
         Per slot: an open or non-manifold edge (a silhouette from every point).
     spheres : ndarray, shape (2^D L, 4)
         Per slot: its edge's bounding sphere, midpoint and half length.
+    live : ndarray of bool, shape (2^(D+1),)
+        Per node: it holds an edge the walk tests (:meth:`restrict`; every edge of the tree by default).
+    active : ndarray of bool, shape (2^D L,)
+        Per slot: an edge the walk tests.
     """
 
     order: np.ndarray
@@ -124,15 +129,24 @@ class EdgeTree:
     planes: np.ndarray
     always: np.ndarray
     spheres: np.ndarray
+    live: np.ndarray
+    active: np.ndarray
 
     @staticmethod
-    def build(edges: Edges, subset: np.ndarray) -> EdgeTree:
-        """The tree over the edges ``subset`` (indices into ``edges``)."""
+    def build(edges: Edges, subset: np.ndarray, first: np.ndarray | None = None) -> EdgeTree:
+        """The tree over the edges ``subset`` (indices into ``edges``); with a mask ``first`` (E,), its
+        edges before the others, each group in the Morton order of its own bounding box, so that only
+        the nodes on the path to the leaf where the groups meet hold both (:meth:`restrict`)."""
         n = subset.size
         depth = max(0, int(np.ceil(np.log2(max(n, 1) / LEAF))))
         leaves = 1 << depth
         mid = 0.5 * (edges.a + edges.b)[subset]
-        by_code = np.argsort(_morton(mid), kind="stable") if n else np.zeros(0, dtype=np.int64)
+        group = np.zeros(n, dtype=bool) if first is None else ~first[subset]
+        code = np.zeros(n, dtype=np.int64)
+        for g in (False, True):
+            if np.any(group == g):
+                code[group == g] = _morton(mid[group == g])
+        by_code = np.lexsort((code, group)) if n else np.zeros(0, dtype=np.int64)
         order = np.full(leaves * LEAF, -1, dtype=np.int64)
         order[:n] = subset[by_code]
         slots = order.reshape(leaves, LEAF)
@@ -196,7 +210,22 @@ class EdgeTree:
             planes,
             always,
             spheres,
+            radius >= 0.0,
+            order >= 0,
         )
+
+    def restrict(self, mask: np.ndarray) -> EdgeTree:
+        """This tree walking only the edges where ``mask`` (E,) is True: the same bounds (a node's
+        sphere and cone hold its edges', hence the subset's), the nodes without such an edge skipped.
+        O(nodes), no copy of the bounds."""
+        active = (self.order >= 0) & mask[self.order.clip(0)]
+        live = np.zeros_like(self.live)
+        leaves = 1 << self.depth
+        live[leaves:] = active.reshape(leaves, -1).any(axis=1)
+        for level in range(self.depth - 1, -1, -1):
+            node = np.arange(1 << level, 2 << level)
+            live[node] = live[2 * node] | live[2 * node + 1]
+        return dataclasses.replace(self, live=live, active=active)
 
     def silhouettes(
         self,
@@ -221,7 +250,7 @@ class EdgeTree:
             stop, count = _compiled()(
                 o, done, emit, np.ascontiguousarray(tris), self.centre, self.radius, self.axis,
                 self.cos_spread, self.sin_spread, self.depth, self.order, self.planes, self.always,
-                self.spheres, r, c,
+                self.spheres, self.live, self.active, r, c,
             )  # fmt: skip
             rows.append(r[:count])
             cols.append(c[:count])
@@ -246,6 +275,8 @@ def walk(
     planes: np.ndarray,
     always: np.ndarray,
     spheres: np.ndarray,
+    live: np.ndarray,
+    active: np.ndarray,
     rows: np.ndarray,
     cols: np.ndarray,
 ) -> tuple[int, int]:
@@ -289,9 +320,9 @@ def walk(
         while top > 0:
             top -= 1
             node = stack[top]
-            r = radius[node]
-            if r < 0.0:  # an empty node
+            if not live[node]:  # no edge to test below
                 continue
+            r = radius[node]
             vx, vy, vz = ox - centre[node, 0], oy - centre[node, 1], oz - centre[node, 2]
             dist = np.sqrt(vx * vx + vy * vy + vz * vz)
             if dist > r:  # a node whose sphere holds o is kept
@@ -321,6 +352,8 @@ def walk(
             for j in range(base, base + LEAF):
                 if order[j] < 0:  # padding ends a leaf
                     break
+                if not active[j]:
+                    continue
                 front1 = ox * planes[j, 0] + oy * planes[j, 1] + oz * planes[j, 2] > planes[j, 3]
                 front2 = ox * planes[j, 4] + oy * planes[j, 5] + oz * planes[j, 6] > planes[j, 7]
                 if not always[j] and front1 == front2:  # n1·(o - a) and n2·(o - a) of one sign
@@ -364,34 +397,46 @@ def _meets(ux: float, uy: float, uz: float, sin_b: float, sides: np.ndarray, fac
 
 
 @functools.cache
-def _compiled() -> Callable:
-    """:func:`walk` compiled by Numba (imported here, on first use: the import alone takes a second)."""
+def compiled(func: Callable) -> Callable:
+    """``func`` compiled by Numba (imported here, on first use: the import alone takes a second), its
+    machine code cached on disk; ``nogil``: the render's worker threads run it at once."""
     import numba
 
-    jit = numba.njit(cache=True, nogil=True)
-    globals()["_meets"] = jit(_meets)  # walk calls the compiled one (resolved when walk compiles)
-    return jit(walk)
+    return numba.njit(cache=True, nogil=True)(func)
+
+
+@functools.cache
+def _compiled() -> Callable:
+    """:func:`walk` compiled, with :func:`_meets`, which it calls by its global name, compiled first."""
+    globals()["_meets"] = compiled(_meets)
+    return compiled(walk)
 
 
 _TREES: dict[int, tuple[weakref.ref, dict[bytes, EdgeTree]]] = {}
 _LOCK = threading.Lock()
 
 
-def edge_tree(edges: Edges, subset: np.ndarray) -> EdgeTree:
-    """:meth:`EdgeTree.build` over the edges where the mask ``subset`` (E,) is True, built once per
-    ``edges`` object and mask and kept while ``edges`` lives (every slice of shading points of a
-    render asks for the same trees). Read-only."""
-    key = subset.tobytes()
+def edge_tree(edges: Edges, first: np.ndarray, restrict: bool = False) -> EdgeTree:
+    """The tree over all of ``edges`` with the mask ``first``'s edges first (:meth:`EdgeTree.build`),
+    built once per ``edges`` object and kept while ``edges`` lives, and with ``restrict``, walking only
+    ``first``'s edges (:meth:`EdgeTree.restrict`): every slice of shading points of a render, and
+    both groups of points (fixed ones testing the moving edges, moving ones all), share one build.
+    Read-only."""
+    key = first.tobytes()
     with _LOCK:
         entry = _TREES.get(id(edges))
-        if entry is not None and entry[0]() is edges and key in entry[1]:
-            return entry[1][key]
-    tree = EdgeTree.build(edges, np.flatnonzero(subset))
+        if entry is not None and entry[0]() is edges and (key, restrict) in entry[1]:
+            return entry[1][key, restrict]
+        whole = entry[1].get((key, False)) if entry is not None and entry[0]() is edges else None
+    if whole is None:
+        whole = EdgeTree.build(edges, np.arange(len(edges)), first)
+    tree = whole.restrict(first) if restrict else whole
     with _LOCK:
         key_edges = id(edges)
         entry = _TREES.get(key_edges)
         if entry is None or entry[0]() is not edges:
             ref = weakref.ref(edges, lambda _: _TREES.pop(key_edges, None))
             entry = _TREES[key_edges] = (ref, {})
-        entry[1][key] = tree
+        entry[1][key, False] = whole
+        entry[1][key, restrict] = tree
     return tree

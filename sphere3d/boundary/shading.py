@@ -50,13 +50,13 @@ from __future__ import annotations
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from sphere3d.boundary.edge_tree import edge_tree
+from sphere3d.boundary.edge_tree import compiled, edge_tree
 from sphere3d.boundary.edges import Edges
 from sphere3d.state import per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "shading_edge_term"]
+__all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "clip_arcs", "shading_edge_term"]
 
 EPS_ANGLE = 1e-6
 """Angle δ (radians) between the sampled edge direction and the nearer rays traced beside it (the others
@@ -107,16 +107,17 @@ def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
 def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np.ndarray, np.ndarray]:
     r"""Every silhouette pair (rows, edges) of the points ``o`` whose edge moves or is seen from a
     moving point and whose arc may meet the emitters (under a black sky), sorted by point, in the
-    edge tree's order within one: a fixed point walks the tree over the moving edges, a moving point
-    the tree over every edge (a pair of a fixed edge and a fixed point has $m·\dot ω = 0$)."""
+    edge tree's order within one: a fixed point walks the tree's moving edges, a moving point every
+    edge (a pair of a fixed edge and a fixed point has $m·\dot ω = 0$): one tree, the moving edges in
+    subtrees of their own (:func:`~sphere3d.boundary.edge_tree.edge_tree`)."""
     near = None if bounds is None else (bounds[1], bounds[2])
-    # the emitters' images: the cull the clip makes exact (_clip_to_emitters), where the arcs are clipped
+    # the emitters' images: the cull the clip makes exact (clip_arcs), where the arcs are clipped
     triangles = None if bounds is None or len(bounds[0]) > MAX_EMITTER_TRIANGLES else bounds[0]
     rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-    for group, edge_mask in ((~point_moves, moving), (point_moves, np.ones_like(moving))):
+    for group, restrict in ((~point_moves, True), (point_moves, False)):
         points = np.flatnonzero(group)
-        if points.size and edge_mask.any():
-            r, c = edge_tree(edges, edge_mask).silhouettes(o[points], near, triangles)
+        if points.size and (moving.any() or not restrict):
+            r, c = edge_tree(edges, moving, restrict).silhouettes(o[points], near, triangles)
             rows.append(points[r])
             cols.append(c)
     if len(rows) == 2:  # one group: already by point
@@ -124,24 +125,6 @@ def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np
     rows, cols = np.concatenate(rows), np.concatenate(cols)
     by_point = np.argsort(rows, kind="stable")
     return rows[by_point], cols[by_point]
-
-
-def _arcs(edges: Edges, o, n0, rows, cols) -> tuple[np.ndarray, ...]:
-    r"""The pairs (point ``o[row]``, edge) with their arcs clipped to the point's horizon: rows,
-    edges, clipped ends (relative to ``o``), parameters s0 and s1, and the arc angle γ (0 for an arc
-    below the horizon)."""
-    qa_all, e = edges.a[cols] - o[rows], (edges.b - edges.a)[cols]
-    ha = dot(qa_all, n0[rows])
-    hb = ha + dot(e, n0[rows])
-    # clip to the part above the horizon: h(s) = ha + s (hb - ha) > 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s_cross = ha / (ha - hb)
-    s0 = np.where(ha > 0.0, 0.0, np.where(hb > ha, s_cross, 1.0))
-    s1 = np.where(hb > 0.0, 1.0, np.where(ha > hb, s_cross, 0.0))
-    qa = qa_all + s0[:, None] * e
-    qb = qa_all + s1[:, None] * e
-    gamma = np.where(s1 > s0, np.arctan2(norm(cross(qa, qb)), dot(qa, qb)), 0.0)
-    return rows, cols, qa, qb, s0, s1, gamma
 
 
 def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -153,33 +136,84 @@ def _arc_frame(qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return wa, perp / np.where(length > 0.0, length, 1.0)[:, None]
 
 
-def _clip_to_emitters(qa, qb, gamma, o, rows, triangles) -> tuple[np.ndarray, np.ndarray]:
-    r"""Per arc and emitter triangle, the sub-arc [lo, hi] of [0, γ] inside the triangle's spherical
-    image seen from the arc's point ``o[rows]`` (empty, hi <= lo, where it sees the back): (P, T).
-
-    Seen from o, triangle $L_0 L_1 L_2$ ($q_i = L_i - o$) covers the directions with
-    $w·(q_{i+1} × q_i) ≥ 0$ for i = 0, 1, 2 when o is in front of it
-    ($\det(q_0, q_1, q_2) < 0$, the side ``face_normals`` points to). On the arc,
-    $w(φ)·c = R \cos(φ - φ_c)$: each condition keeps the half-circle
-    $|φ - φ_c| ≤ π/2$, and as $γ ≤ π$ the arc meets it in one interval, found with
-    $φ_c$ taken in $(-π/2, 3π/2]$ (for $φ_c ≤ -π/2$ the half-circle around $φ_c$ meets
-    $[0, π]$ in $\{0\}$ at most, the one around $φ_c + 2π$ in the rest). The vectors c depend on
-    the point and the triangle only: computed once per point.
-    """
-    wa, perp = _arc_frame(qa, qb)
+def _image_sides(o: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""Per point and emitter triangle $L_0 L_1 L_2$ ($q_i = L_i - o$): the sides' normals
+    $c_i = q_{i+1} × q_i$ (points, T, 3, 3) and whether o sees the triangle's front (points, T):
+    $\det(q_0, q_1, q_2) < 0$, the side ``face_normals`` points to. Seen from o the triangle covers
+    the directions with $w·c_i ≥ 0$ for i = 0, 1, 2."""
     q = triangles[None] - o[:, None, None, :]  # (points, T, 3 vertices, 3)
     sides = cross(q[:, :, [1, 2, 0]], q)  # c_i = q_{i+1} × q_i
-    front = np.einsum("ptk,ptk->pt", q[:, :, 0], sides[:, :, 1]) > 0.0  # q₀·(q₂ × q₁) = -det
-    lo = np.zeros((rows.size, len(triangles)))
-    hi = np.repeat(gamma[:, None], len(triangles), axis=1)
-    for t in range(len(triangles)):  # a few emitter triangles (at most MAX_EMITTER_TRIANGLES)
-        for i in range(3):
-            c = sides[rows, t, i]
-            phi_c = np.arctan2(dot(perp, c), dot(wa, c))
-            phi_c = np.where(phi_c <= -0.5 * np.pi, phi_c + 2.0 * np.pi, phi_c)
-            lo[:, t] = np.maximum(lo[:, t], phi_c - 0.5 * np.pi)
-            hi[:, t] = np.minimum(hi[:, t], phi_c + 0.5 * np.pi)
-    return lo, np.where(front[rows], hi, lo)
+    return sides, np.einsum("ptk,ptk->pt", q[:, :, 0], sides[:, :, 1]) > 0.0  # q₀·(q₂ × q₁) = -det
+
+
+def clip_arcs(
+    o: np.ndarray,
+    n0: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    clip: np.ndarray,
+    sides: np.ndarray,
+    front: np.ndarray,
+    s0: np.ndarray,
+    s1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> None:
+    r"""Each pair (point ``o[rows[p]]``, edge ``cols[p]`` from ``a`` to ``b``): its arc clipped to the
+    point's horizon, written to ``s0``, ``s1`` (the edge parameters of its ends), and its sub-arcs
+    $[lo, hi]$ of $[0, γ]$ in the images of the emitter triangles, written to ``lo``, ``hi`` (P, T);
+    where ``clip[cols[p]]`` is False or T = 0, one sub-arc, the whole arc, in column 0. Scalar Python
+    compiled by Numba (:func:`sphere3d.boundary.edge_tree.compiled`).
+
+    Horizon: $h(s) = n·(a + s (b - a) - o)$ is linear in s; the part with h > 0 is kept.
+    Images (``sides``, ``front``: :func:`_image_sides` per point): on the arc $w(φ) = \cos φ\, w_a
+    + \sin φ\, w_⊥$ (:func:`_arc_frame`), $w(φ)·c = R \cos(φ - φ_c)$, so each side keeps the
+    half-circle $|φ - φ_c| ≤ π/2$; as $γ ≤ π$ the arc meets it in one interval, found with $φ_c$
+    taken in $(-π/2, 3π/2]$ (for $φ_c ≤ -π/2$ the half-circle around $φ_c$ meets $[0, π]$ in
+    $\{0\}$ at most, the one around $φ_c + 2π$ in the rest). A triangle seen from behind: empty
+    (hi = lo)."""
+    n_tris = sides.shape[1]
+    for p in range(rows.shape[0]):
+        i, k = rows[p], cols[p]
+        ax, ay, az = a[k, 0] - o[i, 0], a[k, 1] - o[i, 1], a[k, 2] - o[i, 2]
+        ex, ey, ez = b[k, 0] - a[k, 0], b[k, 1] - a[k, 1], b[k, 2] - a[k, 2]
+        ha = ax * n0[i, 0] + ay * n0[i, 1] + az * n0[i, 2]
+        hb = ha + ex * n0[i, 0] + ey * n0[i, 1] + ez * n0[i, 2]
+        # the part above the horizon: h(s) = ha + s (hb - ha) > 0
+        cross_s = ha / (ha - hb) if ha != hb else 0.0
+        lo_s = 0.0 if ha > 0.0 else (cross_s if hb > ha else 1.0)
+        hi_s = 1.0 if hb > 0.0 else (cross_s if ha > hb else 0.0)
+        s0[p], s1[p] = lo_s, hi_s
+        for t in range(lo.shape[1]):
+            lo[p, t], hi[p, t] = 0.0, 0.0
+        if hi_s <= lo_s:
+            continue
+        qax, qay, qaz = ax + lo_s * ex, ay + lo_s * ey, az + lo_s * ez
+        qbx, qby, qbz = ax + hi_s * ex, ay + hi_s * ey, az + hi_s * ez
+        cx, cy, cz = qay * qbz - qaz * qby, qaz * qbx - qax * qbz, qax * qby - qay * qbx
+        gamma = np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), qax * qbx + qay * qby + qaz * qbz)
+        if n_tris == 0 or not clip[k]:
+            hi[p, 0] = gamma
+            continue
+        length = np.sqrt(qax * qax + qay * qay + qaz * qaz)
+        wx, wy, wz = qax / length, qay / length, qaz / length
+        along = qbx * wx + qby * wy + qbz * wz
+        px, py, pz = qbx - along * wx, qby - along * wy, qbz - along * wz
+        length = np.sqrt(px * px + py * py + pz * pz)
+        length = length if length > 0.0 else 1.0
+        px, py, pz = px / length, py / length, pz / length
+        for t in range(n_tris):
+            start, stop = 0.0, gamma
+            for j in range(3):
+                c0, c1, c2 = sides[i, t, j, 0], sides[i, t, j, 1], sides[i, t, j, 2]
+                phi_c = np.arctan2(px * c0 + py * c1 + pz * c2, wx * c0 + wy * c1 + wz * c2)
+                if phi_c <= -0.5 * np.pi:
+                    phi_c += 2.0 * np.pi
+                start = max(start, phi_c - 0.5 * np.pi)
+                stop = min(stop, phi_c + 0.5 * np.pi)
+            lo[p, t], hi[p, t] = start, stop if front[i, t] else start
 
 
 def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np.ndarray, ...]:
@@ -194,21 +228,17 @@ def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np
     """
     m = len(o)
     rows, cols = _found(edges, o, moving, point_moves, bounds)
-    rows, cols, qa, qb, s0, s1, gamma = _arcs(edges, o, n0, rows, cols)
-    lo, hi = np.zeros((rows.size, 1)), gamma[:, None]
-    if bounds is not None and len(bounds[0]) <= MAX_EMITTER_TRIANGLES:
-        clip = ~unclipped[cols]
-        clip_lo, clip_hi = _clip_to_emitters(qa[clip], qb[clip], gamma[clip], o, rows[clip], bounds[0])
-        lo, hi = np.zeros((rows.size, len(bounds[0]))), np.zeros((rows.size, len(bounds[0])))
-        lo[clip], hi[clip] = clip_lo, clip_hi
-        hi[~clip, 0] = gamma[~clip]
+    clipped = bounds is not None and len(bounds[0]) <= MAX_EMITTER_TRIANGLES
+    sides, front = _image_sides(o, bounds[0] if clipped else np.zeros((0, 3, 3)))
+    s0, s1 = np.empty(rows.size), np.empty(rows.size)
+    lo, hi = np.empty((rows.size, sides.shape[1] or 1)), np.empty((rows.size, sides.shape[1] or 1))
+    compiled(clip_arcs)(o, n0, rows, cols, edges.a, edges.b, ~unclipped, sides, front, s0, s1, lo, hi)
     pair, sub = np.nonzero(hi > lo)  # sub-arcs, sorted by pair, hence by row
     angle = (hi - lo)[pair, sub]
     owner = rows[pair]
     if pair.size == 0:
         return (
             (np.zeros(0, dtype=np.int64),) * 2
-            + (np.zeros((0, 3)),) * 2
             + (np.zeros(0),) * 4
             + (np.zeros((0, lo.shape[1])),) * 2
             + (np.zeros(0),)
@@ -224,7 +254,7 @@ def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np
     live = np.flatnonzero((total[row] > 0.0) & (owner[j] == row))
     j = j[live]
     p = pair[j]
-    return live, cols[p], qa[p], qb[p], s0[p], s1[p], lo[p, sub[j]], angle[j], lo[p], hi[p], total[row[live]]
+    return live, cols[p], s0[p], s1[p], lo[p, sub[j]], angle[j], lo[p], hi[p], total[row[live]]
 
 
 def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
@@ -256,12 +286,15 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     point_moves = np.any(tangent(shading.x) != 0.0, axis=-1)
     unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
     per_point = u.shape[2]
-    draw, k, qa, qb, s0, s1, start, angle, lo, hi, total = _choose(
+    draw, k, s0, s1, start, angle, lo, hi, total = _choose(
         edges, o, n0, u[:, 0], moving, point_moves, _emitter_bounds(state), unclipped
     )
     if draw.size == 0:
         return out
     live = draw // per_point  # the draws' shading points
+    # the drawn arcs' ends above the horizon, relative to o: a + s (b - a) - o at s0 and s1
+    qa_all, e = edges.a[k] - o[live], (edges.b - edges.a)[k]
+    qa, qb = qa_all + s0[:, None] * e, qa_all + s1[:, None] * e
     # a direction uniform in angle on the drawn sub-arc of the arc from qa to qb
     wa, perp = _arc_frame(qa, qb)
     phi = start + u[:, 1].ravel()[draw] * angle

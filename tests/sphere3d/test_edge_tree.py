@@ -115,7 +115,8 @@ def test02_the_compiled_walk_returns_what_its_python_returns():
     rows, cols = np.empty(len(o) * len(edges), dtype=np.int64), np.empty(len(o) * len(edges), dtype=np.int64)
     stop, count = edge_tree.walk(
         np.ascontiguousarray(o), 0, emit, triangles, tree.centre, tree.radius, tree.axis, tree.cos_spread,
-        tree.sin_spread, tree.depth, tree.order, tree.planes, tree.always, tree.spheres, rows, cols,
+        tree.sin_spread, tree.depth, tree.order, tree.planes, tree.always, tree.spheres, tree.live,
+        tree.active, rows, cols,
     )  # fmt: skip
     assert stop == len(o) and count > 50
     assert np.array_equal(compiled[0], rows[:count]) and np.array_equal(compiled[1], cols[:count])
@@ -162,3 +163,22 @@ def test04_no_table_of_points_by_edges_on_a_fine_mesh(method):
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     assert float(run.stdout.split()[-1]) > 0.0
+
+
+def test05_a_restricted_tree_finds_the_pairs_of_a_tree_over_the_subset():
+    # the moving edges are a subset of the mesh's: one tree over all edges, restricted, must find
+    # exactly the pairs of a tree built over the subset alone (in its own leaf order)
+    _, edges, o, cone, bounds = _setup(3, 8)
+    mask = (np.arange(len(edges)) % 5 != 0) & (edges.a[:, 2] > 0.7)  # two thirds of the upper half
+    whole = EdgeTree.build(edges, np.arange(len(edges)), mask)  # the subset's edges first
+    restricted, alone = whole.restrict(mask), EdgeTree.build(edges, np.flatnonzero(mask))
+    assert restricted.live.sum() < whole.live.sum()  # some subtrees are skipped
+    slots = whole.order.reshape(-1, edge_tree.LEAF)  # one leaf per row
+    first, other = (slots >= 0) & mask[slots.clip(0)], (slots >= 0) & ~mask[slots.clip(0)]
+    assert np.sum(first.any(axis=1) & other.any(axis=1)) <= 1  # one leaf at most holds both groups
+    for cull in ((None, None), (cone, None), (cone, bounds[0])):
+        a, b = restricted.silhouettes(o, *cull), alone.silhouettes(o, *cull)
+        assert a[0].size > 100 and np.array_equal(a[0], b[0])  # the same pairs per point, in order
+        pairs_a = set(zip(a[0].tolist(), a[1].tolist(), strict=True))
+        assert pairs_a == set(zip(b[0].tolist(), b[1].tolist(), strict=True))
+        assert mask[a[1]].all()
