@@ -27,7 +27,7 @@ the candidates' length); and under a black sky f
 vanishes outside the emitters' directions on both sides of every arc, so an arc counts only
 where it crosses an emitter's spherical image: each arc above the horizon ($n·(P - x) > 0$, a
 linear condition in s) is clipped to the image of every emitter triangle
-(:func:`_clip_to_emitters`; emitters' own edges, whose arcs are the images' borders, are not
+(:func:`clip_arcs`; emitters' own edges, whose arcs are the images' borders, are not
 clipped). Each shading point draws k sub-arcs among its candidates' with probability ∝ their
 angle ($Γ = Σ \mathrm{angles}$), then a point uniform in angle on each: density $c/Γ$ per radian,
 c the number of sub-arcs of that arc holding the point (1 unless emitters overlap as seen
@@ -92,7 +92,7 @@ def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
 
     Only when the sky is black (and not the parameter): then f is 0 outside the emitters'
     directions on both sides of any edge, so the arcs can be restricted to the emitters'
-    spherical images without changing any expectation (:func:`_found`, :func:`_clip_to_emitters`).
+    spherical images without changing any expectation (:func:`_found`, :func:`clip_arcs`).
     None (no restriction) otherwise or without emitters.
     """
     sky = float(detach(state.sky)) != 0.0 or state.sky_varies
