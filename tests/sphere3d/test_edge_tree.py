@@ -6,7 +6,9 @@ all around it and on the ground below; with the emitters' cone, the silhouette a
 (2) the compiled walk must return what the Python it is compiled from returns, and (3) the pairs and
 an image must not depend on the size of the buffers the walk fills (a full buffer resumes the walk).
 (4) Memory: on a mesh whose (points × edges) table would need 16 GB, a boundary and a reparam
-gradient run in a process limited to a few GiB of address space.
+gradient run in a process limited to a few GiB of address space. (5) One tree serves both groups of
+points: restricted to a subset of its edges it finds the pairs of a tree over the subset. (6) The
+compiled arc clip returns what its Python returns.
 """
 
 from __future__ import annotations
@@ -182,3 +184,28 @@ def test05_a_restricted_tree_finds_the_pairs_of_a_tree_over_the_subset():
         pairs_a = set(zip(a[0].tolist(), a[1].tolist(), strict=True))
         assert pairs_a == set(zip(b[0].tolist(), b[1].tolist(), strict=True))
         assert mask[a[1]].all()
+
+
+def test06_the_compiled_arc_clip_returns_what_its_python_returns():
+    # shading.clip_arcs runs compiled in every render: its Python, run here as written, is the spec
+    _, edges, o, cone, bounds = _setup(2, 9)
+    o = o[::5]
+    tree = EdgeTree.build(edges, np.arange(len(edges)))
+    rows, cols = tree.silhouettes(o, cone)
+    n0 = np.tile([0.0, 0.0, 1.0], (len(o), 1))
+    clip = np.arange(len(edges)) % 4 != 0  # some edges unclipped
+    sides, front = shading._image_sides(o, bounds[0])
+    results = []
+    for func in (shading.clip_arcs, edge_tree.compiled(shading.clip_arcs)):
+        out = np.empty(rows.size), np.empty(rows.size), np.empty((rows.size, 2)), np.empty((rows.size, 2))
+        func(o, n0, rows, cols, edges.a, edges.b, clip, sides, front, *out)
+        results.append(out)
+    (s0, s1, lo, hi), compiled = results
+    # the same arithmetic; atan2 may differ by an ulp or two between numpy's and the compiled libm, and
+    # the angles are below 2π: a few ulp of 2π
+    for x, y in zip(results[0], compiled, strict=True):
+        np.testing.assert_allclose(x, y, rtol=0.0, atol=8 * np.spacing(2.0 * np.pi))
+    above = s1 > s0
+    assert 0 < above.sum() < rows.size  # some arcs cross the horizon or lie below it
+    assert np.any((hi > lo)[clip[cols]]) and np.any((hi <= lo)[clip[cols] & above])  # clipped, some away
+    assert np.all(lo[~clip[cols], 1] == hi[~clip[cols], 1])  # unclipped: one sub-arc, in column 0
