@@ -39,6 +39,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from flatland import tasks
 from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
@@ -91,7 +93,15 @@ def _gradient(
     spec = GRADIENT_METHODS.lookup(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
     _check_budget(task, resolved)
-    return spec.func(task, **resolved), resolved
+    tally = spec.func(task, **resolved)
+    if task.k is not None and np.shape(tally.derivative) != (task.k, task.batches, task.pixels):
+        names = [p.name for p in task.param]
+        raise ValidationError(
+            "param",
+            f"method {spec.name!r} gives one derivative, not one per parameter of {names!r} "
+            "(it does not evaluate at task.dual_offset()): pass one name per call",
+        )
+    return tally, resolved
 
 
 def render(
