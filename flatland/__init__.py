@@ -22,6 +22,7 @@ if TYPE_CHECKING:
         Dual,
         Estimate,
         GradientImage,
+        GradientImages,
         Image,
         ValidationError,
         detach,
@@ -36,8 +37,8 @@ if TYPE_CHECKING:
 
 _SOURCES = {
     "flatland.core": (
-        "Dual", "Estimate", "GradientImage", "Image", "ValidationError", "detach", "relative_error",
-        "tangent", "variable",
+        "Dual", "Estimate", "GradientImage", "GradientImages", "Image", "ValidationError", "detach",
+        "relative_error", "tangent", "variable",
     ),
     "flatland.textbook": ("METHODS", "estimate"),
     "flatland.integrals": ("INTEGRALS", "get_integral"),
@@ -54,6 +55,7 @@ __all__ = [
     "Dual",
     "Estimate",
     "GradientImage",
+    "GradientImages",
     "Image",
     "Scene",
     "ValidationError",

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach, is_dual, tangent
+from flatland.core.dual import Dual, detach, is_dual, k_of, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import paired_combine
 from flatland.lights import Lights
@@ -127,13 +127,15 @@ class Transforms(Protocol):
         ...
 
     def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray | None:
-        """2D only: a derivative-only term added to E at each shading point (None: nothing)."""
+        """2D only: a derivative-only term added to E at each shading point, shape (n,), or (k, n) for
+        k parameters (``ctx.geom.k``) (None: nothing)."""
         ...
 
     def pixel_extra(
         self, task: flatland.tasks.ImageTask, state: flatland.state.SceneState
     ) -> np.ndarray | None:
-        """2D only: a derivative-only term per batch and pixel, shape (batches, pixels) (None: nothing)."""
+        """2D only: a derivative-only term per batch and pixel, shape (batches, pixels), or
+        (k, batches, pixels) for k parameters (None: nothing)."""
         ...
 
 
@@ -190,7 +192,8 @@ def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any
     """Incident radiance along rays (sky on a miss) and the hits re-attached to ``geom``."""
     rows = np.flatnonzero(hits.hit)
     n = hits.prim.size
-    out = zeros((n,), geom.differentiable or is_dual(origins) or is_dual(dirs)) + geom.sky * (~hits.hit)
+    k = geom.k if geom.differentiable else k_of(origins, dirs)
+    out = zeros((n,), geom.differentiable or is_dual(origins) or is_dual(dirs), k) + geom.sky * (~hits.hit)
     if not rows.size:
         return out, None
     o = origins[rows] if np.ndim(detach(origins)) == 2 else origins
@@ -241,7 +244,7 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, 
     total = members.reduce(f * inv[rep]).reshape(techniques, n).sum(axis=0)
     extra = ctx.transforms.shading_extra(ctx, x, normal, ignore)
     if extra is not None:
-        total = total + Dual(np.zeros(n), extra)
+        total = total + Dual(np.zeros(n), extra, ctx.geom.k)
     return total
 
 
@@ -257,7 +260,10 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
         return radiance
     prim = hits.prim[rows]
     rho = geom.albedo[prim]
-    live = (detach(rho) != 0.0) | (tangent(rho) != 0.0)
+    moving = tangent(rho) != 0.0
+    if moving.ndim > np.ndim(detach(rho)):  # k tangents: an albedo moving with any parameter
+        moving = np.any(moving, axis=0)
+    live = (detach(rho) != 0.0) | moving
     if not np.any(live):
         return radiance
     sub = np.flatnonzero(live)

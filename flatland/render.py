@@ -4,7 +4,8 @@ Entry points:
 
 - :func:`render` ``(scene, spp, seed, batches) -> Image``: the pixel integrals.
 - :func:`render_gradient` ``(scene, param, method, spp, seed, batches, **options)
-  -> GradientImage``: the image and its derivative with respect to one parameter.
+  -> GradientImage``: the image and its derivative with respect to one parameter; given a
+  list of k parameters, ``-> GradientImages``: their k derivatives from one pass.
 - :func:`irradiance` ``(scene, point, normal, param, method, n, seed, ...) ->
   Estimate``: the cosine-weighted incident radiance E(x) at a point, the shading
   integral on its own (the closed forms of theory/radiometry are stated for it).
@@ -38,15 +39,17 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from flatland import tasks
 from flatland.core.budget import Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
-from flatland.core.image import GradientImage, Image, resolve_batches
+from flatland.core.image import GradientImage, GradientImages, Image, resolve_batches
 from flatland.core.progress import run as _bar
 from flatland.core.validate import ValidationError, check_int, check_seed
 from flatland.methods import GRADIENT_METHODS
 from flatland.scene import Scene, check_direction, check_point, load_scene
-from flatland.state import parse_parameter
+from flatland.state import parse_parameter, parse_parameters
 from flatland.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
@@ -58,7 +61,11 @@ def _task(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **point: An
     scene = load_scene(scene)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
-    p = None if param is None else parse_parameter(scene, param)
+    p: Any = None
+    if isinstance(param, list | tuple):
+        p = parse_parameters(scene, param)
+    elif param is not None:
+        p = parse_parameter(scene, param)
     if point:
         return PointTask(scene, p, point["point"], point["normal"], spp, seed, resolve_batches(spp, batches))
     return ImageTask(scene, p, spp, seed, resolve_batches(spp, batches))
@@ -86,7 +93,15 @@ def _gradient(
     spec = GRADIENT_METHODS.lookup(method)
     resolved = GRADIENT_METHODS.resolve_options(spec.name, options)
     _check_budget(task, resolved)
-    return spec.func(task, **resolved), resolved
+    tally = spec.func(task, **resolved)
+    if task.k is not None and np.shape(tally.derivative) != (task.k, task.batches, task.pixels):
+        names = [p.name for p in task.param]
+        raise ValidationError(
+            "param",
+            f"method {spec.name!r} gives one derivative, not one per parameter of {names!r} "
+            "(it does not evaluate at task.dual_offset()): pass one name per call",
+        )
+    return tally, resolved
 
 
 def render(
@@ -114,22 +129,25 @@ def render(
 
 def render_gradient(
     scene: Scene | str | dict,
-    param: str,
+    param: str | list[str] | tuple[str, ...],
     method: str = "reparam",
     spp: int = 64,
     seed: int = 0,
     batches: int | None = None,
     progress: bool | None = None,
     **options: Any,
-) -> GradientImage:
+) -> GradientImage | GradientImages:
     """Render the image and its derivative with respect to ``param`` (at offset θ = 0) by ``method``.
 
     Parameters
     ----------
     scene : Scene, str or dict
         A scene, built-in name, ``.json`` path or dict.
-    param : str
-        Parameter name, e.g. ``"occluder.translate.x"`` (see :mod:`flatland.scene`).
+    param : str, or list or tuple of str
+        Parameter name, e.g. ``"occluder.translate.x"`` (see :mod:`flatland.scene`), or k >= 1
+        distinct names: then the k derivatives come from one pass (every ray, probe and
+        sample shared; forward mode carries k tangents, :mod:`flatland.core.dual`), except
+        ``finite_difference``, which renders 2k + 1 times.
     method : {"naive", "finite_difference", "boundary", "reparam"}
         The gradient method.
     spp : int
@@ -147,48 +165,58 @@ def render_gradient(
         ``probes``, ``spread``, ``refine``, ``paired`` (reparam, see
         :func:`flatland.methods.reparam.reparam`).
 
+    Returns
+    -------
+    GradientImage or GradientImages
+        For one name, its :class:`~flatland.core.image.GradientImage`, the same numbers whether
+        or not other calls pass lists. For a list, a
+        :class:`~flatland.core.image.GradientImages`: ``images[name]`` is that parameter's
+        GradientImage. With the same seed, parameter i's derivative equals the single call's
+        bit for bit when the other parameters leave the geometry's values unchanged at θ0
+        (translations, vertices, emission, albedo; ``finite_difference``: always); a
+        rotation or a scale in the list changes them by rounding (``c + (p - c)`` is not
+        always p), and the other parameters then agree with their single calls to rounding
+        (tests/flatland/test_multi_param.py).
+
     Raises
     ------
     ValidationError
         One error naming the field and value: unknown method, option or parameter,
-        spp < 1, kappa <= 0, a box filter with ``reparam``, ...
+        an empty list or a repeated name, spp < 1, kappa <= 0, a box filter with ``reparam``, ...
     """
     if param is None:
         raise ValidationError("param", "is required (a parameter name like 'occluder.translate.x')")
     task = _task(scene, param, spp, seed, batches)
     with _bar(f"{method} {task.scene.name}", progress):
         result, resolved = _gradient(task, method, options)
-    return GradientImage.from_batches(
-        result.value,
-        result.derivative,
-        param=task.param.name,
-        method=method,
-        spp=task.spp,
-        seed=task.seed,
-        options=resolved,
-        scene=task.scene.name,
-    )
+    run = dict(method=method, spp=task.spp, seed=task.seed, options=resolved, scene=task.scene.name)
+    if task.k is not None:
+        names = tuple(p.name for p in task.param)
+        return GradientImages.from_batches(result.value, result.derivative, params=names, **run)
+    return GradientImage.from_batches(result.value, result.derivative, param=task.param.name, **run)
 
 
 def irradiance(
     scene: Scene | str | dict,
     point: Any,
     normal: Any,
-    param: str | None = None,
+    param: str | list[str] | tuple[str, ...] | None = None,
     method: str = "naive",
     n: int = 4096,
     seed: int = 0,
     batches: int | None = None,
     progress: bool | None = None,
     **options: Any,
-) -> Estimate:
+) -> Estimate | dict[str, Estimate]:
     r"""Estimate $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$ at a fixed point and its derivative.
 
     The shading integral of the renderer on its own (same samplers, same methods),
     at a point that does not move with θ. Closed forms (theory/radiometry): a uniform emitter
     of radiance L between angles $φ_a < φ_b$ from the normal gives $L (\sin φ_b - \sin φ_a)$;
     the unoccluded sky of radiance 1 gives 2. With ``param=None`` only the value is
-    estimated (derivative 0). ``progress``: a progress bar per chunk, as in :func:`render`.
+    estimated (derivative 0). Given a list of k parameters, a dict from each name to its
+    Estimate (all with the same value), the k derivatives from one pass as in
+    :func:`render_gradient`. ``progress``: a progress bar per chunk, as in :func:`render`.
     """
     point, normal = check_point("point", point), check_direction("normal", normal)
     task = _task(scene, param, n, seed, batches, point=point, normal=normal)
@@ -198,6 +226,11 @@ def irradiance(
             result, resolved = task.evaluate(0.0), {}
         else:
             result, resolved = _gradient(task, method, options)
+    if task.k is not None:
+        return {
+            p.name: Estimate.from_batches(result.value[:, 0], d[:, 0], task.n, method, resolved)
+            for p, d in zip(task.param, result.derivative, strict=True)
+        }
     return Estimate.from_batches(
         result.value[:, 0], result.derivative[:, 0], task.n, method if param is not None else "", resolved
     )

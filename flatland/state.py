@@ -5,8 +5,11 @@ into a :class:`Parameter`, and :func:`build_state` is where θ enters: the param
 offset ``theta`` is applied to the quantity it names, as a
 float (finite differences, plain renders) or a :class:`~flatland.core.dual.Dual`
 (``variable(0.0)``, the gradient methods), and every θ-dependent array of the
-:class:`SceneState` carries the tangent. The ray caster (:mod:`flatland.tracing`)
-traces the detached state and re-attaches hits to this one.
+:class:`SceneState` carries the tangent. Several parameters at once: a tuple of k
+parameters with a tuple of k offsets, each applied to what it names in turn; with the
+offsets :func:`~flatland.core.dual.variables` ``(k)`` (the seeds e_i) the arrays carry
+k tangents, slot i the derivative with respect to parameter i. The ray caster
+(:mod:`flatland.tracing`) traces the detached state and re-attaches hits to this one.
 """
 
 from __future__ import annotations
@@ -17,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach
+from flatland.core.dual import Dual, detach, k_of
 from flatland.core.validate import ValidationError
 from flatland.scene import Camera, Scene, Shape
 
-__all__ = ["Parameter", "SceneState", "build_state", "parse_parameter"]
+__all__ = ["Parameter", "SceneState", "build_state", "parse_parameter", "parse_parameters"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,17 @@ def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
     raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, emission or albedo")
 
 
+def parse_parameters(scene: Scene, names: Any, field: str = "param") -> tuple[Parameter, ...]:
+    """A list or tuple of k >= 1 distinct parameter names, each parsed by :func:`parse_parameter`; one
+    ValidationError naming ``field`` and the value otherwise (empty, repeated names, not names)."""
+    if not isinstance(names, list | tuple) or not names:
+        raise ValidationError(field, f"must be a parameter name or a non-empty list of them, got {names!r}")
+    repeated = sorted({n for n in names if isinstance(n, str) and names.count(n) > 1})
+    if repeated:
+        raise ValidationError(field, f"names each parameter once, got {names!r} (repeated: {repeated})")
+    return tuple(parse_parameter(scene, name, field) for name in names)
+
+
 @dataclass(frozen=True)
 class SceneState:
     """A scene as flat arrays at one parameter value (Duals where θ enters).
@@ -111,6 +125,11 @@ class SceneState:
         """True when some array is a Dual (bound with a Dual θ)."""
         return any(isinstance(getattr(self, f.name), Dual) for f in fields(self))
 
+    @property
+    def k(self) -> int | None:
+        """How many tangents its Duals carry (:func:`~flatland.core.dual.k_of`): None for one (or none)."""
+        return k_of(*(getattr(self, f.name) for f in fields(self)))
+
     def detached(self) -> SceneState:
         """The same geometry with every derivative dropped (for tracing and jump values)."""
         return replace(self, **{f.name: detach(getattr(self, f.name)) for f in fields(self)})
@@ -131,11 +150,18 @@ def _rotation(points: Any, centre: np.ndarray, angle: Any) -> Any:
     return np.stack([centre[0] + c * dx - s * dy, centre[1] + s * dx + c * dy], axis=1)
 
 
-def _moved_points(shape: Shape, p: Parameter | None, theta: Any) -> Any:
-    """The shape's points (a circle's centre, as one point) with parameter ``p`` at offset ``theta``."""
+def _moved_points(shape: Shape, moves: tuple[tuple[Parameter, Any], ...]) -> Any:
+    """The shape's points (a circle's centre, as one point) with each parameter of ``moves`` at its
+    offset, in turn."""
     pts = np.array([shape.center] if shape.type == "circle" else shape.points, dtype=np.float64)
-    if p is None or p.target != shape.name:
-        return pts
+    for p, theta in moves:
+        if p.target == shape.name:
+            pts = _move(shape, pts, p, theta)
+    return pts
+
+
+def _move(shape: Shape, pts: Any, p: Parameter, theta: Any) -> Any:
+    """``pts`` with the shape's parameter ``p`` at offset ``theta``."""
     if p.kind == "translate":
         return pts + theta * _unit(p.axis)
     if p.kind == "rotate":
@@ -150,22 +176,39 @@ def _moved_points(shape: Shape, p: Parameter | None, theta: Any) -> Any:
     return pts
 
 
-def build_state(scene: Scene, param: str | Parameter | None = None, theta: Any = 0.0) -> SceneState:
+def build_state(
+    scene: Scene, param: str | Parameter | tuple | list | None = None, theta: Any = 0.0
+) -> SceneState:
     """The scene's :class:`SceneState` with parameter ``param`` set to offset ``theta``.
 
     ``theta`` may be a float (finite differences) or a Dual (``variable(0.0)``, the
-    gradient methods); with ``param=None`` every array is plain.
+    gradient methods); with ``param=None`` every array is plain. A tuple or list of k
+    parameters takes a sequence of k offsets, applied in order (e.g. ``variables(k)``:
+    the state's Duals then carry k tangents), or one offset for all of them.
     """
-    p = parse_parameter(scene, param) if isinstance(param, str) else param
+    if isinstance(param, tuple | list):
+        params = [parse_parameter(scene, q) if isinstance(q, str) else q for q in param]
+        offsets = list(theta) if isinstance(theta, tuple | list) else [theta] * len(params)
+        if len(offsets) != len(params):
+            raise ValueError(
+                f"theta: {len(params)} parameters need {len(params)} offsets, got {len(offsets)}"
+            )
+        moves = tuple(zip(params, offsets, strict=True))
+    else:
+        p = parse_parameter(scene, param) if isinstance(param, str) else param
+        moves = () if p is None else ((p, theta),)
     seg_a, seg_b, seg_shape, seg_fade, seg_one = [], [], [], [], []
     circ_c, circ_r, circ_shape, circ_one = [], [], [], []
     vertices = []
     for k, s in enumerate(scene.shapes):
-        pts = _moved_points(s, p, theta)
+        pts = _moved_points(s, moves)
         if s.type == "circle":
-            scaled = p is not None and p.target == s.name and p.kind == "scale"
+            radius: Any = s.radius
+            for p, theta in moves:
+                if p.target == s.name and p.kind == "scale":
+                    radius = radius * (1.0 + theta)
             circ_c.append(pts[0])
-            circ_r.append(np.stack([s.radius * (1.0 + theta) if scaled else s.radius]))
+            circ_r.append(np.stack([radius]))
             circ_shape.append(k)
             circ_one.append(s.one_sided)
             continue
@@ -184,20 +227,22 @@ def build_state(scene: Scene, param: str | Parameter | None = None, theta: Any =
     prim_shape = np.array(seg_shape + circ_shape, dtype=np.int64)
     emission: Any = np.array([scene.shapes[k].emission for k in prim_shape])
     albedo: Any = np.array([scene.shapes[k].albedo for k in prim_shape])
-    if p is not None and p.kind in ("emission", "albedo"):
-        mask = np.array([scene.shapes[k].name == p.target for k in prim_shape], dtype=np.float64)
-        if p.kind == "emission":
-            emission = emission + theta * mask
-        else:
-            albedo = albedo + theta * mask
+    for p, theta in moves:
+        if p.kind in ("emission", "albedo"):
+            mask = np.array([scene.shapes[k].name == p.target for k in prim_shape], dtype=np.float64)
+            if p.kind == "emission":
+                emission = emission + theta * mask
+            else:
+                albedo = albedo + theta * mask
     cam = scene.camera
     o: Any = np.array(cam.position, dtype=np.float64)
     f: Any = np.array(cam.direction, dtype=np.float64)
-    if p is not None and p.target == "camera" and p.kind == "translate":
-        o = o + theta * _unit(p.axis)
-    if p is not None and p.target == "camera" and p.kind == "rotate":
-        angle = math.atan2(cam.direction[1], cam.direction[0]) + theta
-        f = np.stack([np.cos(angle), np.sin(angle)])
+    for p, theta in moves:
+        if p.target == "camera" and p.kind == "translate":
+            o = o + theta * _unit(p.axis)
+        if p.target == "camera" and p.kind == "rotate":
+            angle = math.atan2(detach(f)[1], detach(f)[0]) + theta
+            f = np.stack([np.cos(angle), np.sin(angle)])
     r_vec = np.stack([f[1], -f[0]])  # right = forward turned clockwise
     return SceneState(
         seg_a=seg_a_all,

@@ -5,8 +5,11 @@ A task fixes the scene, the parameter, the sample count, the seed and the batche
 the gradient, :func:`~flatland.state.build_state`), runs the integrator
 (:mod:`flatland.integrator`) once under the method's
 :class:`~flatland.integrator.Transforms`, and returns a :class:`Tally` of per-batch,
-per-pixel means. Methods (:mod:`flatland.methods`) differ only in the ``theta`` and
-the transforms they pass, so they share every primary sample: sample j of pixel p
+per-pixel means. A task's ``param`` may be a tuple of k parameters: the gradient
+methods then bind the scene at :meth:`ImageTask.dual_offset` (k seeds e_i) and the
+derivative has a leading axis of k, one slot per parameter. Methods
+(:mod:`flatland.methods`) differ only in the ``theta`` and the transforms they pass,
+so they share every primary sample: sample j of pixel p
 has the global index ``p * spp + j`` (batch ``j // (spp / batches)``), and every
 number drawn for it is keyed on that index (:class:`flatland.core.rng.Draws`), so
 results do not depend on :data:`CHUNK`. The same names as :mod:`sphere3d.tasks`.
@@ -21,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core import progress
-from flatland.core.dual import detach, tangent
+from flatland.core.dual import detach, tangent, variable, variables
 from flatland.core.rng import Draws
 from flatland.integrator import PRIMARY_UNIFORMS, Context, Identity, Transforms, pixel_samples, shade
 from flatland.lights import Lights
@@ -37,7 +40,8 @@ rounding of the per-pixel sums, which add the same numbers in another grouping).
 
 @dataclass(frozen=True)
 class Tally:
-    """Per-batch, per-pixel estimates of the value and the derivative, shape (batches, pixels)."""
+    """Per-batch, per-pixel estimates of the value and the derivative, shape (batches, pixels); for
+    k parameters the derivative has a leading axis of k, (k, batches, pixels)."""
 
     value: np.ndarray
     derivative: np.ndarray
@@ -49,7 +53,7 @@ class ImageTask:
     ``spp // batches``, which give the standard errors."""
 
     scene: Scene
-    param: Parameter | None
+    param: Parameter | tuple[Parameter, ...] | None
     spp: int
     seed: int
     batches: int
@@ -57,6 +61,20 @@ class ImageTask:
     @property
     def pixels(self) -> int:
         return self.scene.camera.pixels
+
+    @property
+    def k(self) -> int | None:
+        """The number of parameters of a tuple ``param``; None for one parameter (or none)."""
+        return _k(self.param)
+
+    def dual_offset(self) -> Any:
+        """The offset θ0 = 0 as forward-mode seed(s): ``variable(0.0)``, or for k parameters
+        ``variables(k)`` (parameter i with the unit tangent e_i)."""
+        return _dual_offset(self.param)
+
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The parameters, as a tuple (one for a single parameter)."""
+        return _parameters(self.param)
 
     @property
     def per_batch(self) -> int:
@@ -87,7 +105,7 @@ class PointTask:
     at a fixed ``point`` with unit ``normal``: ``n`` samples in ``batches`` batches (one "pixel")."""
 
     scene: Scene
-    param: Parameter | None
+    param: Parameter | tuple[Parameter, ...] | None
     point: tuple[float, float]
     normal: tuple[float, float]
     n: int
@@ -95,6 +113,19 @@ class PointTask:
     batches: int
 
     pixels = 1
+
+    @property
+    def k(self) -> int | None:
+        """The number of parameters of a tuple ``param``; None for one parameter (or none)."""
+        return _k(self.param)
+
+    def dual_offset(self) -> Any:
+        """The offset θ0 = 0 as forward-mode seed(s), as :meth:`ImageTask.dual_offset`."""
+        return _dual_offset(self.param)
+
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The parameters, as a tuple (one for a single parameter)."""
+        return _parameters(self.param)
 
     @property
     def per_batch(self) -> int:
@@ -115,6 +146,18 @@ class PointTask:
 
         value, deriv = _sums(self.n, 1, self.batches, self.seed, self.state(theta), transforms, estimate)
         return Tally(value, deriv)
+
+
+def _k(param: Any) -> int | None:
+    return len(param) if isinstance(param, tuple) else None
+
+
+def _dual_offset(param: Any) -> Any:
+    return variables(len(param)) if isinstance(param, tuple) else variable(0.0)
+
+
+def _parameters(param: Any) -> tuple[Parameter, ...]:
+    return param if isinstance(param, tuple) else () if param is None else (param,)
 
 
 def _chunks(total: int) -> Iterator[np.ndarray]:
@@ -138,8 +181,9 @@ def _sums(
     ctx = Context(state, state0, Lights.of(state0), transforms or Identity())
     per_batch = spp // batches
     size = batches * pixels
+    k = state.k
     sums_v = np.zeros(size)
-    sums_t = np.zeros(size)
+    sums_t = np.zeros(size if k is None else (k, size))
     progress.start(-(-pixels * spp // CHUNK))
     for index in _chunks(pixels * spp):
         pixel, j = np.divmod(index, spp)
@@ -149,8 +193,13 @@ def _sums(
         est = estimate(ctx, pixel, u, draws)
         key = batch * pixels + pixel
         sums_v += np.bincount(key, weights=detach(est), minlength=size)
-        sums_t += np.bincount(key, weights=tangent(est), minlength=size)
+        if k is None:
+            sums_t += np.bincount(key, weights=tangent(est), minlength=size)
+        else:  # each parameter's slot summed as a single tangent would be
+            t_dot = tangent(est, k)
+            for i in range(k):
+                sums_t[i] += np.bincount(key, weights=t_dot[i], minlength=size)
         progress.advance()
     value = (sums_v / per_batch).reshape(batches, pixels)
-    deriv = (sums_t / per_batch).reshape(batches, pixels)
+    deriv = (sums_t / per_batch).reshape((*sums_t.shape[:-1], batches, pixels))
     return value, deriv

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach
+from flatland.core.dual import Dual, detach, k_of
 from flatland.state import SceneState
 
 __all__ = [
@@ -47,9 +47,10 @@ EPS_DIST = 1e-9
 """Hits closer than this to the ray origin are ignored (besides the ``ignore`` primitive)."""
 
 
-def zeros(shape: tuple[int, ...], dual: bool) -> Any:
-    """Zeros to fill by index: a Dual when what goes in may carry a tangent, else a plain array."""
-    return Dual(np.zeros(shape)) if dual else np.zeros(shape)
+def zeros(shape: tuple[int, ...], dual: bool, k: int | None = None) -> Any:
+    """Zeros to fill by index: a Dual when what goes in may carry a tangent (``k`` of them, or the
+    classic one), else a plain array."""
+    return Dual(np.zeros(shape), None, k) if dual else np.zeros(shape)
 
 
 def cross2(a: Any, b: Any) -> Any:
@@ -221,8 +222,9 @@ def attach(geom: SceneState, hits: Hits, rows: np.ndarray, origins: Any, dirs: A
     m = prim.size
     n_seg = geom.n_seg
     dual = geom.differentiable or isinstance(origins, Dual) or isinstance(dirs, Dual)
-    point, normal, u_out = zeros((m, 2), dual), zeros((m, 2), dual), zeros((m,), dual)
-    origins_b = origins if np.ndim(detach(origins)) == 2 else origins[None, :] + zeros((m, 2), dual)
+    k = geom.k if geom.differentiable else k_of(origins, dirs)
+    point, normal, u_out = zeros((m, 2), dual, k), zeros((m, 2), dual, k), zeros((m,), dual, k)
+    origins_b = origins if np.ndim(detach(origins)) == 2 else origins[None, :] + zeros((m, 2), dual, k)
     seg = np.flatnonzero(prim < n_seg)
     if seg.size:
         k = prim[seg]
@@ -263,7 +265,8 @@ def attached_points(geom: SceneState, prim: np.ndarray, coord: np.ndarray) -> tu
     """
     m = prim.size
     n_seg = geom.n_seg
-    point, normal = zeros((m, 2), geom.differentiable), zeros((m, 2), geom.differentiable)
+    dual, k = geom.differentiable, geom.k
+    point, normal = zeros((m, 2), dual, k), zeros((m, 2), dual, k)
     seg = np.flatnonzero(prim < n_seg)
     if seg.size:
         k = prim[seg]

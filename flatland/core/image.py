@@ -16,7 +16,7 @@ adding the pixels' standard errors in quadrature is wrong; the batches share non
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,6 +30,7 @@ __all__ = [
     "BatchSummary",
     "FilmSum",
     "GradientImage",
+    "GradientImages",
     "Image",
     "Options",
     "check_finite_result",
@@ -325,3 +326,114 @@ class GradientImage:
         """:func:`relative_error` of this derivative against a reference gradient image."""
         ref = reference.derivative if isinstance(reference, GradientImage) else reference
         return relative_error(self.derivative, ref)
+
+
+@dataclass(frozen=True, eq=False)
+class GradientImages(Mapping[str, GradientImage]):
+    """A rendered image and its derivatives with respect to k scene parameters, from one pass.
+
+    A read-only mapping from each parameter's name to its :class:`GradientImage`
+    (``images["occluder.translate.x"]``), in the order the parameters were given, with
+    the arrays of all of them at hand.
+
+    Attributes
+    ----------
+    value, value_stderr : ndarray
+        Per-pixel I and its standard error (shared by every parameter).
+    derivative, derivative_stderr : ndarray
+        Per-pixel dI/dθ_i and their standard errors, shape ``(k, *film)``: row i is
+        parameter ``params[i]``.
+    params : tuple of str
+        The k parameters.
+    method, spp, seed, batches, options, scene
+        As in :class:`GradientImage`.
+    value_sum_stderr : float
+        Standard error of the film sum of I from the per-batch sums.
+    derivative_sum_stderr : tuple of float
+        Per parameter, the standard error of the film sum of its derivative.
+    """
+
+    value: np.ndarray
+    derivative: np.ndarray
+    value_stderr: np.ndarray
+    derivative_stderr: np.ndarray
+    params: tuple[str, ...]
+    method: str
+    spp: int
+    seed: int
+    batches: int
+    options: Mapping[str, Any] = field(default_factory=dict)
+    scene: str = ""
+    value_sum_stderr: float | None = None
+    derivative_sum_stderr: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "options", Options(self.options))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Film shape."""
+        return self.value.shape
+
+    @classmethod
+    def from_batches(
+        cls,
+        values: np.ndarray,
+        derivatives: np.ndarray,
+        *,
+        params: tuple[str, ...],
+        method: str,
+        spp: int,
+        seed: int,
+        options: Mapping[str, Any] | None = None,
+        scene: str = "",
+    ) -> GradientImages:
+        """The images from per-batch estimates: values ``(batches, *film)``, derivatives
+        ``(k, batches, *film)``; parameter i's summary is exactly :meth:`GradientImage.from_batches`
+        of ``derivatives[i]``."""
+        run = dict(method=method, spp=spp, seed=seed, options=options, scene=scene)
+        images = [
+            GradientImage.from_batches(values, d, param=p, **run)
+            for p, d in zip(params, derivatives, strict=True)
+        ]
+        first = images[0]
+        return cls(
+            value=first.value,
+            derivative=np.stack([g.derivative for g in images]),
+            value_stderr=first.value_stderr,
+            derivative_stderr=np.stack([g.derivative_stderr for g in images]),
+            params=tuple(params),
+            batches=first.batches,
+            value_sum_stderr=first.value_sum_stderr,
+            derivative_sum_stderr=tuple(float(g.derivative_sum_stderr) for g in images),
+            **run,  # type: ignore[arg-type]
+        )
+
+    def __getitem__(self, name: str) -> GradientImage:
+        """The :class:`GradientImage` of parameter ``name`` (KeyError if it is not one of ``params``)."""
+        if name not in self.params:
+            raise KeyError(f"{name!r} is not one of the parameters {list(self.params)}")
+        i = self.params.index(name)
+        return GradientImage(
+            value=self.value,
+            derivative=self.derivative[i],
+            value_stderr=self.value_stderr,
+            derivative_stderr=self.derivative_stderr[i],
+            param=name,
+            method=self.method,
+            spp=self.spp,
+            seed=self.seed,
+            batches=self.batches,
+            options=self.options,
+            scene=self.scene,
+            value_sum_stderr=self.value_sum_stderr,
+            derivative_sum_stderr=None
+            if self.derivative_sum_stderr is None
+            else self.derivative_sum_stderr[i],
+        )
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.params)
+
+    def __len__(self) -> int:
+        return len(self.params)

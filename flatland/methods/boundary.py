@@ -1,6 +1,8 @@
 """The boundary method: naive interior term plus the exact discontinuity terms (edge sampling in 2D).
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), BoundaryTransforms())``.
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), BoundaryTransforms())``
+(``variable(0.0)``, or ``variables(k)`` for k parameters: one pass, the jump terms times each
+parameter's velocity).
 ``camera`` and ``directions`` stay the identity (the naive interior term); the
 2D-only extension points of :class:`~flatland.integrator.Transforms` carry the rest:
 ``shading_extra`` adds the jump terms seen from each shading point inside
@@ -18,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import detach, tangent, variable
+from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
 from flatland.integrator import Context, Identity, incident, radiance_along_film
 from flatland.lights import Lights
@@ -49,28 +51,29 @@ class BoundaryTransforms(Identity):
         Candidates c are the angles of all vertices and circle tangent points seen from
         x(θ) (Duals: they move with the geometry and with x); only those in front of the
         surface (cos > 0) can matter, since f vanishes behind it. The jump is found by
-        tracing at $c ∓ ε$ on the detached geometry.
+        tracing at $c ∓ ε$ on the detached geometry. For k parameters the term has a leading
+        axis of k: the same jumps times each parameter's $φ_c'$.
         """
-        n = ignore.size
-        out = np.zeros(n)
+        n, k = ignore.size, ctx.geom.k
+        out = np.zeros(n if k is None else (k, n))
         m = np.shape(detach(ctx.geom.vertices))[0] + 2 * ctx.geom.n_circ
         step = max(1, MAX_CANDIDATES // max(m, 1))
         for lo in range(0, n, step):  # blocks of shading points: (points x candidates) stays bounded
             sl = slice(lo, min(n, lo + step))
-            out[sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl])
+            out[..., sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl])
         return out
 
     @staticmethod
-    def _jumps(ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray) -> np.ndarray:
+    def _jumps(ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray) -> np.ndarray | float:
         n = ignore.size
         phi_c, exists = silhouette_angles(ctx.geom, x)
         if phi_c.shape[1] == 0:
-            return np.zeros(n)
+            return 0.0
         phi0 = detach(phi_c)
         cos_c = np.cos(phi0 - np.arctan2(n0[:, 1], n0[:, 0])[:, None])
         rows, cols = np.nonzero(exists & (cos_c > 1e-12))
         if not rows.size:
-            return np.zeros(n)
+            return 0.0
         phi = phi0[rows, cols]
         origins = detach(x)[rows]
         sides = []
@@ -79,8 +82,10 @@ class BoundaryTransforms(Identity):
             hits = cast(ctx.geom0, origins, d, ignore[rows])
             sides.append(incident(ctx.geom0, origins, d, hits)[0])
         # discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz rule, theory/leibniz)
-        term = (sides[0] - sides[1]) * cos_c[rows, cols] * tangent(phi_c)[rows, cols]
-        return np.bincount(rows, weights=term, minlength=n)
+        term = (sides[0] - sides[1]) * cos_c[rows, cols] * tangent(phi_c[rows, cols])
+        if term.ndim == 1:
+            return np.bincount(rows, weights=term, minlength=n)
+        return np.stack([np.bincount(rows, weights=slot, minlength=n) for slot in term])  # k parameters
 
     def pixel_extra(self, task: ImageTask, geom: SceneState) -> np.ndarray | None:
         """$Σ_c k_j(t_c) [L(t_c^-) - L(t_c^+)] t_c'(θ)$ per batch and pixel (the camera's silhouettes).
@@ -90,9 +95,11 @@ class BoundaryTransforms(Identity):
         of the shapes and of the camera. The jump of the full radiance $L = L_e + (ρ/2) E$
         is estimated per batch with ``spp / batches`` shading samples on each side, the
         same samples on both sides (common random numbers), so a candidate hidden
-        behind something else contributes exactly zero.
+        behind something else contributes exactly zero. For k parameters: shape
+        (k, batches, pixels), the same jumps times each parameter's $t_c'$.
         """
-        out = np.zeros((task.batches, task.pixels))
+        k = geom.k
+        out = np.zeros((task.batches, task.pixels) if k is None else (k, task.batches, task.pixels))
         phi_c, exists = silhouette_angles(geom, geom.cam_o)
         if phi_c.shape[1] == 0:
             return out
@@ -107,7 +114,7 @@ class BoundaryTransforms(Identity):
         keep = np.any(weights > 0.0, axis=1)
         if not np.any(keep):
             return out
-        t0, weights, speed = t0[keep], weights[keep], tangent(t_c)[keep]
+        t0, weights, speed = t0[keep], weights[keep], tangent(t_c[keep])
         geom0 = geom.detached()
         m, n_s = t0.size, task.per_batch
         eps = EPS_FILM * (1.0 + np.abs(t0))
@@ -123,7 +130,11 @@ class BoundaryTransforms(Identity):
             )  # same samples both sides
             jump = (radiance[: m * n_s] - radiance[m * n_s :]).reshape(m, n_s).mean(axis=1)
             # discontinuity term: k_j(t_c) (L(t_c-) - L(t_c+)) * dt_c/dtheta   (Leibniz rule, theory/leibniz)
-            out[b] = (weights * (jump * speed)[:, None]).sum(axis=0)
+            if k is None:
+                out[b] = (weights * (jump * speed)[:, None]).sum(axis=0)
+            else:  # per parameter, summed as for one (numpy's order of a sum depends on the shape)
+                for i in range(k):
+                    out[i, b] = (weights * (jump * speed[i])[:, None]).sum(axis=0)
         return out
 
 
@@ -150,4 +161,4 @@ def boundary(task: ImageTask | PointTask) -> Tally:
     failure modes: two discontinuities within ``EPS_ANGLE`` of each other, and
     candidates seen exactly edge-on, both of measure zero.
     """
-    return task.evaluate(variable(0.0), BoundaryTransforms())
+    return task.evaluate(task.dual_offset(), BoundaryTransforms())

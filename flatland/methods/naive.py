@@ -1,6 +1,7 @@
 """The naive image gradient: forward-mode AD of the renderer's estimator as it stands.
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), Identity())``:
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), Identity())`` (θ0 = 0 as
+``variable(0.0)``, or for k parameters ``variables(k)``: one pass, k tangents):
 the :class:`~flatland.integrator.Identity` transforms change nothing, so every step
 (film samples, radiance, shading by MIS, per-pixel sums) is differentiated as it stands.
 
@@ -10,7 +11,6 @@ makes an integrand jump at a point that moves with θ.
 
 from __future__ import annotations
 
-from flatland.core.dual import variable
 from flatland.integrator import Identity
 from flatland.methods._common import GRADIENT_METHODS
 from flatland.tasks import ImageTask, PointTask, Tally
@@ -39,4 +39,4 @@ def naive(task: ImageTask | PointTask) -> Tally:
     exactly these terms. The value estimate is unbiased and, for the same seed, identical to
     the other methods'.
     """
-    return task.evaluate(variable(0.0), Identity())
+    return task.evaluate(task.dual_offset(), Identity())

@@ -1,6 +1,8 @@
 r"""Reparameterization of the pixel and shading integrals by translations chosen with probe rays.
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), ReparamTransforms(...))``.
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), ReparamTransforms(...))``
+(``variable(0.0)``, or ``variables(k)`` for k parameters: one pass whose translations follow the
+chosen point's motion in all k directions at once).
 ``camera`` gets each chunk's film samples
 $t \sim k_j$ before the camera rays are traced and returns the translated points $T(t)$ with
 kernel weights; ``directions`` gets the cosine and emitter samples φ inside
@@ -20,7 +22,6 @@ from __future__ import annotations
 from functools import partial
 
 from flatland.core.contract import Option
-from flatland.core.dual import variable
 from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import check_bool, check_int, check_positive
 from flatland.methods._common import GRADIENT_METHODS
@@ -120,4 +121,4 @@ def reparam(
     if kappa_film is None:
         kappa_film = default_kappa_film(task.scene.camera.pixel_width)
     transforms = ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired)
-    return task.evaluate(variable(0.0), transforms)
+    return task.evaluate(task.dual_offset(), transforms)

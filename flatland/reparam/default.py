@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import as_dual, detach, is_dual
+from flatland.core.dual import as_dual, detach, is_dual, k_of
 from flatland.core.rng import Draws
 from flatland.core.translation import translation_offset, unit_weight
 from flatland.integrator import Context, Identity, Members
@@ -90,10 +90,10 @@ def _stretch(
     y = mu[rows]
     inside = (y >= a0) & (y <= b0)
     moved = y + np.where(y < a0, left, np.where(inside, left + (y - a0) * stretch, right))
-    log_jacobian = zeros(np.shape(mu), is_dual(moved))
+    log_jacobian = zeros(np.shape(mu), is_dual(moved), k_of(moved))
     log_jacobian[rows] = np.where(inside, np.log1p(stretch), 0.0)  # log |det J_T| = log s
     if not is_dual(points) and is_dual(moved):
-        points = as_dual(points)
+        points = as_dual(points, k_of(moved))
     points[rows] = moved
     return points, log_jacobian
 

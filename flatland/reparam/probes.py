@@ -231,7 +231,7 @@ def select_points(
             coord_f[live] = np.where(on, c_mid, coord_f[live])
             lo, hi = np.where(on, mid, lo), np.where(on, hi, mid)
 
-    point = zeros((n, 2), geom.differentiable)
+    point = zeros((n, 2), geom.differentiable, geom.k)
     if single.size:
         point[single] = attached_points(geom, prim_f, coord_f)[0]
     corner = np.flatnonzero(code == 2)
