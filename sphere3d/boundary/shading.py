@@ -168,9 +168,9 @@ def clip_arcs(
     compiled by Numba (:func:`sphere3d.boundary.edge_tree.compiled`).
 
     Horizon: $h(s) = n·(a + s (b - a) - o)$ is linear in s; the part with h > 0 is kept.
-    Images (``sides``, ``front``: :func:`_image_sides` per point): on the arc $w(φ) = \cos φ\, w_a
-    + \sin φ\, w_⊥$ (:func:`_arc_frame`), $w(φ)·c = R \cos(φ - φ_c)$, so each side keeps the
-    half-circle $|φ - φ_c| ≤ π/2$; as $γ ≤ π$ the arc meets it in one interval, found with $φ_c$
+    Images (``sides``, ``front``: :func:`_image_sides` per point): on the arc
+    $w(φ) = \cos φ\, w_a + \sin φ\, w_⊥$ (:func:`_arc_frame`), $w(φ)·c = R \cos(φ - φ_c)$, so each side
+    keeps the half-circle $|φ - φ_c| ≤ π/2$; as $γ ≤ π$ the arc meets it in one interval, found with $φ_c$
     taken in $(-π/2, 3π/2]$ (for $φ_c ≤ -π/2$ the half-circle around $φ_c$ meets $[0, π]$ in
     $\{0\}$ at most, the one around $φ_c + 2π$ in the rest). A triangle seen from behind: empty
     (hi = lo)."""
