@@ -224,7 +224,13 @@ def _uniforms(seed: int, batch: int, skip: int, shape: tuple[int, ...]) -> np.nd
 
 
 def camera_edge_term(
-    state: SceneState, plain: SceneState, edges: Edges, seed: int, batch: int, points_per_pixel: float
+    state: SceneState,
+    plain: SceneState,
+    edges: Edges,
+    seed: int,
+    batch: int,
+    points_per_pixel: float,
+    segments: FilmEdges | None = None,
 ) -> np.ndarray:
     """One batch's boundary term of every pixel, shape (height, width) (see the module docstring).
 
@@ -240,13 +246,15 @@ def camera_edge_term(
         stratification offsets, then N × :data:`SHADING_UNIFORMS` shading uniforms.
     points_per_pixel : float
         Expected edge points per pixel of projected edge length.
+    segments : optional
+        ``film_edges(state, plain, edges)`` if the caller has it (the same for every batch).
 
     The points are processed :data:`POINT_CHUNK` at a time (:func:`point_bytes`), each chunk with
     its own part of the batch's stream: the same numbers as all at once, the splat's sums in chunk order.
     """
     cam = state.camera
     out = np.zeros(cam.height * cam.width)
-    seg = film_edges(state, plain, edges)
+    seg = film_edges(state, plain, edges) if segments is None else segments
     count = point_count(points_per_pixel, seg.length)
     n = int(count.sum())
     for lo in range(0, n, POINT_CHUNK):

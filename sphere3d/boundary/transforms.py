@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from sphere3d.boundary.camera import camera_edge_term
+from sphere3d import execution
+from sphere3d.boundary.camera import camera_edge_term, film_edges
 from sphere3d.boundary.edges import Edges
 from sphere3d.boundary.shading import shading_edge_term
 from sphere3d.integrator import Identity, Shading
@@ -85,10 +86,8 @@ class BoundaryTransforms(Identity):
         if not state.dual or not hasattr(task, "spp"):
             return None
         plain = plain_state(task.scene, task.param, task.tracer)
-        per_batch = task.spp // task.batches
-        return np.stack(
-            [
-                camera_edge_term(state, plain, self.edges, task.seed, b, self.rate * per_batch)
-                for b in range(task.batches)
-            ]
-        )
+        rate = self.rate * (task.spp // task.batches)
+        segments = film_edges(state, plain, self.edges)  # the same for every batch
+        # the batches on the threads: each draws from its own stream (seed, batch)
+        term = lambda b: camera_edge_term(state, plain, self.edges, task.seed, b, rate, segments)  # noqa: E731
+        return np.stack(execution.map_chunks(term, range(task.batches), counted=False))

@@ -52,7 +52,7 @@ from sphere3d.boundary.emitters import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, take_rows
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.paper import direction_towards, mean_point_direction
-from sphere3d.reparam.penumbra import bounding_sphere, may_see_motion, moving_occluders
+from sphere3d.reparam.penumbra import may_see_motion, moving_occluders, moving_sphere
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points, intersect_triangles
@@ -106,7 +106,7 @@ def _aimed_points(
     non-emitter triangle or emitter edges.
 
     The centre c is that of the moving non-emitter triangles' bounding sphere
-    (:func:`~sphere3d.reparam.penumbra.bounding_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an
+    (:func:`~sphere3d.reparam.penumbra.moving_sphere`), seen along the axis $a = (c - x) / |c - x|$. On an
     edge
     $p(t) = p_0 + t e$, $t \in [0, 1]$, the cosine $a \cdot v / |v|$ with $v = p(t) - x$ has one
     critical point (its derivative's numerator is linear in t), so the extremes over the border lie
@@ -121,8 +121,8 @@ def _aimed_points(
     moving = moving_occluders(state)
     if table is None or not moving.any():
         return None
+    centre, radius = moving_sphere(state)
     triangles = np.asarray(detach(state.triangles))
-    centre, radius = bounding_sphere(triangles[moving])
     to = centre - x
     length = norm(to)
     axis = to / np.where(length > 0.0, length, 1.0)[:, None]

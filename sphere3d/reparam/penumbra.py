@@ -59,6 +59,7 @@ __all__ = [
     "cones_overlap",
     "may_see_motion",
     "moving_occluders",
+    "moving_sphere",
     "separating_planes",
 ]
 
@@ -238,6 +239,16 @@ def moving_occluders(state: Any) -> np.ndarray:
     moving[state.emitters] = False
     moving.flags.writeable = False  # shared by every caller of this state
     return moving
+
+
+@per_state
+def moving_sphere(state: Any) -> tuple[np.ndarray, float]:
+    """:func:`bounding_sphere` of the :func:`moving_occluders` at θ0, once per state; meaningless (a
+    sphere of radius 0 about the origin) without them."""
+    moving = moving_occluders(state)
+    if not moving.any():
+        return np.zeros(3), 0.0
+    return bounding_sphere(np.asarray(detach(state.triangles))[moving])
 
 
 @per_state
