@@ -20,8 +20,11 @@ penumbra planes, the edge tree) are O(E log E) and built once per state by the f
 asks; ``boundary``'s shading term enumerates, per shading point, every silhouette edge whose arc
 can meet the emitters (:mod:`sphere3d.boundary.edge_tree` finds them without scanning the mesh),
 so its cost grows with the silhouette edges a point sees, about the square root of the mesh's
-edges, not with the mesh. More cores: the chunks (:data:`sphere3d.tasks.CHUNK` samples each) are
-independent, so their share of the time divides by min(cores, chunks); the per-state tables do
+edges, not with the mesh: the work per penumbra point grows with the mesh's resolution, as the
+number of arcs it sums over does (the estimator's probability of an arc is its angle over all of
+them). More cores: the chunks (at most :data:`sphere3d.tasks.CHUNK` samples, and at least
+:data:`sphere3d.execution.CHUNKS_PER_THREAD` per thread) are independent, so their share of the
+time divides by the cores, up to the chunks' count; the per-state tables and the state's build do
 not (the one-thread rows: their difference from the two-thread rows is the chunks' share).
 
 Agreement per region: at 5 120 and 81 920 triangles, ``reparam`` and ``boundary`` against
