@@ -125,8 +125,9 @@ def test06_make_bench_turns_the_cells_into_summary_rows_and_the_page(monkeypatch
 def test07_the_occluder_table_takes_every_motion_of_the_occluder_in_both_scenes(monkeypatch):
     """``benchmarks.bench_occluder_motions``: its motions are every translation, turn and the scale of
     the shape named ``occluder`` in both scenes (the parameters a user can differentiate), and one
-    scene and motion gives a row per method, relative to the reference's RMS (a fake renderer whose
-    every image is the reference reads bias 0, its bound 0 and RMSE 0)."""
+    scene and motion gives two rows per method (all pixels, and outside the junction pixels),
+    relative to the reference's RMS (a fake renderer whose every image is the reference reads bias 0,
+    its bound 0 and RMSE 0)."""
     from benchmarks import bench_occluder_motions as occ
     from sphere3d.scene import load_scene
 
@@ -138,7 +139,18 @@ def test07_the_occluder_table_takes_every_motion_of_the_occluder_in_both_scenes(
         derivative = np.array([[1.0, -2.0], [0.5, 0.0]])
         derivative_stderr = np.zeros((2, 2))
 
+    # junctions: near the occluder and two static things (the ground and the sky beyond its far edge)
+    junctions = occ.junction_pixels("hard_shadow_cube")
+    assert 0 < junctions.sum() < 0.02 * junctions.size
+    monkeypatch.setattr(occ, "junction_pixels", lambda scene: np.array([[True, False], [False, False]]))
     monkeypatch.setattr(occ, "render_gradient", lambda *a, **k: Fake())
     rows = occ.measure("hard_shadow", "occluder.rotate.z")
-    assert [r.case for r in rows] == [f"hard_shadow occluder.rotate.z {m}: bias / rms" for m in occ.METHODS]
-    assert all(r.value == 0.0 and r.note.startswith("bias <= 0.000") and "RMSE 0.000" in r.note for r in rows)
+    cases = [
+        f"hard_shadow occluder.rotate.z {m}: bias / rms{where}"
+        for m in occ.METHODS
+        for where in ("", " outside junctions")
+    ]
+    assert [r.case for r in rows] == cases
+    assert all(r.value == 0.0 and "bias <= 0.000" in r.note for r in rows)
+    assert all(r.note.startswith("bias <= 0.000") and "RMSE 0.000" in r.note for r in rows[::2])
+    assert all(r.note.startswith("1 junction px left out; bias <= 0.000") for r in rows[1::2])

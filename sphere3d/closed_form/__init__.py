@@ -24,7 +24,9 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
 A third scene adds a static black triangle behind the moving one (:func:`junction_scene`): its
 camera image (:func:`junction_image`) is the filter integrated over the union of the two, whose
 derivative carries the two T-junctions where the moving edges cross the static one
-(:mod:`sphere3d.reparam.junctions`), by clipping on Duals (:func:`clip_convex`).
+(:mod:`sphere3d.reparam.junctions`), by clipping on Duals (:func:`clip_convex`); moved until a vertex
+of the moving triangle lies just under the static edge (:func:`corner_junction_scene`), the two
+junctions meet at a corner of the silhouette.
 
 All are written from the scene's definition (camera frame, pixel mapping, filter
 profiles, shape transform), not from the estimators' code. The scenes the tests and
@@ -57,6 +59,7 @@ from sphere3d.closed_form.scenes import (
     PIXEL,
     TRIANGLE_SHAPE,
     ShareLost,
+    corner_junction_scene,
     junction_scene,
     pinhole_triangle_scene,
     share_lost,
@@ -72,6 +75,7 @@ __all__ = [
     "TriangleImage",
     "boundary_flux",
     "clip_convex",
+    "corner_junction_scene",
     "filter_cdf_1d",
     "filter_kinks",
     "filter_profile_1d",

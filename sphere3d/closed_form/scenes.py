@@ -15,6 +15,7 @@ __all__ = [
     "PIXEL",
     "TRIANGLE_SHAPE",
     "ShareLost",
+    "corner_junction_scene",
     "junction_scene",
     "pinhole_triangle_scene",
     "share_lost",
@@ -85,6 +86,21 @@ def junction_scene(size: float = 6.0, width: int = 16, filter: str = "gaussian",
             "albedo": 0.0,
         }
     )
+    return scene
+
+
+def corner_junction_scene(below: float = 0.1, size: float = 6.0, width: int = 16) -> dict:
+    """:func:`junction_scene` with the triangle moved up until its lower left vertex's image lies
+    ``below`` px under the wall's edge (in y at that vertex's x): the two T-junctions meet at a corner
+    of the moving silhouette, as where a box's corner lies on the ground's far edge."""
+    scene = junction_scene(size, width)
+    tri = scene["shapes"][0]
+    vertex = np.array(TRIANGLE_SHAPE[0][:2]) * size * PIXEL + np.array(tri["translate"][:2])
+    edge = -0.4 * PIXEL * 4.5 / 4.0  # the wall's edge at x = 0 (depth 4.5), as in junction_scene
+    # the edge's line y = edge - x / 30 at depth 4.5, seen at the triangle's depth 4: scaled by 4 / 4.5
+    line = edge * 4.0 / 4.5 - vertex[0] / 30.0
+    tri["translate"][1] += line - below * PIXEL - vertex[1]
+    scene["name"] = f"corner_junction_{size:g}px"
     return scene
 
 

@@ -28,7 +28,11 @@ Exact to first order in the distance from J, for straight edges; the closed form
 :mod:`sphere3d.closed_form.junction` (a black triangle moving across a static one's edge) checks
 it. Still biased where the two edges cross outside ``radius`` of the kernel's centre (the
 single-edge rule applies), where a third discontinuity lies between the static probes (the row
-is abandoned), and at a corner of either edge.
+is abandoned), and at a corner of either edge: where the moving silhouette's corner lies on the
+static edge (a box's corner on the ground's far edge), the kernels there hold three
+discontinuities with two motions; the closed form of
+:func:`~sphere3d.closed_form.corner_junction_scene` measures the loss (tests/sphere3d/test_junctions.py),
+and ``hard_shadow_cube``'s bias lies mostly at such a corner (the occluder-motions table).
 """
 
 from __future__ import annotations
