@@ -222,8 +222,20 @@ class Image:
         return cls(summary.mean, summary.stderr, spp, seed, np.shape(per_batch)[0], scene)
 
 
+class _OptionsFilm:
+    """What the gradient results share: their ``options`` kept read-only, their film's shape."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "options", Options(self.options))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Film shape."""
+        return self.value.shape
+
+
 @dataclass(frozen=True)
-class GradientImage:
+class GradientImage(_OptionsFilm):
     """A rendered image and its derivative with respect to one scene parameter.
 
     Attributes
@@ -263,13 +275,6 @@ class GradientImage:
     value_sum_stderr: float | None = None
     derivative_sum_stderr: float | None = None
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "options", Options(self.options))
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        """Film shape."""
-        return self.value.shape
 
     @classmethod
     def from_batches(
@@ -329,7 +334,7 @@ class GradientImage:
 
 
 @dataclass(frozen=True, eq=False)
-class GradientImages(Mapping[str, GradientImage]):
+class GradientImages(_OptionsFilm, Mapping[str, GradientImage]):
     """A rendered image and its derivatives with respect to k scene parameters, from one pass.
 
     A read-only mapping from each parameter's name to its :class:`GradientImage`
@@ -367,13 +372,6 @@ class GradientImages(Mapping[str, GradientImage]):
     value_sum_stderr: float | None = None
     derivative_sum_stderr: tuple[float, ...] | None = None
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "options", Options(self.options))
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        """Film shape."""
-        return self.value.shape
 
     @classmethod
     def from_batches(
