@@ -30,10 +30,11 @@ Biased where the kernel also holds a discontinuity not through V (a static edge:
 the corner, which keeps its own rule, :mod:`sphere3d.reparam.junctions`; an edge of another
 shape), and not applied where the ring holds one edge of V only, nor along a crease far from its
 ends, which is followed by a point of one face (the probes pair different shapes only): a 4 px
-triangle tilting, seen at 30 degrees, keeps a few per cent (the atlas). So the box of
-``hard_shadow_cube`` turning about its centre keeps most
-of its bias (about a quarter of its gradient image's RMS, at a corner on the ground's far edge
-and along a crease): the vertices' reach holds few of its samples.
+triangle tilting, seen at 30 degrees, keeps a few per cent (the atlas). The box of
+``hard_shadow_cube`` keeps most of its bias under every motion but the sideways translation where
+its corner lies on the ground's far edge (a junction at a corner, :mod:`sphere3d.reparam.junctions`),
+and under turns some along its front crease (the probes pair different shapes only): the
+occluder-motions table gives both, with and without the junction pixels.
 
 The vertices are found by a k-d tree over their film images (built once per state,
 O(V log V)); a vertex hidden behind other geometry is skipped; the mesh edges are
