@@ -46,6 +46,7 @@ __all__ = [
     "connect",
     "map_chunks",
     "map_tiles",
+    "prepare",
     "tile_count",
     "tile_ranges",
     "workers",
@@ -118,6 +119,16 @@ def _heap_for_temporaries() -> Any:
     m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
     done = bool(mallopt(m_mmap_threshold, 32 << 20)) and bool(mallopt(m_trim_threshold, 512 << 20))
     return libc if done else None
+
+
+def prepare(transforms: Any, state: Any) -> None:
+    """Build the per-state tables a method names, ``transforms.tables(state)`` (an optional hook of
+    :class:`~sphere3d.integrator.Transforms`: builders :func:`~sphere3d.state.per_state` keeps), on the
+    threads at once, before the chunks: otherwise the first chunks ask for them one after the other,
+    each thread waiting for the one building. Changes no number (a table is what its builder makes)."""
+    builders = tuple(getattr(transforms, "tables", lambda _: ())(state))
+    if builders:
+        map_chunks(lambda i: builders[i](state), range(len(builders)), counted=False)
 
 
 def map_chunks(func: Callable[[int], Any], items: range, counted: bool = True) -> list[Any]:

@@ -166,6 +166,7 @@ class ImageTask:
         if execution.client() is not None:
             return self._on_cluster(theta, transforms)
         state = build_state(self.scene, self.param, theta, self.tracer)
+        execution.prepare(transforms, state)  # the method's per-state tables, built at once
         batches, per_batch = self.batches, self.spp // self.batches
         chunk = functools.partial(self._chunk, state, transforms)
         chunks = range(self._chunk_count())

@@ -275,7 +275,6 @@ class GradientImage(_OptionsFilm):
     value_sum_stderr: float | None = None
     derivative_sum_stderr: float | None = None
 
-
     @classmethod
     def from_batches(
         cls,
@@ -371,7 +370,6 @@ class GradientImages(_OptionsFilm, Mapping[str, GradientImage]):
     scene: str = ""
     value_sum_stderr: float | None = None
     derivative_sum_stderr: tuple[float, ...] | None = None
-
 
     @classmethod
     def from_batches(

@@ -20,6 +20,7 @@ what each extension adds and why.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,13 +29,22 @@ import numpy as np
 from flatland.core.dual import Dual, detach
 from flatland.core.rng import Draws
 from flatland.core.translation import unit_weight
-from sphere3d.boundary.emitters import emitter_edge_term
+from sphere3d.boundary.emitters import edge_table, emitter_edge_term
 from sphere3d.film import FilmTransform
 from sphere3d.integrator import EmitterChange, Identity, Members, Shading
 from sphere3d.reparam.emitter_probes import PROBES, emitter_rotation
-from sphere3d.reparam.film_kernel import KAPPA_FILM, film_transform
+from sphere3d.reparam.film_affine import _shape_images
+from sphere3d.reparam.film_corners import _corner_table
+from sphere3d.reparam.film_kernel import (
+    KAPPA_FILM,
+    _film_hull,
+    _moving_vertices,
+    _plane_table,
+    film_transform,
+)
+from sphere3d.reparam.penumbra import moving_sphere, separating_planes
 from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
-from sphere3d.reparam.shading_affine import inner_shape_map
+from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
 from sphere3d.reparam.snaps import angle_snap
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import sample_cosine_hemisphere, sample_vmf, vmf_hemisphere_fraction
@@ -121,6 +131,18 @@ class ReparamTransforms(Identity):
     film_corners: bool = True
     baseline: bool = True
     shading_shapes: bool = True
+
+    def tables(self, state: SceneState) -> tuple[Callable[[SceneState], Any], ...]:
+        """The per-state tables the options read where triangles move (:func:`sphere3d.execution.prepare`
+        builds them at once); none otherwise (each is then asked for only where its rule applies)."""
+        if not state.dual or not _moving_vertices(state).any():
+            return ()
+        film = (
+            (_film_hull, _plane_table)
+            + (_shape_images,) * self.film_shapes
+            + (_corner_table,) * self.film_corners
+        )
+        return (*film, separating_planes, moving_sphere, edge_table) + (_moving_shapes,) * self.shading_shapes
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
