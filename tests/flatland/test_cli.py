@@ -194,10 +194,19 @@ def test09_parameter_names_are_exactly_those_parse_parameter_accepts():
     )
     names = parameter_names(scene)
     # camera: translate.x|y, rotate (3); circle: translate.x|y, scale, emission, albedo (5);
-    # triangle: translate.x|y, rotate, scale, vertex.0-2.x|y, emission, albedo (12)
-    assert len(names) == 3 + 5 + 12 == len(set(names))
+    # triangle: translate.x|y, rotate, scale, vertex.0-2.x|y, shape.0-2 (orders 0 and 1: 3 vertices
+    # allow no order 2), emission, albedo (15)
+    assert len(names) == 3 + 5 + 15 == len(set(names))
     assert all(parse_parameter(scene, name).name == name for name in names)
-    for refused in ("ball.rotate", "ball.vertex.0.x", "tri.vertex.3.x", "camera.scale"):
+    refused_names = (
+        "ball.rotate",
+        "ball.vertex.0.x",
+        "tri.vertex.3.x",
+        "camera.scale",
+        "ball.shape.0",
+        "tri.shape.3",
+    )
+    for refused in refused_names:
         assert refused not in names
         with pytest.raises(ValidationError):
             parse_parameter(scene, refused)
