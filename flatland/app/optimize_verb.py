@@ -36,14 +36,16 @@ def add_optimize(verbs: Any, pkg: Package, common: Any, scene_arg: Any) -> None:
     scene_arg(p)
     p.add_argument(
         "--param", action="append", default=None, required=True,
-        help="a parameter to recover (repeat for several), e.g. occluder.translate.x",
+        help="a parameter to recover (repeat for several), e.g. occluder.translate.x (no default: required)",
     )  # fmt: skip
-    p.add_argument("--target", default=None, help="target image: .npy of the camera's pixels")
+    p.add_argument("--target", default=None, help="target image: .npy of the camera's pixels (default: none)")
     p.add_argument(
         "--target-theta", type=float, nargs="+", default=None,
-        help="or render the target at these offsets, one per --param",
+        help="or render the target at these offsets, one per --param (default: none)",
     )  # fmt: skip
-    p.add_argument("--target-spp", type=int, default=1024, help="samples per pixel of --target-theta (1024)")
+    p.add_argument(
+        "--target-spp", type=int, default=1024, help="samples per pixel of --target-theta (default 1024)"
+    )
     p.add_argument("--steps", type=int, default=100, help="Adam steps (default 100)")
     p.add_argument("--lr", type=float, default=0.02, help="first step size per parameter (default 0.02)")
     p.add_argument("--decay", type=float, default=0.1, help="the step shrinks to lr x decay (default 0.1)")
