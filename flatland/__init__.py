@@ -3,7 +3,8 @@
 Textbook 1D integrals (:mod:`flatland.integrals`) with the four estimators of
 :mod:`flatland.textbook` behind :func:`estimate`; 2D scenes (:mod:`flatland.scene`)
 rendered with :func:`render` and differentiated with :func:`render_gradient` by the
-same four methods (:mod:`flatland.methods`); all on forward-mode AD (:mod:`flatland.core`).
+same four methods (:mod:`flatland.methods`); parameters recovered from target images with
+:func:`optimize` (:mod:`flatland.optimize`); all on forward-mode AD (:mod:`flatland.core`).
 
 The names below are imported on first use (PEP 562), so ``import flatland.core.dual``
 or ``import sphere3d`` loads the numeric kernel :mod:`flatland.core` without the 2D
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
         variable,
     )
     from flatland.integrals import INTEGRALS, get_integral
+    from flatland.optimize import optimize
     from flatland.render import GRADIENT_METHODS, irradiance, render, render_gradient
     from flatland.scene import Scene, list_scenes, load_scene
     from flatland.textbook import METHODS, estimate
@@ -42,6 +44,7 @@ _SOURCES = {
     ),
     "flatland.textbook": ("METHODS", "estimate"),
     "flatland.integrals": ("INTEGRALS", "get_integral"),
+    "flatland.optimize": ("optimize",),
     "flatland.render": ("GRADIENT_METHODS", "irradiance", "render", "render_gradient"),
     "flatland.scene": ("Scene", "list_scenes", "load_scene"),
 }  # fmt: skip
@@ -65,6 +68,7 @@ __all__ = [
     "irradiance",
     "list_scenes",
     "load_scene",
+    "optimize",
     "relative_error",
     "render",
     "render_gradient",

@@ -1,4 +1,5 @@
-"""``python -m flatland demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.app.cli`).
+"""``python -m flatland demo | render SCENE | gradient SCENE | study CONFIG | optimize SCENE`` (see
+:mod:`flatland.app.cli`).
 
 ``demo`` also prints the textbook table (:mod:`flatland.textbook_report`): every
 estimator on every textbook integral next to its closed form. Every film figure of ``demo``,
@@ -16,6 +17,7 @@ from typing import Any
 from flatland.app.cli import Package
 from flatland.app.cli import main as _main
 from flatland.integrals import INTEGRALS as _INTEGRALS
+from flatland.optimize import optimize, render_targets
 from flatland.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from flatland.scene import list_scenes, load_scene, parameter_names
 from flatland.textbook import METHODS as _ESTIMATORS
@@ -114,6 +116,8 @@ PACKAGE = Package(
     integrals=_INTEGRALS,
     estimate=_estimate,
     estimators=_ESTIMATORS,
+    optimize=optimize,
+    render_targets=render_targets,
 )
 """What the command line and the study runner (:mod:`flatland.app`) need to know about flatland."""
 

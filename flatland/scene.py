@@ -40,7 +40,23 @@ scene as loaded, and gradients are taken at θ = 0:
 ``NAME.albedo``                  add θ to the shape's albedo
 ``camera.translate.x`` / ``.y``  move the camera
 ``camera.rotate``                turn the camera by θ radians (counter-clockwise)
+``NAME.shape.K``                 a polygon's radial Fourier coefficient K: add
+                                 $θ (p_i - c) B_K(φ_i)$ to each vertex $p_i$
 ===============================  =================================================
+
+Shape coefficients deform a polygon smoothly along its radii: vertex i at angle $φ_i$ and
+distance $r_i$ from the centre c (both of the polygon as loaded) moves to radius
+$r_i (1 + Σ_K θ_K B_K(φ_i))$, with $B_0 = 1$, $B_{2m-1} = \cos mφ$, $B_{2m} = \sin mφ$ for
+orders $m = 1 … M$, $M = \min(4, ⌊(n - 1)/2⌋)$ for n vertices (no order at or above the Nyquist
+order n/2 of the vertices, at most 9 coefficients). The deformation is linear in θ, so offsets
+add exactly, and with every coefficient 0 the polygon is unchanged bit for bit. A circle has no
+shape coefficients (its ray intersection and tangent points are closed forms of a circle): a round
+shape to deform is a polygon with many vertices.
+
+A scene may carry ``offsets`` (``{"occluder.translate.x": 0.3}``): parameter offsets applied
+on load, so the scene as rendered is the scene as written moved by them, and a gradient is
+taken at those offsets (:func:`flatland.state.moved_scene` adds to them; every parameter of
+the table composes additively with its own offset, a scale's factor being $1 + θ$ in total).
 
 :func:`flatland.state.build_state` turns (scene, parameter, θ) into a
 :class:`~flatland.state.SceneState`, the flat arrays the ray caster and renderer use.
@@ -84,7 +100,9 @@ __all__ = [
 SHAPE_TYPES = ("segment", "polyline", "polygon", "circle")
 FILTERS = ("box", "tent", "gaussian")
 _MIN_POINTS = {"segment": 2, "polyline": 2, "polygon": 3}
-_TOP_KEYS = ("name", "description", "camera", "sky", "shapes", "parameters")
+_TOP_KEYS = ("name", "description", "camera", "sky", "shapes", "parameters", "offsets")
+MAX_SHAPE_ORDER = 4
+"""Highest Fourier order of a polygon's shape coefficients (``NAME.shape.K``): at most 2 · 4 + 1 = 9."""
 _CAMERA_KEYS = ("position", "direction", "fov", "pixels", "filter")
 _COMMON_SHAPE_KEYS = ("name", "type", "albedo", "emission", "one_sided")
 _SHAPE_KEYS = {
@@ -142,6 +160,13 @@ class Shape:
         pairs = [(i, i + 1) for i in range(n - 1)]
         return [*pairs, (n - 1, 0)] if self.type == "polygon" else pairs
 
+    def shape_terms(self) -> int:
+        r"""How many shape coefficients ``NAME.shape.K`` the shape has: $2M + 1$ for a polygon of n
+        vertices, $M = \min(4, ⌊(n - 1)/2⌋)$ (see the module docstring); 0 for other shapes."""
+        if self.type != "polygon":
+            return 0
+        return 2 * min(MAX_SHAPE_ORDER, (len(self.points) - 1) // 2) + 1
+
     def centre(self) -> np.ndarray:
         """The centre rotations and scalings act about: the mean of the points, or the circle's centre."""
         if self.type == "circle":
@@ -159,6 +184,7 @@ class Scene:
     shapes: tuple[Shape, ...]
     parameters: tuple[str, ...] = ()
     description: str = ""
+    offsets: tuple[tuple[str, float], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The scene as a JSON-ready dict; ``load_scene(scene.to_dict()) == scene``."""
@@ -188,6 +214,7 @@ class Scene:
             "sky": self.sky,
             "shapes": shapes,
             "parameters": list(self.parameters),
+            **({"offsets": dict(self.offsets)} if self.offsets else {}),
         }
 
     def shape(self, name: str) -> Shape:
@@ -337,7 +364,9 @@ def _from_dict(d: Any) -> Scene:
     from flatland.state import parse_parameter  # state.py builds on this module: imported on use
 
     params = tuple(parse_parameter(scene, p, field=f"parameters[{k}]").name for k, p in enumerate(raw_params))
-    return replace(scene, parameters=params)
+    from flatland.state import check_offsets
+
+    return replace(scene, parameters=params, offsets=check_offsets(scene, d.get("offsets", {})))
 
 
 def _scene_dir() -> Any:
@@ -377,7 +406,8 @@ def parameter_names(scene: Scene) -> tuple[str, ...]:
     """Every parameter name :func:`~flatland.state.parse_parameter` accepts for ``scene``, in scene order.
 
     The camera's three, then per shape ``translate.x|y``, ``rotate`` (not circles),
-    ``scale``, ``vertex.K.x|y`` for each point, ``emission`` and ``albedo``.
+    ``scale``, ``vertex.K.x|y`` for each point, ``shape.K`` (polygons: :meth:`Shape.shape_terms`),
+    ``emission`` and ``albedo``.
     ``scene.parameters`` holds only the ones the scene file declares.
     """
     names = ["camera.translate.x", "camera.translate.y", "camera.rotate"]
@@ -386,5 +416,6 @@ def parameter_names(scene: Scene) -> tuple[str, ...]:
         names += [] if shape.type == "circle" else [f"{shape.name}.rotate"]
         names.append(f"{shape.name}.scale")
         names += [f"{shape.name}.vertex.{k}.{axis}" for k in range(len(shape.points)) for axis in "xy"]
+        names += [f"{shape.name}.shape.{k}" for k in range(shape.shape_terms())]
         names += [f"{shape.name}.emission", f"{shape.name}.albedo"]
     return tuple(names)

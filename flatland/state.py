@@ -10,6 +10,11 @@ parameters with a tuple of k offsets, each applied to what it names in turn; wit
 offsets :func:`~flatland.core.dual.variables` ``(k)`` (the seeds e_i) the arrays carry
 k tangents, slot i the derivative with respect to parameter i. The ray caster
 (:mod:`flatland.tracing`) traces the detached state and re-attaches hits to this one.
+
+A scene's own ``offsets`` (:mod:`flatland.scene`) are applied first, in their order; a parameter
+passed to :func:`build_state` that the scene already offsets gets the sum of both in that slot, so
+the state is that of the scene as written at the summed offsets, and a derivative taken at a moved
+scene (:func:`moved_scene`) is the derivative at those offsets, for every kind of parameter.
 """
 
 from __future__ import annotations
@@ -21,10 +26,19 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, k_of
-from flatland.core.validate import ValidationError
+from flatland.core.validate import ValidationError, check_finite
 from flatland.scene import Camera, Scene, Shape
 
-__all__ = ["Parameter", "SceneState", "build_state", "parse_parameter", "parse_parameters"]
+__all__ = [
+    "Parameter",
+    "SceneState",
+    "build_state",
+    "check_offsets",
+    "moved_scene",
+    "parse_parameter",
+    "parse_parameters",
+    "shape_basis",
+]
 
 
 @dataclass(frozen=True)
@@ -33,9 +47,9 @@ class Parameter:
 
     name: str
     target: str  # shape name or "camera"
-    kind: str  # translate, rotate, scale, vertex, emission, albedo
+    kind: str  # translate, rotate, scale, vertex, shape, emission, albedo
     axis: int = -1  # 0 for x, 1 for y (translate, vertex)
-    index: int = -1  # vertex index
+    index: int = -1  # vertex index, or shape coefficient index
 
 
 def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
@@ -72,7 +86,13 @@ def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
         if shape.type == "circle" or k >= len(shape.points):
             raise bad(f"shape {target!r} has {len(shape.points)} vertices")
         return Parameter(name, target, "vertex", axis=axes[rest[2]], index=k)
-    raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, emission or albedo")
+    if len(rest) == 2 and rest[0] == "shape" and rest[1].isdigit():
+        k, terms = int(rest[1]), shape.shape_terms()
+        if k >= terms:
+            has = f"shape.0 to shape.{terms - 1}" if terms else "no shape coefficients (polygons have them)"
+            raise bad(f"shape {target!r} ({shape.type}, {len(shape.points)} points) has {has}")
+        return Parameter(name, target, "shape", index=k)
+    raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, shape.K, emission or albedo")
 
 
 def parse_parameters(scene: Scene, names: Any, field: str = "param") -> tuple[Parameter, ...]:
@@ -160,6 +180,20 @@ def _moved_points(shape: Shape, moves: tuple[tuple[Parameter, Any], ...]) -> Any
     return pts
 
 
+def shape_basis(shape: Shape, k: int) -> np.ndarray:
+    r"""The displacement of every vertex per unit of the shape coefficient k: $(p_i - c) B_k(φ_i)$.
+
+    $p_i$ are the polygon's points as loaded, c their mean and $φ_i$ the angle of $p_i - c$;
+    $B_0 = 1$, $B_{2m-1} = \cos mφ$, $B_{2m} = \sin mφ$ (the table of :mod:`flatland.scene`). Shape
+    (n, 2).
+    """
+    d = np.array(shape.points, dtype=np.float64) - shape.centre()
+    phi = np.arctan2(d[:, 1], d[:, 0])
+    order = (k + 1) // 2
+    basis = np.ones_like(phi) if k == 0 else np.cos(order * phi) if k % 2 else np.sin(order * phi)
+    return d * basis[:, None]
+
+
 def _move(shape: Shape, pts: Any, p: Parameter, theta: Any) -> Any:
     """``pts`` with the shape's parameter ``p`` at offset ``theta``."""
     if p.kind == "translate":
@@ -173,7 +207,72 @@ def _move(shape: Shape, pts: Any, p: Parameter, theta: Any) -> Any:
         mask = np.zeros_like(pts)
         mask[p.index, p.axis] = 1.0
         return pts + theta * mask
+    if p.kind == "shape":  # linear in θ: offsets add exactly; θ = 0 adds ±0.0, the points bit for bit
+        return pts + theta * shape_basis(shape, p.index)
     return pts
+
+
+def _moves(scene: Scene, param: Any, theta: Any) -> tuple[tuple[Parameter, Any], ...]:
+    """(parameter, offset) pairs to apply in order: the scene's own offsets (a parameter also in
+    ``param`` gets the sum in its slot; a plain 0.0 is skipped, the identity), then ``param``'s others."""
+    if isinstance(param, tuple | list):
+        params = [parse_parameter(scene, q) if isinstance(q, str) else q for q in param]
+        offsets = list(theta) if isinstance(theta, tuple | list) else [theta] * len(params)
+        if len(offsets) != len(params):
+            raise ValueError(
+                f"theta: {len(params)} parameters need {len(params)} offsets, got {len(offsets)}"
+            )
+        given = list(zip(params, offsets, strict=True))
+    else:
+        p = parse_parameter(scene, param) if isinstance(param, str) else param
+        given = [] if p is None else [(p, theta)]
+    extra = {p.name: (p, t) for p, t in given}
+    moves = []
+    for name, base in scene.offsets:
+        if name in extra:
+            p, t = extra.pop(name)
+            moves.append((p, base + t))
+        elif base != 0.0:
+            moves.append((parse_parameter(scene, name), base))
+    return (*moves, *extra.values())
+
+
+def check_offsets(scene: Scene, offsets: Any, field: str = "offsets") -> tuple[tuple[str, float], ...]:
+    """A mapping (or pairs) from parameter names to finite offsets, checked against ``scene``: one
+    ValidationError naming ``field`` when a name is unknown or the offsets leave an albedo outside
+    [0, 1], an emission below 0 or a scale factor $1 + θ$ at or below 0."""
+    pairs = list(offsets.items()) if isinstance(offsets, dict) else offsets
+    if not isinstance(pairs, list | tuple):
+        raise ValidationError(field, f"must map parameter names to offsets, got {offsets!r}")
+    out = []
+    for name, value in pairs:
+        p = parse_parameter(scene, name, field)
+        out.append((p.name, check_finite(f"{field}[{name!r}]", value)))
+    for p, theta in ((parse_parameter(scene, n), t) for n, t in out):
+        base = scene.shape(p.target) if p.target != "camera" else None
+        if p.kind == "albedo" and not 0.0 <= base.albedo + theta <= 1.0:
+            raise ValidationError(
+                field, f"{p.name} = {theta!r} leaves the albedo {base.albedo + theta!r}, not in [0, 1]"
+            )
+        if p.kind == "emission" and base.emission + theta < 0.0:
+            raise ValidationError(
+                field, f"{p.name} = {theta!r} leaves the emission {base.emission + theta!r} < 0"
+            )
+        if p.kind == "scale" and not 1.0 + theta > 0.0:
+            raise ValidationError(field, f"{p.name} = {theta!r} makes the scale factor 1 + θ <= 0")
+    return tuple(out)
+
+
+def moved_scene(scene: Scene, params: Any, theta: Any) -> Scene:
+    """``scene`` moved by the offsets ``theta`` of ``params`` (added to the scene's own offsets):
+    rendering it renders the scene at those offsets, and differentiating it with respect to
+    ``params`` differentiates there (the offsets of :mod:`flatland.scene`)."""
+    names = [params] if isinstance(params, str) else list(params)
+    values = np.broadcast_to(np.asarray(theta, dtype=np.float64), (len(names),))
+    merged = dict(scene.offsets)
+    for name, value in zip(names, values, strict=True):
+        merged[parse_parameter(scene, name).name] = merged.get(name, 0.0) + float(value)
+    return replace(scene, offsets=check_offsets(scene, merged))
 
 
 def build_state(
@@ -186,17 +285,7 @@ def build_state(
     parameters takes a sequence of k offsets, applied in order (e.g. ``variables(k)``:
     the state's Duals then carry k tangents), or one offset for all of them.
     """
-    if isinstance(param, tuple | list):
-        params = [parse_parameter(scene, q) if isinstance(q, str) else q for q in param]
-        offsets = list(theta) if isinstance(theta, tuple | list) else [theta] * len(params)
-        if len(offsets) != len(params):
-            raise ValueError(
-                f"theta: {len(params)} parameters need {len(params)} offsets, got {len(offsets)}"
-            )
-        moves = tuple(zip(params, offsets, strict=True))
-    else:
-        p = parse_parameter(scene, param) if isinstance(param, str) else param
-        moves = () if p is None else ((p, theta),)
+    moves = _moves(scene, param, theta)
     seg_a, seg_b, seg_shape, seg_fade, seg_one = [], [], [], [], []
     circ_c, circ_r, circ_shape, circ_one = [], [], [], []
     vertices = []

@@ -39,7 +39,7 @@ PACKAGES = [
     ),
 ]
 SHARED_METHODS = ("naive", "finite_difference", "reparam")
-VERBS = ("demo", "render", "gradient", "study")
+VERBS = ("demo", "render", "gradient", "study", "optimize")
 PARAM = "occluder.translate.x"
 DEEP = 100_000
 """Nesting depth of the deep JSON files: far past Python's recursion limit (1000)."""

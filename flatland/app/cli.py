@@ -15,6 +15,9 @@ Verbs (the same in both packages; implemented in :mod:`flatland.app.commands`):
     ``value``, ``value_stderr``). Without ``--param`` it names the scene's parameters.
 ``study CONFIG``
     A study (:mod:`flatland.app.study`): CSV and figures in ``--out``.
+``optimize SCENE --param P [--param P2 ...] (--target FILE.npy | --target-theta V ...)``
+    Recover the parameters from a target image by Adam (:mod:`flatland.app.optimize_verb`): the
+    images, the loss curve and the history in ``--out``.
 
 ``SCENE`` is a built-in scene name (listed by ``render --help``) or a JSON file;
 ``--method`` offers the methods of the package's method table. Without a verb the
@@ -43,6 +46,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from flatland.app.commands import UsageError, verb_demo, verb_gradient, verb_render, verb_study
+from flatland.app.optimize_verb import add_optimize
 from flatland.core.contract import MethodTable
 from flatland.core.validate import ValidationError, check_int, check_seed
 
@@ -119,6 +123,10 @@ class Package:
         The package's ``render`` and ``render_gradient`` take ``scheduler=`` (a ``dask.distributed``
         scheduler address): ``render`` and ``gradient`` then take ``--scheduler``. False (the
         default): no such option.
+    optimize, render_targets : callable, optional
+        The package's ``optimize(scene, params, targets, method=, steps=, lr=, decay=, spp=, seed=,
+        progress=)`` (:func:`flatland.optimize.optimize`) and ``render_targets(scene, params, theta,
+        spp=, seed=)``; None: the ``optimize`` verb refuses with one line.
     sketch : callable, optional
         ``sketch(ax, scene, param)`` draws a scene (and what ``param`` moves; None:
         nothing) into a matplotlib Axes; the figures of ``demo``, ``render`` and
@@ -154,6 +162,8 @@ class Package:
     sketch: Callable[[Any, Any, str | None], Any] | None = None
     films: tuple[str, ...] = ()
     cluster: bool = False
+    optimize: Callable[..., Any] | None = None
+    render_targets: Callable[..., Any] | None = None
 
     def plot(self, kind: str) -> Callable[..., Any]:
         """The figure writer ``plot_<kind>``: the package's own, else the shared one (imported now)."""
@@ -173,7 +183,7 @@ class _Parser(argparse.ArgumentParser):
 # ---------------------------------------------------------------------------------------------- helpers
 def _check_counts(args: argparse.Namespace) -> None:
     """Counts and seed parsed as plain ints are checked here, so errors read ``spp: must be ...``."""
-    for name in ("spp", "batches", "probes", "workers"):
+    for name in ("spp", "batches", "probes", "workers", "steps", "target_spp"):
         if getattr(args, name, None) is not None:
             check_int(name, getattr(args, name))
     if args.seed is not None:
@@ -276,6 +286,7 @@ def _parser(pkg: Package) -> _Parser:
     study.add_argument("--cache-dir", default=None, help="reference cache (default OUT/.cache/reparam-lab)")
     common(study, "replace every cell's samples per trial, n or spp (default: keep them)", None, seed=None)
     study.set_defaults(func=verb_study)
+    add_optimize(verbs, pkg, common, scene_arg)
     return parser
 
 

@@ -25,7 +25,7 @@ chunk (:func:`advance`); a method that makes several passes says how many first
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -33,7 +33,7 @@ from typing import Any
 
 from flatland.core.validate import ValidationError
 
-__all__ = ["DELAY", "advance", "expect", "run", "show", "silenced", "start"]
+__all__ = ["DELAY", "advance", "expect", "run", "show", "silenced", "start", "steps"]
 
 DELAY = 2.0
 """Seconds a call runs before its bar appears: shorter calls print nothing."""
@@ -93,6 +93,33 @@ def silenced() -> Iterator[None]:
     """Calls inside show no bar (a study's trials, run under the study's own bar or in a worker)."""
     with run("", False):
         yield
+
+
+@contextmanager
+def steps(desc: str, total: int, progress: bool | None) -> Iterator[Callable[[str], None]]:
+    """A bar over the ``total`` steps of an outer loop (an optimisation): yields ``step(text)``, which
+    advances it by one step and shows ``text`` (e.g. the loss) beside it. The renders inside show no
+    bar of their own (:func:`silenced`); inside another call's bar, nothing new."""
+    wanted = show(progress)
+    bar = None
+    if wanted and _CURRENT.get() is None:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=total, desc=desc, unit="step", file=sys.stderr, delay=DELAY, leave=False, dynamic_ncols=True
+        )
+
+    def step(text: str) -> None:
+        if bar is not None:
+            bar.set_postfix_str(text, refresh=False)
+            bar.update(1)
+
+    try:
+        with silenced():
+            yield step
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def expect(passes: int) -> None:

@@ -194,10 +194,19 @@ def test09_parameter_names_are_exactly_those_parse_parameter_accepts():
     )
     names = parameter_names(scene)
     # camera: translate.x|y, rotate (3); circle: translate.x|y, scale, emission, albedo (5);
-    # triangle: translate.x|y, rotate, scale, vertex.0-2.x|y, emission, albedo (12)
-    assert len(names) == 3 + 5 + 12 == len(set(names))
+    # triangle: translate.x|y, rotate, scale, vertex.0-2.x|y, shape.0-2 (orders 0 and 1: 3 vertices
+    # allow no order 2), emission, albedo (15)
+    assert len(names) == 3 + 5 + 15 == len(set(names))
     assert all(parse_parameter(scene, name).name == name for name in names)
-    for refused in ("ball.rotate", "ball.vertex.0.x", "tri.vertex.3.x", "camera.scale"):
+    refused_names = (
+        "ball.rotate",
+        "ball.vertex.0.x",
+        "tri.vertex.3.x",
+        "camera.scale",
+        "ball.shape.0",
+        "tri.shape.3",
+    )
+    for refused in refused_names:
         assert refused not in names
         with pytest.raises(ValidationError):
             parse_parameter(scene, refused)
@@ -313,3 +322,33 @@ def test17_finite_difference_step_too_large_for_a_scale_parameter(tmp_path):
     )
     assert lines[0] == f"error: {expected}"
     assert not any(tmp_path.iterdir())
+
+
+def test18_optimize_writes_images_loss_and_history_and_refuses_bad_targets(tmp_path, scene_file, capsys):
+    """``optimize``: from --target-theta and from a ``render`` .npy; a wrong-size target, a missing target
+    and a parameter count that does not match --target-theta are one line and status 2."""
+    argv = ["optimize", str(scene_file), "--param", "occluder.translate.x", "--param", "occluder.albedo"]
+    small = ["--steps", "3", "--spp", "4", "--target-spp", "16", "--quiet", "--out", str(tmp_path)]
+    assert main([*argv, "--target-theta", "0.1", "0.2", *small]) == 0
+    out = capsys.readouterr().out
+    assert "occluder.translate.x = " in out and "loss " in out
+    for suffix in ("_images.png", "_loss.png"):
+        assert mpimg.imread(tmp_path / f"small_shadow_optimize_reparam{suffix}").shape[0] > 100
+    history = np.loadtxt(tmp_path / "small_shadow_optimize_reparam.csv", delimiter=",", skiprows=1)
+    assert history.shape == (4, 5)  # steps 0-3: step, loss, seconds and the two parameters
+    assert main(["render", str(scene_file), "--spp", "4", "--quiet", "--out", str(tmp_path)]) == 0
+    assert main([*argv, "--target", str(tmp_path / "small_shadow.npy"), *small]) == 0
+    capsys.readouterr()
+    np.save(tmp_path / "wrong.npy", np.zeros(7))
+    cases = {
+        "--target": (
+            ["--target", str(tmp_path / "wrong.npy")],
+            "error: targets[0]: must be an image of the view's 24",
+        ),
+        "none": ([], "error: optimize: give exactly one of --target FILE.npy and --target-theta"),
+        "count": (["--target-theta", "0.1"], "error: target-theta: needs one offset per --param (2)"),
+    }
+    for extra, message in cases.values():
+        assert main([*argv, *extra, *small]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(message), lines

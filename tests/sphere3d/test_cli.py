@@ -140,3 +140,10 @@ def test06_film_option_chooses_the_film_and_a_bad_one_is_one_line(tmp_path, scen
     capsys.readouterr()
     assert main(["gradient", str(scene_file), "--param", "occluder.translate.x", "--film", "box"]) == 2
     assert capsys.readouterr().err == "error: film: must be one of splat, pixel; got 'box'\n"
+
+
+def test07_optimize_is_refused_in_one_line_until_render_gradient_takes_lists(tmp_path, capsys):
+    argv = ["optimize", "shadow", "--param", "occluder.translate.x", "--target-theta", "0.1"]
+    assert main([*argv, "--out", str(tmp_path)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: optimize: sphere3d has no optimize yet"), lines

@@ -1,0 +1,285 @@
+r"""Inverse rendering in flatland: recover parameter offsets from target images seen by one or more cameras.
+
+:func:`optimize` checks its inputs and runs the shared optimiser :func:`flatland.core.optimize.descend`
+(Adam on $L(θ) = Σ_v Σ_j (I_{vj}(θ) - I^*_{vj})^2$) with flatland's renderer injected: the scene at θ
+is :func:`flatland.state.moved_scene` (the scene's ``offsets``, so the derivative of
+:func:`~flatland.render.render_gradient` there is the derivative at θ for every kind of parameter),
+and a view is a :class:`~flatland.scene.Camera` put in place of the scene's. :func:`render_targets`
+renders the targets of a known θ, :func:`silhouette_iou` compares a shape's silhouettes.
+
+A parameter's default bounds keep the scene valid: an albedo offset keeps the albedo in [0, 1], an
+emission offset keeps the emission >= 0, a scale offset keeps the factor $1 + θ >= 0.05$; the others
+are unbounded unless ``bounds`` says otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from flatland.core.optimize import OptimizeResult, Views, descend
+from flatland.core.validate import ValidationError, check_finite, check_int, check_positive, check_seed
+from flatland.methods import GRADIENT_METHODS
+from flatland.render import render, render_gradient
+from flatland.scene import Camera, Scene, load_scene
+from flatland.state import moved_scene, parse_parameters
+
+__all__ = ["film_interval", "optimize", "render_targets", "silhouette_iou"]
+
+MIN_SCALE = 0.05
+"""The smallest scale factor $1 + θ$ a scale parameter's default bounds allow."""
+
+
+def _cameras(scene: Scene, views: Any) -> tuple[Camera, ...]:
+    """The views as cameras: None -> the scene's; else a non-empty list of Cameras or camera dicts."""
+    if views is None:
+        return (scene.camera,)
+    if isinstance(views, Camera | Mapping | str) or not isinstance(views, Sequence) or not views:
+        raise ValidationError("views", f"must be a non-empty list of cameras, got {views!r}")
+    cameras = []
+    for i, view in enumerate(views):
+        if isinstance(view, Camera):
+            cameras.append(view)
+        elif isinstance(view, Mapping):
+            d = scene.to_dict()
+            d["camera"] = dict(view)
+            try:
+                cameras.append(load_scene(d).camera)
+            except ValidationError as e:
+                raise ValidationError(f"views[{i}]", str(e)) from None
+        else:
+            raise ValidationError(f"views[{i}]", f"must be a Camera or a camera dict, got {view!r}")
+    return tuple(cameras)
+
+
+def _targets(targets: Any, cameras: tuple[Camera, ...]) -> np.ndarray:
+    """One finite image per view, each of its camera's width: shape ``(V, pixels)``."""
+    if isinstance(targets, np.ndarray) and targets.ndim == 1 and len(cameras) == 1:
+        targets = [targets]
+    if isinstance(targets, str | Mapping) or not hasattr(targets, "__len__") or len(targets) != len(cameras):
+        raise ValidationError(
+            "targets", f"must hold one image per view ({len(cameras)} views), got {_describe(targets)}"
+        )
+    images = []
+    for i, (target, camera) in enumerate(zip(targets, cameras, strict=True)):
+        image = np.asarray(target, dtype=np.float64) if _numeric(target) else None
+        if image is None or image.shape != (camera.pixels,):
+            raise ValidationError(
+                f"targets[{i}]",
+                f"must be an image of the view's {camera.pixels} pixels, got {_describe(target)}",
+            )
+        if not np.all(np.isfinite(image)):
+            raise ValidationError(f"targets[{i}]", "must be finite (it holds NaN or inf)")
+        images.append(image)
+    if len({im.shape for im in images}) > 1:
+        raise ValidationError("targets", "views of different widths cannot share one loss array")
+    return np.stack(images)
+
+
+def _numeric(x: Any) -> bool:
+    try:
+        return np.asarray(x).dtype.kind in "iuf"
+    except (TypeError, ValueError):
+        return False
+
+
+def _describe(x: Any) -> str:
+    shape = np.shape(x) if _numeric(x) else None
+    return f"an array of shape {shape}" if shape is not None else repr(x)[:80]
+
+
+def _bounds(scene: Scene, params: tuple[Any, ...], bounds: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of each offset: ``bounds[name] = (lo, hi)``, or the module docstring's."""
+    bounds = {} if bounds is None else bounds
+    if not isinstance(bounds, Mapping):
+        raise ValidationError("bounds", f"must map parameter names to (low, high), got {bounds!r}")
+    names = [p.name for p in params]
+    for name in bounds:
+        if name not in names:
+            raise ValidationError("bounds", f"{name!r} is not one of the parameters {names}")
+    lower, upper = np.full(len(params), -np.inf), np.full(len(params), np.inf)
+    for i, p in enumerate(params):
+        shape = scene.shape(p.target) if p.target != "camera" else None
+        if p.kind == "albedo":
+            lower[i], upper[i] = -shape.albedo, 1.0 - shape.albedo
+        elif p.kind == "emission":
+            lower[i] = -shape.emission
+        elif p.kind == "scale":
+            lower[i] = MIN_SCALE - 1.0
+        if p.name in bounds:
+            pair = bounds[p.name]
+            if not isinstance(pair, Sequence) or len(pair) != 2:
+                raise ValidationError(f"bounds[{p.name!r}]", f"must be a pair (low, high), got {pair!r}")
+            lo, hi = (check_finite(f"bounds[{p.name!r}]", v) for v in pair)
+            if not lower[i] <= lo <= 0.0 <= hi <= upper[i]:
+                raise ValidationError(
+                    f"bounds[{p.name!r}]",
+                    f"must satisfy {lower[i]:g} <= low <= 0 <= high <= {upper[i]:g} (offsets from the scene),"
+                    f" got {pair!r}",
+                )
+            lower[i], upper[i] = lo, hi
+    return lower, upper
+
+
+def _lr(lr: Any, k: int) -> np.ndarray:
+    values = np.atleast_1d(np.asarray(lr, dtype=np.float64)) if _numeric(lr) else None
+    if values is None or values.ndim != 1 or values.size not in (1, k):
+        raise ValidationError("lr", f"must be a positive step size or one per parameter ({k}), got {lr!r}")
+    for v in values:
+        check_positive("lr", float(v))
+    return np.broadcast_to(values, (k,)).copy()
+
+
+def optimize(
+    scene: Scene | str | dict,
+    params: str | Sequence[str],
+    targets: Any,
+    method: str = "reparam",
+    steps: int = 100,
+    lr: float | Sequence[float] = 0.02,
+    spp: int = 64,
+    seed: int = 0,
+    views: Sequence[Camera | Mapping[str, Any]] | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    decay: float = 0.1,
+    record: Sequence[int] | None = None,
+    progress: bool | None = None,
+    **options: Any,
+) -> OptimizeResult:
+    r"""Recover the offsets θ of ``params`` that make the scene's images match ``targets``, by Adam.
+
+    Parameters
+    ----------
+    scene : Scene, str or dict
+        The scene at the start (θ = 0): a scene, built-in name, ``.json`` path or dict.
+    params : str or list of str
+        The k parameters (:mod:`flatland.scene`), e.g. ``["occluder.translate.x", "occluder.albedo"]``.
+    targets : array or list of arrays
+        One target image per view, each of its camera's pixels.
+    method : str
+        The gradient method of :func:`~flatland.render.render_gradient`.
+    steps : int
+        Adam steps, >= 1 (each: a render for the residual and a gradient render, per view).
+    lr : float or list of float
+        The first step size, in each parameter's units (one for all, or one per parameter);
+        it shrinks geometrically to ``lr * decay`` at the last step (0 < decay <= 1).
+    spp, seed : int
+        Samples per pixel of every render; the seed the run's seeds are derived from (a different
+        one per render, the same run for the same seed).
+    views : list of Camera or camera dicts, optional
+        The cameras (default: the scene's); a dict as the scene's ``camera``.
+    bounds : mapping, optional
+        ``{name: (low, high)}`` on the offset (``low <= 0 <= high``), within the defaults.
+    record : list of int, optional
+        Steps (0 to ``steps``) whose images the result keeps (default: the first and the last).
+    progress : bool, optional
+        A bar over the steps showing the loss (None: when stderr is a terminal).
+    **options
+        Options of the method (e.g. ``kappa``, ``h``).
+
+    Returns
+    -------
+    OptimizeResult
+        The history: θ, loss and gradient per step, wall times, images at ``record``.
+
+    Raises
+    ------
+    ValidationError
+        One error naming the field and value: an unknown parameter or method, a target of the
+        wrong size or count, an empty view list, steps < 1, a step size <= 0, bad bounds, ...
+    """
+    scene = load_scene(scene)
+    names = [params] if isinstance(params, str) else params
+    parsed = parse_parameters(scene, list(names) if isinstance(names, tuple) else names, field="params")
+    spec = GRADIENT_METHODS.lookup(method)
+    GRADIENT_METHODS.resolve_options(spec.name, options)  # an unknown or bad option: one error now
+    cameras = _cameras(scene, views)
+    images = _targets(targets, cameras)
+    steps = check_int("steps", steps)
+    spp, seed = check_int("spp", spp), check_seed("seed", seed)
+    decay = check_finite("decay", decay)
+    if not 0.0 < decay <= 1.0:
+        raise ValidationError("decay", f"must lie in (0, 1], got {decay!r}")
+    k = len(parsed)
+    step_sizes = _lr(lr, k)
+    lower, upper = _bounds(scene, parsed, bounds)
+    record = (0, steps) if record is None else tuple(check_int("record", r, minimum=0) for r in record)
+    if any(r > steps for r in record):
+        raise ValidationError("record", f"steps must lie in 0..{steps}, got {list(record)}")
+    names = tuple(p.name for p in parsed)
+    problem = Views(
+        scene_at=lambda theta: moved_scene(scene, names, theta),
+        with_view=lambda s, camera: replace(s, camera=camera),
+        render=render,
+        render_gradient=render_gradient,
+        views=cameras,
+        params=names,
+        method=spec.name,
+        spp=spp,
+        options=dict(options),
+    )
+    return descend(
+        problem, images, np.zeros(k), steps=steps, lr=step_sizes, seed=seed, lower=lower, upper=upper,
+        decay=decay, record=record, progress=progress,
+    )  # fmt: skip
+
+
+def render_targets(
+    scene: Scene | str | dict,
+    params: str | Sequence[str],
+    theta: Any,
+    views: Sequence[Camera | Mapping[str, Any]] | None = None,
+    spp: int = 1024,
+    seed: int = 1,
+) -> np.ndarray:
+    """The images of the scene moved by the offsets ``theta`` of ``params`` seen by each view, shape
+    ``(V, pixels)``: targets of a known answer (give them a seed no run of :func:`optimize` uses)."""
+    scene = load_scene(scene)
+    names = [params] if isinstance(params, str) else list(params)
+    moved = moved_scene(scene, names, theta)
+    return np.stack(
+        [render(replace(moved, camera=c), spp=spp, seed=seed).value for c in _cameras(scene, views)]
+    )
+
+
+def film_interval(scene: Scene | str | dict, shape: str, camera: Camera | None = None) -> tuple[float, float]:
+    r"""The film interval $[t_a, t_b]$ a shape covers seen by ``camera`` (default the scene's), clipped to
+    the film $[-\tan(\mathrm{fov}/2), \tan(\mathrm{fov}/2)]$: its points' (a circle's tangent points')
+    smallest and largest film coordinates. A shape is connected, so it covers the whole interval;
+    occlusion by other shapes is ignored. The shape must lie in front of the camera."""
+    from flatland.state import build_state
+
+    scene = load_scene(scene)
+    camera = camera or scene.camera
+    seen = replace(scene, camera=camera)
+    state = build_state(seen)
+    target = scene.shape(shape)
+    k = next(i for i, s in enumerate(scene.shapes) if s.name == shape)
+    o, f, r = np.asarray(state.cam_o), np.asarray(state.cam_f), np.asarray(state.cam_r)
+    if target.type == "circle":
+        c = np.asarray(state.circ_c)[state.prim_shape[state.n_seg :] == k][0] - o
+        radius = float(np.asarray(state.circ_r)[state.prim_shape[state.n_seg :] == k][0])
+        beta = math.asin(min(radius / float(np.hypot(*c)), 1.0))
+        turn = np.array([[math.cos(beta), -math.sin(beta)], [math.sin(beta), math.cos(beta)]])
+        v = np.stack([turn @ c, turn.T @ c])
+    else:
+        segs = np.flatnonzero(state.prim_shape[: state.n_seg] == k)
+        v = np.concatenate([np.asarray(state.seg_a)[segs], np.asarray(state.seg_b)[segs]]) - o
+    depth = v @ f
+    if np.any(depth <= 0.0):
+        raise ValidationError("shape", f"{shape!r} is not entirely in front of the camera")
+    t = (v @ r) / depth
+    h = camera.half_width
+    return float(np.clip(t.min(), -h, h)), float(np.clip(t.max(), -h, h))
+
+
+def silhouette_iou(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Intersection over union of two film intervals (:func:`film_interval`): $|A ∩ B| / |A ∪ B|$, 1 for
+    two empty intervals."""
+    inter = max(0.0, min(a[1], b[1]) - max(a[0], b[0]))
+    union = (a[1] - a[0]) + (b[1] - b[0]) - inter
+    return 1.0 if union <= 0.0 else inter / union
