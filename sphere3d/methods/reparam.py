@@ -1,6 +1,8 @@
 """The ``reparam`` method: rotations chosen by probe rays, vMF convolution kernels, paired samples.
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), transforms)`` with the
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), transforms)`` (``variable(0.0)``,
+or ``variables(k)`` for k parameters: the rotations follow the chosen points' motion in all k directions
+at once, :mod:`sphere3d.rotation`) with the
 variant's :class:`~sphere3d.integrator.Transforms`: :class:`~sphere3d.reparam.paper.PaperTransforms`
 (the estimator as published, Loubet et al. 2019, Sec. 4.1-4.3) or
 :class:`~sphere3d.reparam.default.ReparamTransforms` (the default: the paper's estimator and the
@@ -17,7 +19,6 @@ from typing import Any
 
 from flatland.core.budget import Term
 from flatland.core.contract import Option
-from flatland.core.dual import variable
 from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import ValidationError, check_bool, check_choice, check_int, check_positive
 from sphere3d.boundary.emitters import POINTS
@@ -160,7 +161,7 @@ def reparam(
         transforms = ReparamTransforms(
             kappa, kappa_film, probes, emitter_probes, spread, refine, paired, baseline=baseline
         )
-    return task.evaluate(variable(0.0), transforms)
+    return task.evaluate(task.dual_offset(), transforms)
 
 
 @memory_model("reparam")
