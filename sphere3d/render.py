@@ -34,8 +34,9 @@ from sphere3d import execution, tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.methods._common import MEMORY_MODELS
 from sphere3d.scene import check_vector, load_scene
-from sphere3d.state import COORD_MAX, scene_term
+from sphere3d.state import scene_term
 from sphere3d.tasks import ImageTask, PointTask
+from sphere3d.world import COORD_MAX
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
@@ -236,7 +237,7 @@ def irradiance(
     Parameters
     ----------
     point, normal : sequence of 3 floats
-        The point (within ±:data:`~sphere3d.state.COORD_MAX`) and its normal (not zero; normalized here).
+        The point (within ±:data:`~sphere3d.world.COORD_MAX`) and its normal (not zero; normalized here).
     param : str, or list or tuple of str, optional
         A parameter of the scene to differentiate by; None (default): the value only (derivative 0).
         A list of k distinct names: their derivatives from one pass, as in :func:`render_gradient`.
