@@ -132,8 +132,8 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
 
     Cost: (kernels × moving shapes) comparisons, then (kernels with a shape × anchors).
     """
-    n, p = len(mu), shading.state.k
-    slots = () if p is None else (p,)
+    n, params = len(mu), shading.state.k
+    slots = () if params is None else (params,)
     out = ShadingAffine(np.zeros(n, dtype=bool), np.zeros((*slots, n, 3)), np.zeros((*slots, n)))
     shapes = _moving_shapes(shading.state)
     if not len(shapes.shape) or n == 0:
@@ -195,9 +195,9 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
     y = (c + um[:, :1] * t + um[:, 1:] * b) / np.sqrt(s2)[:, None]
     out.mask[rows] = True
     chart = (q, scatter, mean, um, s2, y, t, b)
-    for i, slot in enumerate([u_dot] if p is None else u_dot):  # each parameter's map as a single one's
+    for i, slot in enumerate([u_dot] if params is None else u_dot):  # each parameter's map as a single one's
         y_dot, log_jacobian_dot = _map_tangents(slot, keep_idx, *chart)
-        if p is None:
+        if params is None:
             out.mu_dot[rows], out.log_jacobian_dot[rows] = y_dot, log_jacobian_dot
         else:
             out.mu_dot[i, rows], out.log_jacobian_dot[i, rows] = y_dot, log_jacobian_dot
