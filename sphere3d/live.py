@@ -11,7 +11,7 @@ plain rows.
 
 A Dual may carry k tangents, one per parameter, on a leading axis
 (:mod:`flatland.core.dual`): :func:`moves` and the helpers here then ask whether *any* parameter
-moves a row, and :func:`slot_rows` picks rows of every slot.
+moves a row, and :func:`on_rows` fills the rows of every slot.
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ __all__ = [
     "moves",
     "moving_rows",
     "on_rows",
-    "slot_rows",
     "take_rows",
     "triangles_change",
 ]
@@ -60,14 +59,6 @@ def moves(x: Any) -> np.ndarray:
     tangents, under any of the k parameters (False everywhere for a plain array)."""
     t = tangent(x) != 0.0
     return np.any(t, axis=0) if isinstance(x, Dual) and x.k is not None else t
-
-
-def slot_rows(t: Any, rows: Any, k: int | None) -> Any:
-    """Rows ``rows`` of the tangent ``t`` of a Dual of ``k`` tangents: ``t[rows]``, or of every slot
-    ``t[:, rows]`` (a scalar tangent, a constant's 0, passes through)."""
-    if np.ndim(t) == 0:
-        return t
-    return t[rows] if k is None else t[:, rows]
 
 
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
