@@ -170,7 +170,7 @@ def test07_no_module_of_either_package_has_more_than_300_lines_of_code():
 LAYERS = {
     "sphere3d": (
         ("primitives", ("vector", "live", "shapes", "sampling", "rotation", "tracing", "film")),
-        ("scene at θ", ("scene", "state")),
+        ("scene at θ", ("scene", "state", "world")),
         ("integrals", ("integrator", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),
