@@ -232,4 +232,3 @@ def test11_graded_gauss_integrates_a_near_singular_function():
         assert np.all(w > 0.0) and np.sum(w / (x + d)) == pytest.approx(exact, rel=1e-12)
         x, w = graded_gauss(0.0, 1.0, 12, 0)
         assert abs(np.sum(w / (x + d)) / exact - 1.0) > 1e-2
-
