@@ -30,6 +30,9 @@ Standard errors come from ``batches`` independent batches of ``spp / batches``
 samples per pixel (default: the largest divisor of ``spp`` up to 16,
 :func:`flatland.core.image.resolve_batches`).
 
+Every entry point takes ``max_depth``, the diffuse vertices per path (1, the default: direct
+illumination; :func:`flatland.integrator.trace_paths`); ``reparam`` and ``boundary`` refuse more than 1.
+
 Every entry point takes ``progress``: a tqdm bar on standard error, advanced per chunk of
 samples, shown after a couple of seconds when stderr is a terminal (None, the default),
 always (True) or never (False); it changes no number (:mod:`flatland.core.progress`).
