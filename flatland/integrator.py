@@ -13,6 +13,12 @@ multiple importance sampling (balance heuristic): each sample φ contributes
 $f(φ) / (p_\mathrm{cos}(φ) + p_\mathrm{light}(φ))$. All proposals are θ-free (evaluated on the
 detached geometry), so the estimators differentiate cleanly (Loubet et al. 2019, Sec. 3.2).
 
+Paths. With ``max_depth`` d > 1 (:class:`Context`), the path goes on from each shading point
+along its cosine sample (the BSDF sample), and every further diffuse vertex y adds
+$β (ρ_y/2) \hat E(y)$ with the same MIS estimate, up to d vertices (:func:`trace_paths`):
+$L = L_e + \mathcal{T} L_e + … + \mathcal{T}^d L_e$ for the reflection operator $\mathcal{T}$
+(theory/radiometry). d = 1 is the direct illumination above, bit for bit.
+
 Transforms. A gradient method changes *where* the integrands are evaluated, never the
 samples: its :class:`Transforms` maps each film sample t to evaluation points $T(t)$
 (``camera``) and each direction sample φ to $T(φ)$ (``directions``), with a weight
@@ -52,16 +58,19 @@ if TYPE_CHECKING:  # tasks.py builds on this module; the qualified name keeps th
 
 __all__ = [
     "PRIMARY_UNIFORMS",
+    "Bounce",
     "Context",
     "Identity",
     "Members",
     "Transforms",
     "combine",
+    "cosine_ratio",
     "emitted",
     "incident",
     "pixel_samples",
     "radiance_along_film",
     "shade",
+    "trace_paths",
 ]
 
 PRIMARY_UNIFORMS = 4
@@ -159,7 +168,8 @@ class Identity:
 
 @dataclass(frozen=True)
 class Context:
-    """What the transforms may use: the scene state (θ-dependent and detached) and the emitters.
+    """What the transforms may use: the scene state (θ-dependent and detached) and the emitters;
+    and how many diffuse vertices a path has, ``max_depth`` (1: direct illumination).
 
     Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
     argument), keyed on the primary samples, never from a per-chunk stream.
@@ -169,6 +179,7 @@ class Context:
     geom0: SceneState
     lights: Lights
     transforms: Transforms
+    max_depth: int = 1
 
 
 # ------------------------------------------------------------------ radiance
@@ -202,13 +213,41 @@ def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any
     return out, att
 
 
-def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, draws: Draws) -> Any:
+@dataclass(frozen=True)
+class Bounce:
+    r"""Where the cosine (BSDF) sample of each shading point leads: the continuation of a path.
+
+    ``hit`` (n,) whether its ray met a primitive, ``prim`` (n,) which one, ``point`` and
+    ``normal`` (h, 2) the hits re-attached to θ (rows of ``hit`` only, geometric normal),
+    ``dirs`` (n, 2) the ray directions and ``cosine`` (n,) the cosine $d · n(θ)$ at the
+    shading point (a Dual when the normal moves; its value is the density's $2 p_\mathrm{cos}$).
+    """
+
+    hit: np.ndarray
+    prim: np.ndarray
+    point: Any
+    normal: Any
+    dirs: Any
+    cosine: Any
+
+
+def shade(
+    ctx: Context,
+    x: Any,
+    normal: Any,
+    ignore: np.ndarray,
+    u: np.ndarray,
+    draws: Draws,
+    bounce: bool = False,
+) -> Any:
     r"""MIS estimate of $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$
     at shading points ``x`` (n, 2).
 
     ``normal`` (n, 2) is the unit normal on the side being shaded, ``ignore`` the
     primitive each point lies on (-1 for none), ``u`` (n, 3) the primary uniforms,
-    ``draws`` the keys of the n rows for anything the transforms draw.
+    ``draws`` the keys of the n rows for anything the transforms draw. With ``bounce``,
+    returns ``(E, Bounce)``: the cosine sample's ray, which a path continues along
+    (:func:`trace_paths`; one evaluation point per sample, the identity transforms).
     """
     n = ignore.size
     x0, n0 = detach(x), detach(normal)
@@ -237,7 +276,7 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, 
     flat, rep = members.flat()
     d = direction(flat)
     hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
-    li, _ = incident(ctx.geom, xr[rep], d, hits)
+    li, att = incident(ctx.geom, xr[rep], d, hits)
     nr = normal[idx][rep]
     cos = d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1]
     f = li * np.where(detach(cos) > 0.0, cos, 0.0)
@@ -245,12 +284,79 @@ def shade(ctx: Context, x: Any, normal: Any, ignore: np.ndarray, u: np.ndarray, 
     extra = ctx.transforms.shading_extra(ctx, x, normal, ignore)
     if extra is not None:
         total = total + Dual(np.zeros(n), extra, ctx.geom.k)
+    if not bounce:
+        return total
+    if flat.shape[0] != techniques * n:
+        raise ValueError("a path continues only under one evaluation point per sample (identity transforms)")
+    hit = hits.hit[:n]  # the cosine technique's rows come first, and so do their attached hits
+    h = int(np.count_nonzero(hit))
+    point = att.point[:h] if h else None
+    nrm = att.normal[:h] if h else None
+    return total, Bounce(hit, hits.prim[:n], point, nrm, d[:n], cos[:n])
+
+
+# ------------------------------------------------------------------ paths
+def _live(rho: Any) -> np.ndarray:
+    """Rows whose albedo reflects or moves with a parameter (any of k tangents): the rest reflect nothing."""
+    moving = tangent(rho) != 0.0
+    if moving.ndim > np.ndim(detach(rho)):  # k tangents: an albedo moving with any parameter
+        moving = np.any(moving, axis=0)
+    return (detach(rho) != 0.0) | moving
+
+
+def cosine_ratio(cosine: Any) -> Any:
+    r"""$\cos_θ / \cos_{θ_0}$ of a cosine sample (0 where $\cos_{θ_0} \le 0$): value exactly 1, the derivative
+    of the cosine in the integrand over the θ-free density $p_\mathrm{cos} = \cos_{θ_0} / 2$."""
+    c0 = detach(cosine)
+    ok = c0 > 0.0
+    return np.where(ok, cosine / np.where(ok, c0, 1.0), 0.0)
+
+
+def trace_paths(
+    ctx: Context, total: Any, rows: np.ndarray, beta: Any, bounce: Bounce, draws: Draws, depth: int
+) -> Any:
+    r"""Add vertices ``depth`` … ``ctx.max_depth`` to ``total[rows]``, the paths leaving along ``bounce``.
+
+    Vertex k (a diffuse hit y of the previous vertex's cosine sample) adds
+    $β_k (ρ_y / 2) \hat E(y)$, $\hat E$ the MIS estimate of :func:`shade` (emitter and cosine sample,
+    balance heuristic), and the path goes on along that cosine sample with
+    $β_{k+1} = β_k f \cos / p_\mathrm{cos} = β_k ρ_y \cos_θ / \cos_{θ_0}$. The emission a
+    continuation ray meets is counted once, inside the previous vertex's $\hat E$ with its MIS
+    weight; its indirect part is this vertex. ``beta`` is the throughput of ``rows`` into this
+    vertex (ρ of the camera's hit, or 2 from a :class:`~flatland.tasks.PointTask`'s point).
+    Vertex k's uniforms are the stream ``"bounce.k"`` keyed on the primary sample (``draws``), so
+    paths do not depend on chunking. Paths end at ``max_depth`` (no Russian roulette: no bias, no
+    early end), on a miss, or at an albedo of 0 that no parameter moves.
+    """
+    geom = ctx.geom
+    while depth <= ctx.max_depth:
+        prim = bounce.prim[bounce.hit]
+        rho = geom.albedo[prim]
+        sel = np.flatnonzero(_live(rho))  # among the hits
+        keep = np.flatnonzero(bounce.hit)[sel]  # among the current rows
+        if not keep.size:
+            break
+        n_geo, d = bounce.normal[sel], bounce.dirs[keep]
+        # shade the side the path arrives on: flip the geometric normal where the ray meets its back
+        facing = np.sum(detach(n_geo) * detach(d), axis=1) < 0.0
+        n_shade = n_geo * np.where(facing, 1.0, -1.0)[:, None]
+        rows, beta, draws, rho = rows[keep], beta[keep], draws.take(keep), rho[sel]
+        last = depth == ctx.max_depth
+        u = draws.uniforms(f"bounce.{depth}", 3)  # keyed on (sample, depth): chunking changes nothing
+        out = shade(ctx, bounce.point[sel], n_shade, prim[sel], u, draws, not last)
+        e, bounce = (out, None) if last else out
+        total[rows] = total[rows] + beta * 0.5 * rho * e
+        if last:
+            break
+        beta = beta * rho * cosine_ratio(bounce.cosine)
+        depth += 1
     return total
 
 
 # ------------------------------------------------------------------ the pixel integral
 def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) -> Any:
-    """$L(t)$ for film evaluation points ``t_eval`` (n,): emission at the hit + $(ρ/2) E$ there."""
+    """$L(t)$ for film evaluation points ``t_eval`` (n,): emission at the hit + $(ρ/2) E$ there, and
+    with ``ctx.max_depth`` > 1 the further vertices of its path (:func:`trace_paths`)."""
     geom = ctx.geom
     d = film_direction(geom, t_eval)
     hits = cast(ctx.geom0, detach(geom.cam_o), detach(d))
@@ -260,10 +366,7 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
         return radiance
     prim = hits.prim[rows]
     rho = geom.albedo[prim]
-    moving = tangent(rho) != 0.0
-    if moving.ndim > np.ndim(detach(rho)):  # k tangents: an albedo moving with any parameter
-        moving = np.any(moving, axis=0)
-    live = (detach(rho) != 0.0) | moving
+    live = _live(rho)
     if not np.any(live):
         return radiance
     sub = np.flatnonzero(live)
@@ -271,8 +374,13 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
     # shade the side facing the camera: flip the geometric normal where the ray meets its back
     facing = np.sum(detach(n_geo) * detach(d)[rows[sub]], axis=1) < 0.0
     n_shade = n_geo * np.where(facing, 1.0, -1.0)[:, None]
-    e = shade(ctx, att.point[sub], n_shade, prim[sub], u[rows[sub]], draws.take(rows[sub]))
+    paths = ctx.max_depth > 1
+    out = shade(ctx, att.point[sub], n_shade, prim[sub], u[rows[sub]], draws.take(rows[sub]), paths)
+    e, bounce = out if paths else (out, None)
     radiance[rows[sub]] = radiance[rows[sub]] + 0.5 * rho[sub] * e
+    if paths:  # a diffuse vertex's cosine sample weight: f cos / p = (ρ/2) cos_θ / (cos_θ0 / 2)
+        beta = rho[sub] * cosine_ratio(bounce.cosine)
+        radiance = trace_paths(ctx, radiance, rows[sub], beta, bounce, draws.take(rows[sub]), 2)
     return radiance
 
 

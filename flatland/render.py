@@ -30,6 +30,9 @@ Standard errors come from ``batches`` independent batches of ``spp / batches``
 samples per pixel (default: the largest divisor of ``spp`` up to 16,
 :func:`flatland.core.image.resolve_batches`).
 
+Every entry point takes ``max_depth``, the diffuse vertices per path (1, the default: direct
+illumination; :func:`flatland.integrator.trace_paths`); ``reparam`` and ``boundary`` refuse more than 1.
+
 Every entry point takes ``progress``: a tqdm bar on standard error, advanced per chunk of
 samples, shown after a couple of seconds when stderr is a terminal (None, the default),
 always (True) or never (False); it changes no number (:mod:`flatland.core.progress`).
@@ -55,20 +58,24 @@ from flatland.tasks import ImageTask, PointTask, Tally
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
 
-def _task(scene: Any, param: Any, spp: Any, seed: Any, batches: Any, **point: Any) -> ImageTask | PointTask:
+def _task(
+    scene: Any, param: Any, spp: Any, seed: Any, batches: Any, max_depth: Any, **point: Any
+) -> ImageTask | PointTask:
     """An :class:`~flatland.tasks.ImageTask`, or given ``point`` and ``normal`` a
     :class:`~flatland.tasks.PointTask`."""
     scene = load_scene(scene)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
+    depth = check_int("max_depth", max_depth)
     p: Any = None
     if isinstance(param, list | tuple):
         p = parse_parameters(scene, param)
     elif param is not None:
         p = parse_parameter(scene, param)
     if point:
-        return PointTask(scene, p, point["point"], point["normal"], spp, seed, resolve_batches(spp, batches))
-    return ImageTask(scene, p, spp, seed, resolve_batches(spp, batches))
+        batches = resolve_batches(spp, batches)
+        return PointTask(scene, p, point["point"], point["normal"], spp, seed, batches, depth)
+    return ImageTask(scene, p, spp, seed, resolve_batches(spp, batches), depth)
 
 
 def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
@@ -79,7 +86,7 @@ def _check_budget(task: ImageTask | PointTask, options: dict[str, Any]) -> None:
             pixels=task.pixels,
             spp=task.spp if image else task.n,
             batches=task.batches,
-            rays=rays_per_sample(options),
+            rays=rays_per_sample(options) * task.max_depth,  # 3 rays per vertex bound 1 + 2 d
             chunk=tasks.CHUNK,
             pixels_field="camera.pixels",
             spp_field="spp" if image else "n",
@@ -110,17 +117,20 @@ def render(
     seed: int = 0,
     batches: int | None = None,
     progress: bool | None = None,
+    max_depth: int = 1,
 ) -> Image:
-    """Render the scene's pixels: $I_j = ∫ k_j(t) L(t) dt$ with ``spp`` samples per pixel.
+    r"""Render the scene's pixels: $I_j = ∫ k_j(t) L(t) dt$ with ``spp`` samples per pixel.
 
     ``progress``: a progress bar per chunk (None: when stderr is a terminal; see the module docstring).
+    ``max_depth``: diffuse vertices per path, an integer >= 1; 1 is direct illumination, d gives
+    $L = Σ_{i=0}^{d} \mathcal{T}^i L_e$ (:func:`flatland.integrator.trace_paths`).
 
     Raises
     ------
     ValidationError
         Naming the field and value (bad scene field, spp < 1, batches not dividing spp, ...).
     """
-    task = _task(scene, None, spp, seed, batches)
+    task = _task(scene, None, spp, seed, batches, max_depth)
     _check_budget(task, {})
     with _bar(f"render {task.scene.name}", progress):
         result = task.evaluate(0.0)
@@ -135,6 +145,7 @@ def render_gradient(
     seed: int = 0,
     batches: int | None = None,
     progress: bool | None = None,
+    max_depth: int = 1,
     **options: Any,
 ) -> GradientImage | GradientImages:
     """Render the image and its derivative with respect to ``param`` (at offset θ = 0) by ``method``.
@@ -160,6 +171,10 @@ def render_gradient(
     progress : bool, optional
         A progress bar per chunk on stderr: None (default) when stderr is a terminal, True
         always, False never (:mod:`flatland.core.progress`); it changes no number.
+    max_depth : int
+        Diffuse vertices per path, >= 1 (1: direct illumination), as in :func:`render`. ``naive``
+        and ``finite_difference`` take any depth; ``reparam`` and ``boundary`` only 1 for now (their
+        transforms and jump terms at the further vertices are not implemented: refused).
     **options
         Method options: ``h`` (finite_difference); ``kappa``, ``kappa_film``,
         ``probes``, ``spread``, ``refine``, ``paired`` (reparam, see
@@ -186,7 +201,7 @@ def render_gradient(
     """
     if param is None:
         raise ValidationError("param", "is required (a parameter name like 'occluder.translate.x')")
-    task = _task(scene, param, spp, seed, batches)
+    task = _task(scene, param, spp, seed, batches, max_depth)
     with _bar(f"{method} {task.scene.name}", progress):
         result, resolved = _gradient(task, method, options)
     run = dict(method=method, spp=task.spp, seed=task.seed, options=resolved, scene=task.scene.name)
@@ -206,6 +221,7 @@ def irradiance(
     seed: int = 0,
     batches: int | None = None,
     progress: bool | None = None,
+    max_depth: int = 1,
     **options: Any,
 ) -> Estimate | dict[str, Estimate]:
     r"""Estimate $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$ at a fixed point and its derivative.
@@ -217,9 +233,10 @@ def irradiance(
     estimated (derivative 0). Given a list of k parameters, a dict from each name to its
     Estimate (all with the same value), the k derivatives from one pass as in
     :func:`render_gradient`. ``progress``: a progress bar per chunk, as in :func:`render`.
+    ``max_depth`` d: $L_i$ carries paths of up to d - 1 further diffuse vertices (1: emission only).
     """
     point, normal = check_point("point", point), check_direction("normal", normal)
-    task = _task(scene, param, n, seed, batches, point=point, normal=normal)
+    task = _task(scene, param, n, seed, batches, max_depth, point=point, normal=normal)
     with _bar(f"irradiance {method if param is not None else ''}".rstrip(), progress):
         if param is None:
             _check_budget(task, {})

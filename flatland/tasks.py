@@ -26,7 +26,16 @@ import numpy as np
 from flatland.core import progress
 from flatland.core.dual import detach, tangent, variable, variables
 from flatland.core.rng import Draws
-from flatland.integrator import PRIMARY_UNIFORMS, Context, Identity, Transforms, pixel_samples, shade
+from flatland.integrator import (
+    PRIMARY_UNIFORMS,
+    Context,
+    Identity,
+    Transforms,
+    cosine_ratio,
+    pixel_samples,
+    shade,
+    trace_paths,
+)
 from flatland.lights import Lights
 from flatland.scene import Scene
 from flatland.state import Parameter, SceneState, build_state
@@ -50,13 +59,15 @@ class Tally:
 @dataclass(frozen=True)
 class ImageTask:
     """Every pixel of the scene's camera: ``spp`` samples per pixel in ``batches`` batches of
-    ``spp // batches``, which give the standard errors."""
+    ``spp // batches``, which give the standard errors; paths of up to ``max_depth`` diffuse vertices
+    (1: direct illumination, :func:`~flatland.integrator.trace_paths`)."""
 
     scene: Scene
     param: Parameter | tuple[Parameter, ...] | None
     spp: int
     seed: int
     batches: int
+    max_depth: int = 1
 
     @property
     def pixels(self) -> int:
@@ -92,7 +103,7 @@ class ImageTask:
         """
         state = self.state(theta)
         transforms = transforms or Identity()
-        value, deriv = _sums(self.spp, self.pixels, self.batches, self.seed, state, transforms, pixel_samples)
+        value, deriv = _sums(self, state, transforms, pixel_samples)
         extra = transforms.pixel_extra(self, state)
         if extra is not None:
             deriv = deriv + extra
@@ -102,7 +113,8 @@ class ImageTask:
 @dataclass(frozen=True)
 class PointTask:
     r"""The irradiance $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$
-    at a fixed ``point`` with unit ``normal``: ``n`` samples in ``batches`` batches (one "pixel")."""
+    at a fixed ``point`` with unit ``normal``: ``n`` samples in ``batches`` batches (one "pixel"). With
+    ``max_depth`` d > 1, $L_i$ is the radiance of paths of up to d - 1 further diffuse vertices."""
 
     scene: Scene
     param: Parameter | tuple[Parameter, ...] | None
@@ -111,6 +123,7 @@ class PointTask:
     n: int
     seed: int
     batches: int
+    max_depth: int = 1
 
     pixels = 1
 
@@ -142,9 +155,13 @@ class PointTask:
             n = pixel.size
             x = np.tile(np.array(self.point, dtype=np.float64), (n, 1))
             normal = np.tile(np.array(self.normal, dtype=np.float64), (n, 1))
-            return shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws)
+            if ctx.max_depth == 1:
+                return shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws)
+            e, bounce = shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws, True)
+            # the indirect part of E by the cosine sample: L_i cos / p_cos = 2 L_i cos_θ / cos_θ0
+            return trace_paths(ctx, e, np.arange(n), 2.0 * cosine_ratio(bounce.cosine), bounce, draws, 2)
 
-        value, deriv = _sums(self.n, 1, self.batches, self.seed, self.state(theta), transforms, estimate)
+        value, deriv = _sums(self, self.state(theta), transforms, estimate)
         return Tally(value, deriv)
 
 
@@ -167,18 +184,17 @@ def _chunks(total: int) -> Iterator[np.ndarray]:
 
 
 def _sums(
-    spp: int,
-    pixels: int,
-    batches: int,
-    seed: int,
+    task: ImageTask | PointTask,
     state: SceneState,
     transforms: Transforms | None,
     estimate: Any,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-batch, per-pixel means of ``estimate(ctx, pixel, u, draws)`` (values and tangents), one pass of
     the call's progress bar (:mod:`flatland.core.progress`) advanced per chunk."""
+    spp = task.spp if isinstance(task, ImageTask) else task.n
+    pixels, batches, seed = task.pixels, task.batches, task.seed
     state0 = state.detached()
-    ctx = Context(state, state0, Lights.of(state0), transforms or Identity())
+    ctx = Context(state, state0, Lights.of(state0), transforms or Identity(), task.max_depth)
     per_batch = spp // batches
     size = batches * pixels
     k = state.k

@@ -24,7 +24,7 @@ from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
 from flatland.integrator import Context, Identity, incident, radiance_along_film
 from flatland.lights import Lights
-from flatland.methods._common import GRADIENT_METHODS
+from flatland.methods._common import GRADIENT_METHODS, direct_only
 from flatland.sampling import filter_value
 from flatland.state import SceneState
 from flatland.tasks import ImageTask, PointTask, Tally
@@ -161,4 +161,5 @@ def boundary(task: ImageTask | PointTask) -> Tally:
     failure modes: two discontinuities within ``EPS_ANGLE`` of each other, and
     candidates seen exactly edge-on, both of measure zero.
     """
+    direct_only(task, "boundary", "jump terms")
     return task.evaluate(task.dual_offset(), BoundaryTransforms())

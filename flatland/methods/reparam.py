@@ -24,7 +24,7 @@ from functools import partial
 from flatland.core.contract import Option
 from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import check_bool, check_int, check_positive
-from flatland.methods._common import GRADIENT_METHODS
+from flatland.methods._common import GRADIENT_METHODS, direct_only
 from flatland.reparam.default import ReparamTransforms, default_kappa_film
 from flatland.tasks import ImageTask, PointTask, Tally
 
@@ -116,6 +116,7 @@ def reparam(
     $1 / \mathrm{distance}$ near its support's end (a mildly heavy tail); the Gaussian
     filter's does not. Sizes: the measurement pages.
     """
+    direct_only(task, "reparam", "change of variables of the shading integral")
     if isinstance(task, ImageTask):
         check_continuous_filter(task.scene.camera.filter)
     if kappa_film is None:
