@@ -1,6 +1,6 @@
-"""flatland: the cost of k = 8 parameters per pass against k = 1, per method (fastest of 3 runs).
+"""flatland and sphere3d: the cost of k = 8 parameters per pass against k = 1, per method (fastest of 3 runs).
 
-:func:`flatland.render.render_gradient` on the ``shadow`` scene at :data:`PIXELS` pixels and
+flatland: :func:`flatland.render.render_gradient` on the ``shadow`` scene at :data:`PIXELS` pixels and
 :data:`SPP` samples per pixel (seed 0, default options), once with the single name
 ``occluder.translate.x`` (k = 1, the classic path: one tangent) and once with the list
 :data:`PARAMS` of eight parameters (k = 8: translations, a rotation, a scale, emission, albedo
@@ -14,11 +14,17 @@ tangents' arithmetic grows with k. ``finite_difference`` shares nothing but the 
 Rows per method: seconds at k = 1 and at k = 8, and their ratio, against the goal of the issue
 "several parameters per pass": at most 3 for every method but ``finite_difference``. The times
 are wall-clock on a machine that may be shared: the fastest of the runs is the least disturbed.
+
+sphere3d (:mod:`benchmarks.multi_param_sphere3d`): the same on ``hard_shadow`` (64 × 64 px, 16 spp),
+k = 1 (``occluder.translate.x``) against the occluder's eight parameters, and the case for one pass
+against finite differences: with k = 8, the time ``reparam`` takes to reach, on every parameter, the
+RMSE ``finite_difference`` has at 16 spp (17 renders), against a goal of a third of FD's time.
 """
 
 from __future__ import annotations
 
 from benchmarks import Row, best_seconds
+from benchmarks.multi_param_sphere3d import sphere3d_rows
 from flatland.render import render_gradient
 from flatland.scene import load_scene
 
@@ -41,7 +47,8 @@ GOAL = 3.0
 
 
 def run(pixels: int = PIXELS, spp: int = SPP, repeats: int = REPEATS) -> list[Row]:
-    """Seconds per gradient image at k = 1 and k = 8 and their ratio, per method."""
+    """Seconds per gradient image at k = 1 and k = 8 and their ratio, per method (flatland, then
+    sphere3d's rows, :func:`benchmarks.multi_param_sphere3d.sphere3d_rows`)."""
     scene = load_scene(SCENE).with_camera(pixels=pixels)
     case = f"{SCENE} {pixels} px x {spp} spp"
     rows = []
@@ -62,4 +69,4 @@ def run(pixels: int = PIXELS, spp: int = SPP, repeats: int = REPEATS) -> list[Ro
             Row("multi_param", f"{case}: {method}, k = {len(PARAMS)}", eight, "s"),
             Row("multi_param", f"{case}: {method}, k = {len(PARAMS)} / k = 1", ratio, "x", note),
         ]
-    return rows
+    return rows + sphere3d_rows(repeats)

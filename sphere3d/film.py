@@ -63,7 +63,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, tangent
+from flatland.core.dual import Dual, detach, tangent
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import filter_radius, filter_value_1d, log_filter_value_1d, pdf_filter_1d
 
@@ -75,6 +75,8 @@ __all__ = [
     "affine_directions",
     "gather",
     "reach",
+    "splat_band",
+    "splat_stencils",
     "splat_weights",
     "stencil",
 ]
@@ -88,7 +90,8 @@ counted in its own pixel only."""
 class AffineFilm:
     r"""Per camera sample (film kernel member): whether an affine film map applies (``mask``), and its
     derivative, $\dot A(u) = \dot a + \dot B (u - \bar p)$: ``a_dot`` (n, 2), ``b_dot`` (n, 2, 2),
-    ``centre`` (n, 2) (pixels)."""
+    ``centre`` (n, 2) (pixels). For k parameters ``a_dot`` is (n, k, 2) and ``b_dot`` (n, k, 2, 2): each
+    sample's map moves in k directions (the parameters' axis after the samples', so rows index alike)."""
 
     mask: np.ndarray
     a_dot: np.ndarray
@@ -96,9 +99,12 @@ class AffineFilm:
     centre: np.ndarray
 
     @staticmethod
-    def none(n: int) -> AffineFilm:
-        """No sample has a map."""
-        return AffineFilm(np.zeros(n, bool), np.zeros((n, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2)))
+    def none(n: int, k: int | None = None) -> AffineFilm:
+        """No sample has a map (for ``k`` parameters: k zero derivatives per sample)."""
+        slots = () if k is None else (k,)
+        return AffineFilm(
+            np.zeros(n, bool), np.zeros((n, *slots, 2)), np.zeros((n, *slots, 2, 2)), np.zeros((n, 2))
+        )
 
     def take(self, index: Any) -> AffineFilm:
         """The samples at ``index``."""
@@ -116,15 +122,24 @@ def affine_directions(cam: Any, omega: np.ndarray, affine: AffineFilm) -> tuple[
     """
     x, y = cam.film(omega)
     u = np.stack([x, y], axis=-1) - affine.centre
-    velocity = affine.a_dot + np.einsum("nij,nj->ni", affine.b_dot, u)
-    velocity = np.where(affine.mask[:, None], velocity, 0.0)
     scale = 2.0 * cam.tan_half / cam.width
     right, up, forward = (np.asarray(v, dtype=np.float64) for v in (cam.right, cam.up, cam.forward))
-    d_dot = scale * (velocity[:, :1] * right - velocity[:, 1:] * up)
     cos = omega @ forward
-    omega_dot = cos[:, None] * (d_dot - omega * np.sum(omega * d_dot, axis=1)[:, None])
-    trace = np.where(affine.mask, affine.b_dot[:, 0, 0] + affine.b_dot[:, 1, 1], 0.0)
-    return Dual(np.array(omega, dtype=np.float64), omega_dot), trace
+
+    def moved(a_dot: np.ndarray, b_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # one parameter's
+        velocity = a_dot + np.einsum("nij,nj->ni", b_dot, u)
+        velocity = np.where(affine.mask[:, None], velocity, 0.0)
+        d_dot = scale * (velocity[:, :1] * right - velocity[:, 1:] * up)
+        omega_dot = cos[:, None] * (d_dot - omega * np.sum(omega * d_dot, axis=1)[:, None])
+        return omega_dot, np.where(affine.mask, b_dot[:, 0, 0] + b_dot[:, 1, 1], 0.0)
+
+    if affine.a_dot.ndim == 2:
+        omega_dot, trace = moved(affine.a_dot, affine.b_dot)
+        return Dual(np.array(omega, dtype=np.float64), omega_dot), trace
+    k = affine.a_dot.shape[1]  # k parameters: each one's map as a single parameter's
+    slots = [moved(affine.a_dot[:, i], affine.b_dot[:, i]) for i in range(k)]
+    omega_dot, trace = (np.stack(parts) for parts in zip(*slots, strict=True))
+    return Dual(np.array(omega, dtype=np.float64), omega_dot, k), trace
 
 
 @dataclass(frozen=True)
@@ -159,7 +174,8 @@ class FilmTransform:
         if not affine.mask.any():
             return r, None
         moved, trace = affine_directions(cam, omega, affine)
-        return Dual(r.value, np.where(affine.mask[:, None], moved.tangent, r.tangent)), (affine.mask, trace)
+        t = np.where(affine.mask[:, None], moved.tangent, r.tangent)
+        return Dual(r.value, t, r.k), (affine.mask, trace)
 
     def log_jacobian(self, cam: Any, r: Any, affine: Any) -> Any:
         r"""log of the film map's Jacobian at the moved directions ``r``: the rotation's ratio of film
@@ -169,12 +185,12 @@ class FilmTransform:
         if affine is None:
             return log_j
         mask, trace = affine
-        return Dual(log_j.value, np.where(mask, trace, log_j.tangent))
+        return Dual(log_j.value, np.where(mask, trace, log_j.tangent), log_j.k)
 
     @staticmethod
-    def identity(shape: tuple[int, ...]) -> FilmTransform:
-        """No change of variables."""
-        return FilmTransform((Rotation.identity(shape),))
+    def identity(shape: tuple[int, ...], k: int | None = None) -> FilmTransform:
+        """No change of variables (with ``k`` zero tangents for k parameters)."""
+        return FilmTransform((Rotation.identity(shape, k),))
 
     def log_kernel(self, member: int, fx: Any, fy: Any, rows: Any = slice(None)) -> Any:
         """log g(f - c) + const at the rotated film points f = (fx, fy) of samples ``rows``
@@ -230,10 +246,10 @@ class Splat:
         for f, c, on in ((fx, self.cx, self.on_x), (fy, self.cy, self.on_y)):
             d = (f[:, None] - c[rows]) * on[rows].astype(np.float64)
             axes.append(tangent(log_filter_value_1d(d, kind)))  # (rows, k): this axis's term alone
-        tx, ty = axes
+        tx, ty = axes  # (rows, k), or (parameters, rows, k)
         rest = tangent(log_rest)
-        total = tx[:, None, :] + ty[:, :, None]  # pixel (a, b): row a, column b
-        return (total + (rest[:, None, None] if np.ndim(rest) else rest)).reshape(len(tx), k * k)
+        total = tx[..., None, :] + ty[..., :, None]  # pixel (a, b): row a, column b
+        return (total + (rest[..., None, None] if np.ndim(rest) else rest)).reshape(*tx.shape[:-1], k * k)
 
 
 def splat_weights(
@@ -310,3 +326,65 @@ def gather(parts: np.ndarray, height: int, width: int, h: int, rows: range, firs
                 s0, s1 = t0 - da - first, t1 - da - first  # the source rows, from the first one held
                 image[..., t0 - r0 : t1 - r0, u0:u1] += st[..., a * side + b, s0:s1, u0 - db : u1 - db]
     return image
+
+
+def _slots(x: Any, k: int | None) -> list[np.ndarray]:
+    """The tangents of ``x`` as a list: one array, or the k slots of k tangents."""
+    t = np.asarray(tangent(x), dtype=np.float64)
+    return [t] if k is None else list(t)
+
+
+def splat_stencils(
+    radiance: Any, weight: Any, slot: np.ndarray, k: int | None, h: int, cv: Any, out: tuple
+) -> None:
+    r"""One chunk's splatted estimates $e = L w$ as stencils (:func:`stencil`), value and tangents, and
+    with the control variate those of the weights of other pixels' samples and its pixels' radiance
+    totals.
+
+    ``radiance`` (samples) and ``weight`` (samples, m): Duals of one tangent or of ``k``, in the sample
+    order (batches, pixels, samples); ``slot`` their stencil slots; ``out`` = (stencils, totals) the
+    chunk's columns of :meth:`~sphere3d.tasks.ImageTask._splat_buffers`: quantities e, its q tangents
+    (q = 1, or k), then w and its q tangents. ``cv``: None (no control variate) or
+    ``(n, leave_one_out)``, the scope's sample count and the function giving the totals and each
+    sample's leave-one-out scale. Each tangent is computed as the one tangent of a single parameter,
+    by the same expressions (:meth:`~sphere3d.tasks.ImageTask._splat_chunk` says what is computed).
+    """
+    stencils, totals = out
+    shape = slot.shape
+    wv = np.asarray(detach(weight), dtype=np.float64).reshape(shape)
+    wts = [t.reshape(shape) for t in _slots(weight, k)]
+    rv = np.asarray(detach(radiance), dtype=np.float64).reshape(*shape[:3], 1)
+    rts = [t.reshape(*shape[:3], 1) for t in _slots(radiance, k)]
+    ev = rv * wv
+    ets = [rt * wv + rv * wt for rt, wt in zip(rts, wts, strict=True)]  # e = L w: the product rule
+    if totals is None:
+        stencil((ev, *ets), slot, h, stencils)
+        return
+    n, leave_one_out = cv
+    total, scale = leave_one_out(rv[..., 0], n)
+    centre = (2 * h + 1) * h + h  # the slot of the sample's own pixel
+    own = np.flatnonzero(slot == centre)  # one entry per sample at most: only there is i ∈ p
+    scale = scale.ravel()[own // shape[-1]]  # sample i left out of its own pixel
+    ev.ravel()[own] -= scale * (wv.ravel()[own] - 1.0)
+    totals[0] = total.reshape(totals.shape[1:])
+    for i, (rt, et, wt) in enumerate(zip(rts, ets, wts, strict=True)):
+        total_t, scale_t = leave_one_out(rt[..., 0], n)
+        scale_t = scale_t.ravel()[own // shape[-1]]
+        et.ravel()[own] -= scale * wt.ravel()[own] + scale_t * (wv.ravel()[own] - 1.0)
+        totals[1 + i] = total_t.reshape(totals.shape[1:])
+    stencil((ev, *ets, wv, *wts), slot, h, stencils)
+    stencils[len(stencils) // 2 :, :, centre] = 0.0  # the weights of other pixels' samples only
+
+
+def splat_band(sums: np.ndarray, totals: np.ndarray | None, per_batch: int, n: int) -> tuple[np.ndarray, ...]:
+    """A band's value and tangents from its gathered stencil sums (quantities, batches, pixels) and its
+    pixels' radiance totals (:func:`splat_stencils`): the means over ``per_batch``, minus, with the
+    control variate (``n`` samples per scope), the other pixels' samples' weights times their target's
+    mean radiance (value), and the tangent of that product (each tangent)."""
+    sums = sums / per_batch
+    if totals is None:
+        return tuple(sums)
+    q = len(sums) // 2  # e and its tangents, then w and its tangents
+    mean = totals / n
+    value = sums[0] - mean[0] * sums[q]
+    return (value, *(sums[i] - mean[0] * sums[q + i] - mean[i] * sums[q] for i in range(1, q)))

@@ -45,7 +45,7 @@ from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import paired_combine, unit_weight
 from sphere3d.film import FilmTransform
-from sphere3d.live import emitters_change, moving_rows, on_rows, take_rows, triangles_change
+from sphere3d.live import emitters_change, moves, moving_rows, on_rows, take_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
     filter_value,
@@ -143,7 +143,7 @@ class Shading:
         m = len(mu)
         cos_x = np.maximum(dot(self.n, rotated), 0.0)
         up = detach(cos_x) > 0.0
-        out = scatter(m, np.flatnonzero(up & ~hits.hit), state.sky, state.dual)  # sky: p_L = 0, so w_C = 1
+        out = scatter(m, np.flatnonzero(up & ~hits.hit), state.sky, state.dual, k=state.k)  # sky: w_C = 1
         e = np.flatnonzero(up & hits.hit & np.isin(hits.triangle, state.emitters))
         if e.size:
             tri = hits.triangle[e]
@@ -273,14 +273,14 @@ class Identity:
     """No change of variables: the renderer as it stands (the naive estimator, Sec. 3.1)."""
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
-        return FilmTransform.identity(x.shape)
+        return FilmTransform.identity(x.shape, state.k)
 
     def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
         rows = np.flatnonzero(visible)
-        return EmitterChange(Rotation.identity((len(rows),)), rows)
+        return EmitterChange(Rotation.identity((len(rows),), shading.state.k), rows)
 
     def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
-        return Members(mu if not shading.state.dual else Dual(mu))
+        return Members(mu if not shading.state.dual else Dual(mu, None, shading.state.k))
 
     def shading_extra(self, shading: Shading) -> np.ndarray | None:
         return None
@@ -310,7 +310,7 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     visible[vis] = True
     change = transforms.emitter(shading, visible)
     if vis.size == 0 and change.extra is None:
-        return scatter(m, vis, 0.0, state.dual)
+        return scatter(m, vis, 0.0, state.dual, k=state.k)
     rotation = change.rotation
     place = np.empty(m, dtype=np.intp)  # row of each point's rotation in the change
     place[change.rows] = np.arange(len(change.rows))
@@ -341,10 +341,11 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
 
 
 def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:
-    """``estimate`` with ``term`` added to the tangents at ``index``: the value, bit for bit, unchanged."""
+    """``estimate`` with ``term`` added to the tangents at ``index`` (for k tangents ``term`` is (k, n),
+    added to every slot): the value, bit for bit, unchanged."""
     t = estimate.tangent.copy()
-    np.add.at(t, index, term)
-    return Dual(estimate.value, t)
+    np.add.at(t, index if estimate.k is None else (slice(None), index), term)
+    return Dual(estimate.value, t, estimate.k)
 
 
 def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Transforms) -> Any:
@@ -391,7 +392,7 @@ def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) 
     bsdf = _bsdf_term(shading, mu, pdf, transforms)
     extra = transforms.shading_extra(shading)
     if extra is not None:
-        bsdf = bsdf + Dual(np.zeros(len(shading)), extra)  # the value is untouched (+ 0.0)
+        bsdf = bsdf + Dual(np.zeros(len(shading)), extra, state.k)  # the value is untouched (+ 0.0)
     return total + bsdf
 
 
@@ -425,7 +426,8 @@ def pixel_samples(
         film = transforms.camera(state, x, y, draws)
         # only rows where a rotation moves: elsewhere every tangent below is exactly 0
         live = np.flatnonzero(np.any([film.active(m) for m in range(len(film.rotations))], axis=0))
-        r_dot, w_dot = np.zeros(d.shape), np.zeros(np.shape(weight))
+        k = state.k  # None, or k parameters: the tangents' leading axis
+        r_dot, w_dot = (np.zeros(s if k is None else (k, *s)) for s in (d.shape, np.shape(weight)))
         for member in range(len(film.rotations)):  # one or two (not a loop over samples)
             r, affine = film.directions(member, cam, take_rows(d, live), live)
             fx, fy = cam.film(r)
@@ -435,19 +437,21 @@ def pixel_samples(
             if splat is None:
                 log_k = log_filter_value(np.stack([fx - cx[live], fy - cy[live]], axis=-1), cam.filter)
                 w = unit_weight(log_k + log_j + film.log_kernel(member, fx, fy, live))
-                w_dot[live] += tangent(w)
+                w_dot[live if k is None else (slice(None), live)] += tangent(w)
             else:  # the same with each reached pixel's centre (sphere3d.film): its tangent only
                 rest = log_j + film.log_kernel(member, fx, fy, live)
-                w_dot[live] += splat.weight_tangents(fx, fy, rest, live, cam.filter)
-            r_dot[live] += tangent(r)
+                w_dot[live if k is None else (slice(None), live)] += splat.weight_tangents(
+                    fx, fy, rest, live, cam.filter
+                )
+            r_dot[live if k is None else (slice(None), live)] += tangent(r)
         # the mean of the estimates under each rotation, w L(Rω) averaged: the radiance's tangent is
         # linear in the direction's, so one evaluation along the mean tangent gives the mean of
         # the tangents; values exactly ω and 1 (the primal stays the naive one)
         m = len(film.rotations)
         if splat is None:
-            rotated, weight = Dual(d, r_dot / m), weight * Dual(np.ones(w_dot.shape), w_dot / m)
+            rotated, weight = Dual(d, r_dot / m, k), weight * Dual(np.ones(np.shape(weight)), w_dot / m, k)
         else:  # the same product, written out: value weight, tangent weight · ẇ / m
-            rotated, weight = Dual(d, r_dot / m), Dual(weight, weight * (w_dot / m))
+            rotated, weight = Dual(d, r_dot / m, k), Dual(weight, weight * (w_dot / m), k)
     else:
         rotated = d
     slot = None if splat is None else splat.slot
@@ -476,7 +480,7 @@ def camera_radiance(
         hits = state.tracer.intersect(detach(cam.origin), d)
     hit = np.flatnonzero(hits.hit)
     miss = np.flatnonzero(~hits.hit)
-    radiance = scatter(n, miss, state.sky, state.dual)
+    radiance = scatter(n, miss, state.sky, state.dual, k=state.k)
     if hit.size:
         tri, plain = hits.triangle[hit], state.detached()
 
@@ -492,7 +496,7 @@ def camera_radiance(
             return it.point, geometric, shade_n, st.emitted(t, it.b1, it.b2) * front
 
         # tangents only where the direction turns, the camera or the hit triangle moves (sphere3d.live)
-        live = moving_rows(hit, rotated) | triangles_change(state)[tri] | np.any(tangent(cam.origin) != 0.0)
+        live = moving_rows(hit, rotated) | triangles_change(state)[tri] | np.any(moves(cam.origin))
         if state.dual:
             point, geometric, shade_n, value = on_rows(attach, hit, live, rotated, hits.triangle)
         else:

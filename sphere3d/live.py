@@ -8,6 +8,10 @@ such rows with plain arrays and keeps the :class:`~flatland.core.dual.Dual` arit
 for the others. Values are those of a whole-array Dual evaluation, row for row (the
 Dual rules compute values with the same numpy operations); tangents are +0 on the
 plain rows.
+
+A Dual may carry k tangents, one per parameter, on a leading axis
+(:mod:`flatland.core.dual`): :func:`moves` and the helpers here then ask whether *any* parameter
+moves a row, and :func:`on_rows` fills the rows of every slot.
 """
 
 from __future__ import annotations
@@ -17,12 +21,13 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach, take_rows, tangent
+from flatland.core.dual import Dual, detach, k_of, take_rows, tangent
 
 __all__ = [
     "all_rows",
     "any_rows",
     "emitters_change",
+    "moves",
     "moving_rows",
     "on_rows",
     "take_rows",
@@ -49,13 +54,25 @@ def all_rows(mask: np.ndarray) -> np.ndarray:
     return _fold_columns(mask, np.logical_and)
 
 
+def moves(x: Any) -> np.ndarray:
+    """Where ``x`` carries a nonzero tangent, a boolean array of its value's shape: for a Dual with k
+    tangents, under any of the k parameters (False everywhere for a plain array)."""
+    t = tangent(x) != 0.0
+    return np.any(t, axis=0) if isinstance(x, Dual) and x.k is not None else t
+
+
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
-    """Where any of ``sources`` (Duals or plain arrays, one row per item) has a tangent at ``rows``."""
+    """Where any of ``sources`` (Duals or plain arrays, one row per item) has a tangent at ``rows`` (under
+    any parameter, for k tangents)."""
     out = np.zeros(len(rows), dtype=bool)
     for s in sources:
         if isinstance(s, Dual) and rows.size:
-            t = s.tangent[rows]
-            out |= any_rows(t.reshape(len(rows), -1) != 0.0)
+            if s.k is None:
+                t = s.tangent[rows]
+                out |= any_rows(t.reshape(len(rows), -1) != 0.0)
+            else:  # the k slots as more columns of each row
+                t = np.moveaxis(s.tangent[:, rows], 0, 1)
+                out |= any_rows(t.reshape(len(rows), -1) != 0.0)
     return out
 
 
@@ -85,32 +102,34 @@ def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sourc
     li, di = rows[on], rows[off]
     plain = func(False, *(take_rows(detach(s), di) for s in sources)) if di.size or not li.size else None
     dual = func(True, *(s[li] for s in sources)) if li.size else None
+    k = k_of(*sources) if dual is None else k_of(*dual)
     outputs = []
     for j in range(len(plain if plain is not None else dual)):
         first = detach(plain[j] if plain is not None else dual[j])
         value = np.empty((len(rows), *np.shape(first)[1:]))
-        grad = np.zeros(value.shape)
+        grad = np.zeros(value.shape if k is None else (k, *value.shape))
         if plain is not None:
             value[off] = detach(plain[j])
         if dual is not None:
             value[on] = detach(dual[j])
-            grad[on] = tangent(dual[j])
-        outputs.append(Dual(value, grad))
+            if k is None:
+                grad[on] = tangent(dual[j])
+            else:
+                grad[:, on] = tangent(dual[j], k)
+        outputs.append(Dual(value, grad, k))
     return tuple(outputs)
 
 
 def triangles_change(state: Any) -> np.ndarray:
     """Per triangle: True if its vertices, vertex normals or its shape's emission carry a tangent."""
-    moves = np.any(tangent(state.triangles) != 0.0, axis=(1, 2)) | np.any(
-        tangent(state.normals) != 0.0, axis=(1, 2)
-    )
-    return moves | (tangent(state.emission) != 0.0)[state.shape_of]
+    change = np.any(moves(state.triangles), axis=(1, 2)) | np.any(moves(state.normals), axis=(1, 2))
+    return change | moves(state.emission)[state.shape_of]
 
 
 def emitters_change(state: Any) -> bool:
     """True if an emitter's triangles, emission or total area carry a tangent."""
     return bool(
-        np.any(tangent(state.triangles)[state.emitters] != 0.0)
-        or np.any(tangent(state.emission) != 0.0)
-        or np.any(tangent(state.emitter_area) != 0.0)
+        np.any(moves(state.triangles)[state.emitters])
+        or np.any(moves(state.emission))
+        or np.any(moves(state.emitter_area))
     )

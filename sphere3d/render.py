@@ -23,17 +23,20 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from flatland.core.budget import IMAGE_BYTES_PER_PIXEL, Request, check_request, rays_per_sample
 from flatland.core.contract import Estimate
-from flatland.core.image import GradientImage, Image, resolve_batches
+from flatland.core.image import GradientImage, GradientImages, Image, resolve_batches
 from flatland.core.progress import run as _bar
 from flatland.core.validate import ValidationError, check_int, check_seed
 from sphere3d import execution, tasks
 from sphere3d.methods import GRADIENT_METHODS
 from sphere3d.methods._common import MEMORY_MODELS
 from sphere3d.scene import check_vector, load_scene
-from sphere3d.state import COORD_MAX, scene_term
+from sphere3d.state import scene_term
 from sphere3d.tasks import ImageTask, PointTask
+from sphere3d.world import COORD_MAX
 
 __all__ = ["GRADIENT_METHODS", "irradiance", "render", "render_gradient"]
 
@@ -119,6 +122,23 @@ def _check_budget(task: ImageTask | PointTask, options: dict[str, Any], method: 
     check_request(_request(task, options, method))
 
 
+def _param(scene: Any, param: Any) -> str | tuple[str, ...]:
+    """One checked parameter name, or for a list or tuple the checked tuple of k distinct names."""
+    return scene.check_params(param) if isinstance(param, list | tuple) else scene.check_param(param)
+
+
+def _run(spec: Any, task: ImageTask | PointTask, resolved: dict[str, Any]) -> Any:
+    """``spec.func(task, **resolved)``, refusing a method that gives one derivative for k parameters."""
+    tally = spec.func(task, **resolved)
+    if task.k is not None and np.shape(tally.derivative)[:1] != (task.k,):
+        raise ValidationError(
+            "param",
+            f"method {spec.name!r} gives one derivative, not one per parameter of {list(task.param)!r} "
+            "(it does not evaluate at task.dual_offset()): pass one name per call",
+        )
+    return tally
+
+
 def _resolve(method: str, task: ImageTask | PointTask, options: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
     """The method's table entry and its checked options, once the request fits (:func:`_check_budget`)."""
     spec = GRADIENT_METHODS.lookup(method)
@@ -129,7 +149,7 @@ def _resolve(method: str, task: ImageTask | PointTask, options: dict[str, Any]) 
 
 def render_gradient(
     scene: Any,
-    param: str,
+    param: str | list[str] | tuple[str, ...],
     method: str = "reparam",
     spp: int = 64,
     seed: int = 0,
@@ -138,13 +158,16 @@ def render_gradient(
     progress: bool | None = None,
     scheduler: str | None = None,
     **options: Any,
-) -> GradientImage:
+) -> GradientImage | GradientImages:
     """Render ``scene`` and its derivative with respect to ``param`` by ``method``.
 
     Parameters
     ----------
-    param : str
-        A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``.
+    param : str, or list or tuple of str
+        A parameter of the scene (``Scene.parameters``), e.g. ``"occluder.translate.x"``, or k >= 1
+        distinct names: their k derivatives from one pass (every traced ray, probe and sample
+        shared; forward mode carries k tangents, :mod:`flatland.core.dual`), except
+        ``finite_difference``, which renders 2k + 1 times.
     method : {"naive", "finite_difference", "boundary", "reparam"}
     spp, seed, batches, film, progress, scheduler
         As in :func:`render`; the film (default ``"splat"``) applies to every method alike (their
@@ -159,18 +182,24 @@ def render_gradient(
 
     Returns
     -------
-    GradientImage
-        Value and derivative with standard errors, arrays of shape (height, width).
+    GradientImage or GradientImages
+        For one name: value and derivative with standard errors, arrays of shape (height, width), the
+        same numbers whether or not other calls pass lists. For a list, a
+        :class:`~flatland.core.image.GradientImages`: ``images[name]`` is that parameter's GradientImage
+        (``derivative`` of shape (k, height, width)); with the same seed each equals the single call's
+        where the parameters move the same things (tests/sphere3d/test_multi_param.py says where and how
+        exactly).
 
     Raises
     ------
     ValidationError
         One error naming the field and value: unknown scene field, method, option or
-        parameter, spp < 1, κ outside (0, 1e15], h <= 0 (or h >= 1 on a scale), batches not dividing spp,
-        film not one of "pixel", "splat", a bad ``scheduler`` (as in :func:`render`).
+        parameter, an empty list or a repeated name, spp < 1, κ outside (0, 1e15], h <= 0 (or h >= 1 on
+        a scale), batches not dividing spp, film not one of "pixel", "splat", a bad ``scheduler`` (as in
+        :func:`render`).
     """
     scene = load_scene(scene)
-    param = scene.check_param(param)
+    param = _param(scene, param)
     GRADIENT_METHODS.lookup(method)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
@@ -178,24 +207,18 @@ def render_gradient(
     task = ImageTask(scene, param, spp, seed, batches, film=film)
     spec, resolved = _resolve(method, task, options)  # every argument checked before a cluster is reached
     with execution.cluster(scheduler), _bar(f"{method} {scene.name}", progress):
-        tally = spec.func(task, **resolved)
-    return GradientImage.from_batches(
-        tally.value,
-        tally.derivative,
-        param=param,
-        method=method,
-        spp=spp,
-        seed=seed,
-        options=resolved,
-        scene=scene.name,
-    )
+        tally = _run(spec, task, resolved)
+    run = dict(method=method, spp=spp, seed=seed, options=resolved, scene=scene.name)
+    if task.k is not None:
+        return GradientImages.from_batches(tally.value, tally.derivative, params=param, **run)
+    return GradientImage.from_batches(tally.value, tally.derivative, param=param, **run)
 
 
 def irradiance(
     scene: Any,
     point: Any,
     normal: Any,
-    param: str | None = None,
+    param: str | list[str] | tuple[str, ...] | None = None,
     method: str = "naive",
     n: int = 4096,
     seed: int = 0,
@@ -203,7 +226,7 @@ def irradiance(
     progress: bool | None = None,
     scheduler: str | None = None,
     **options: Any,
-) -> Estimate:
+) -> Estimate | dict[str, Estimate]:
     r"""Irradiance $E = ∫ L_i(ω) \cos θ\, dω$ at a fixed point and normal, and its derivative.
 
     The integral the renderer evaluates at every diffuse hit (there multiplied by
@@ -214,9 +237,10 @@ def irradiance(
     Parameters
     ----------
     point, normal : sequence of 3 floats
-        The point (within ±:data:`~sphere3d.state.COORD_MAX`) and its normal (not zero; normalized here).
-    param : str, optional
+        The point (within ±:data:`~sphere3d.world.COORD_MAX`) and its normal (not zero; normalized here).
+    param : str, or list or tuple of str, optional
         A parameter of the scene to differentiate by; None (default): the value only (derivative 0).
+        A list of k distinct names: their derivatives from one pass, as in :func:`render_gradient`.
     method : {"naive", "finite_difference", "boundary", "reparam"}
         The gradient method (with ``param``), and ``**options`` its options, as in :func:`render_gradient`.
     n : int
@@ -230,9 +254,10 @@ def irradiance(
 
     Returns
     -------
-    Estimate
+    Estimate or dict of str to Estimate
         Value and derivative with standard errors over ``batches`` batches of ``n / batches``.
-        With ``param=None`` only the value is estimated (derivative 0).
+        With ``param=None`` only the value is estimated (derivative 0). For a list of names, a dict
+        from each name to its Estimate (all with the same value), as flatland's.
 
     Raises
     ------
@@ -242,7 +267,7 @@ def irradiance(
         :func:`render`).
     """
     scene = load_scene(scene)
-    param = scene.check_param(param) if param is not None else None
+    param = _param(scene, param) if param is not None else None
     point = check_vector("point", point)
     if max(map(abs, point)) > COORD_MAX:
         raise ValidationError(
@@ -263,5 +288,10 @@ def irradiance(
     else:
         spec, resolved = _resolve(method, task, options)  # every argument checked before a cluster is reached
     with execution.cluster(scheduler), _bar(f"irradiance {method if spec else ''}".rstrip(), progress):
-        tally = task.evaluate(0.0) if spec is None else spec.func(task, **resolved)
+        tally = task.evaluate(0.0) if spec is None else _run(spec, task, resolved)
+    if task.k is not None:
+        return {
+            name: Estimate.from_batches(tally.value, d, n, method, resolved)
+            for name, d in zip(param, tally.derivative, strict=True)
+        }
     return Estimate.from_batches(tally.value, tally.derivative, n, method if spec else "", resolved)

@@ -103,11 +103,12 @@ class Rotation:
     spin: Dual | None = None
 
     @staticmethod
-    def identity(shape: tuple[int, ...]) -> Rotation:
-        """The identity rotation (no point to follow) for ``shape`` integrals."""
+    def identity(shape: tuple[int, ...], k: int | None = None) -> Rotation:
+        """The identity rotation (no point to follow) for ``shape`` integrals (with ``k`` zero tangents:
+        for k parameters)."""
         z = np.zeros((*shape, 3))
         z[..., 2] = 1.0
-        return Rotation(Dual(z), np.zeros(shape, dtype=bool))
+        return Rotation(Dual(z, None, k), np.zeros(shape, dtype=bool))
 
     @staticmethod
     def following(omega_p: Any, active: np.ndarray | None = None, spin: Any = None) -> Rotation:
@@ -124,6 +125,8 @@ class Rotation:
             active = np.ones(omega_p.shape[:-1], dtype=bool)
         length = norm(omega_p.value)
         active = np.asarray(active, dtype=bool) & (length > 0.0) & np.isfinite(length)
+        if omega_p.k is not None:  # k tangents: each parameter's slot as its own rotation would be
+            return _following_slots(omega_p, active, spin)
         not_finite = any_rows(~np.isfinite(omega_p.tangent).reshape(-1, 3)).reshape(active.shape)
         active = active & ~not_finite
         if spin is not None:
@@ -159,6 +162,8 @@ class Rotation:
         """
         omega = detach(omega)
         b = self.target
+        if b.k is not None:
+            return self._apply_slots(omega)
         if np.shape(omega) == b.shape and not self.active.all():
             # an identity row (inactive: target e_z with tangent +0) has the tangent +0 exactly, so only
             # the active rows are rotated; each row's numbers are those of the whole-array call
@@ -178,6 +183,28 @@ class Rotation:
         # value exactly ω (R is the identity at θ0 up to rounding in a·a); tangent dR/dθ ω
         return Dual(np.broadcast_to(omega, np.shape(t)).copy(), t)
 
+    def _apply_slots(self, omega: np.ndarray) -> Dual:
+        """:meth:`apply` for k parameters: each slot's tangent computed as a single rotation's, on the
+        active rows only (an inactive row's tangent is +0 in every slot)."""
+        b, k = self.target, self.target.k
+        shape = np.broadcast_shapes(np.shape(omega), b.shape)
+        flat = np.broadcast_to(omega, shape).reshape(-1, 3)
+        rows = np.flatnonzero(np.broadcast_to(self.active, shape[:-1]).ravel())
+        t = np.zeros((k, *flat.shape))
+        if rows.size:
+            a = take_rows(np.broadcast_to(b.value, shape).reshape(-1, 3), rows)
+            b_dot = np.broadcast_to(b.tangent, (k, *shape)).reshape(k, -1, 3)[:, rows]
+            omega_rows = take_rows(flat, rows)
+            turn = None
+            if self.spin is not None:  # the turn about a: ψ' (a × ω)
+                spin = np.broadcast_to(self.spin.tangent, (k, *shape[:-1])).reshape(k, -1)[:, rows]
+                turn = cross(a, omega_rows)
+            for i in range(k):  # per parameter, the single rotation's expressions
+                t[i, rows] = _identity_tangent(a, b_dot[i], omega_rows)
+                if turn is not None:
+                    t[i, rows] += spin[i, :, None] * turn
+        return Dual(np.broadcast_to(omega, shape).copy(), t.reshape(k, *shape), k)
+
 
 def _identity_tangent(a: np.ndarray, b_dot: np.ndarray, omega: np.ndarray) -> np.ndarray:
     r"""The tangent of :func:`rotate` ``(a, Dual(a, b_dot), ω)``, R(a → b) at b = a (Loubet et al. 2019,
@@ -190,3 +217,22 @@ def _identity_tangent(a: np.ndarray, b_dot: np.ndarray, omega: np.ndarray) -> np
     bit for bit the same, a zero may differ in sign. Plain arrays, broadcasting.
     """
     return dot(a, b_dot)[..., None] * omega + cross(cross(a, b_dot), omega)
+
+
+def _following_slots(omega_p: Dual, active: np.ndarray, spin: Any) -> Rotation:
+    r""":meth:`Rotation.following` for k parameters (``omega_p`` with k tangents): one target and one
+    spin with k tangent columns, the chosen point's motion in every direction at once. Where one
+    parameter's tangent (or spin rate) is not finite, that parameter's slot is the identity there
+    (its tangents 0), as its own rotation would be; the other slots keep theirs."""
+    k = omega_p.k
+    bad = np.any(~np.isfinite(omega_p.tangent), axis=-1)  # (k, ...): per parameter and row
+    if spin is not None:
+        spin = spin if isinstance(spin, Dual) else Dual(spin, None, k)
+        bad = bad | ~np.isfinite(spin.tangent)
+        spin = Dual(np.zeros(active.shape), np.where(active & ~bad, spin.tangent, 0.0), k)
+    omega_p = Dual(omega_p.value, np.where(bad[..., None], 0.0, omega_p.tangent), k)
+    target = Dual(np.zeros(omega_p.shape), None, k)
+    target.value[..., 2] = 1.0
+    found = omega_p[active]
+    target[active] = found / norm(found)[..., None]
+    return Rotation(target, active, spin)

@@ -338,6 +338,18 @@ class Scene:
             )
         return param
 
+    def check_params(self, names: Any) -> tuple[str, ...]:
+        """A list or tuple of k >= 1 distinct parameter names, each checked by :meth:`check_param`; one
+        ValidationError naming ``param`` and the value otherwise (empty, a repeated name, not a name)."""
+        if not isinstance(names, list | tuple) or not names:
+            raise ValidationError(
+                "param", f"must be a parameter name or a non-empty list of them, got {names!r}"
+            )
+        repeated = sorted({n for n in names if isinstance(n, str) and names.count(n) > 1})
+        if repeated:
+            raise ValidationError("param", f"names each parameter once, got {names!r} (repeated: {repeated})")
+        return tuple(self.check_param(name) for name in names)
+
     def shape_index(self, name: str) -> int:
         """Index of the shape called ``name``."""
         return [s.name for s in self.shapes].index(name)

@@ -22,28 +22,21 @@ import numpy as np
 
 from flatland.core.budget import Term
 from flatland.core.dual import Dual, detach
-from flatland.core.validate import ValidationError
 from sphere3d import shapes as shp
 from sphere3d.sampling import triangle_area
 from sphere3d.scene import AXES, Scene
 from sphere3d.tracing import make_tracer
-from sphere3d.vector import cross, dot, norm
+from sphere3d.vector import dot, norm
+from sphere3d.world import check_world
 
 __all__ = [
-    "COORD_MAX",
     "SCENE_BYTES_PER_TRIANGLE",
     "CameraState",
     "SceneState",
     "build_state",
-    "check_world",
     "plain_state",
     "scene_term",
 ]
-
-COORD_MAX = 1e18
-"""Largest |coordinate| of a world-space vertex or ray origin. Embree traces in float32, and
-its ray–triangle test multiplies two coordinate differences, which must stay below float32's
-3.4e38: |x| < 1.8e19; a factor 18 of margin (1e18² · 4 = 4e36)."""
 
 
 def _axis_rotation(axis: int, angle: Any) -> Any:
@@ -117,8 +110,8 @@ class SceneState:
     Attributes
     ----------
     scene : Scene
-    param : str or None
-        The parameter θ stands for (None: a plain render).
+    param : str, tuple of str or None
+        The parameter θ stands for (None: a plain render), or the k parameters of k tangents.
     triangles : Dual or ndarray, shape (T, 3, 3)
         World-space vertices of all triangles, grouped by shape.
     shape_of : ndarray of int, shape (T,)
@@ -147,7 +140,7 @@ class SceneState:
     """
 
     scene: Scene
-    param: str | None
+    param: str | tuple[str, ...] | None
     triangles: Any
     shape_of: np.ndarray
     uv: np.ndarray
@@ -170,6 +163,11 @@ class SceneState:
     def dual(self) -> bool:
         """True if the state carries θ-tangents."""
         return isinstance(self.triangles, Dual)
+
+    @property
+    def k(self) -> int | None:
+        """How many tangents its Duals carry, one per parameter (None: one, or none)."""
+        return self.triangles.k if isinstance(self.triangles, Dual) else None
 
     def detached(self) -> SceneState:
         """The same state without tangents (values unchanged), for rows whose tangents are known to be 0."""
@@ -296,89 +294,49 @@ def plain_state(scene: Scene, param: str | None = None, tracer: str = "embree") 
     return state
 
 
-def _offset(values: tuple[float, ...], index: int, theta: Any) -> Any:
-    """``values`` as a vector with ``theta`` added to component ``index``."""
-    return np.stack([float(v) + theta if i == index else float(v) for i, v in enumerate(values)])
+def _offset(values: tuple[float, ...], offsets: dict[int | None, Any]) -> Any:
+    """``values`` as a vector with ``offsets[i]`` added to component i (none: the plain vector)."""
+    if not offsets:
+        return np.array(values)
+    return np.stack([float(v) + offsets[i] if i in offsets else float(v) for i, v in enumerate(values)])
 
 
-def check_world(
-    scene: Scene,
-    param: str | None,
-    theta: Any,
-    triangles: np.ndarray,
-    shape_of: np.ndarray,
-    origin: np.ndarray,
-) -> None:
-    """Refuse world-space geometry the float tracer and normals cannot represent (one ValidationError).
-
-    Shapes are validated in their local coordinates; translate, rotate and scale can
-    still make a triangle collapse in world space: scaled by 1e-13 and placed at
-    x = 600, where float64 coordinates are 1.1e-13 apart, its vertices round to one
-    point, and its unit normal would be 0/0. Every world triangle must have a nonzero
-    $|e_1 × e_2|$ (the very expression its normal is divided by), and every vertex and
-    the camera must lie within ±:data:`COORD_MAX`.
-
-    Parameters
-    ----------
-    triangles : ndarray, shape (T, 3, 3)
-        Detached world-space vertices; ``shape_of`` (T,) their shapes.
-    origin : ndarray, shape (3,)
-        The detached camera position.
-    """
-    offset = float(np.asarray(detach(theta)))  # nonzero only for finite differences' θ = ±h
-    where = f" (with {param} offset by {offset!r})" if param and offset != 0.0 else ""
-    reach = np.max(np.abs(triangles), axis=(1, 2))
-    far = ~(reach <= COORD_MAX)  # also catches non-finite coordinates
-    if far.any():
-        i = int(shape_of[np.argmax(far)])
-        top = float(np.max(reach[shape_of == i]))
-        raise ValidationError(
-            f"shapes[{i}]",
-            f"{scene.shapes[i].name!r} reaches |coordinate| {top:.3g} in world space{where}; "
-            f"coordinates must lie within ±{COORD_MAX:g} (rays are traced in float32)",
-        )
-    if not np.all(np.abs(origin) <= COORD_MAX):
-        raise ValidationError(
-            "camera.position",
-            f"is {list(map(float, origin))} in world space{where}; "
-            f"coordinates must lie within ±{COORD_MAX:g} (rays are traced in float32)",
-        )
-    area2 = norm(cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]))
-    flat = ~(area2 > 0.0)
-    if flat.any():
-        t = int(np.argmax(flat))
-        i = int(shape_of[t])
-        s, k = scene.shapes[i], t - int(np.argmax(shape_of == i))
-        raise ValidationError(
-            f"shapes[{i}]",
-            f"triangle {k} of {s.name!r} has zero area in world space{where}: "
-            f"its vertices round together (or its size squared underflows) at scale {s.scale!r} and "
-            f"translate {list(s.translate)}; "
-            "enlarge the shape or move it nearer the origin",
-        )
+def _bind(scene: Scene, param: Any, theta: Any) -> dict[tuple[str, str], dict[int | None, Any]]:
+    """Each parameter's offset by what it moves: (owner, kind) -> {axis (None: no axis): offset}. ``param``
+    is one name (offset ``theta``), None, or a tuple or list of k names with a sequence of k offsets
+    (or one offset for all of them)."""
+    names = tuple(param) if isinstance(param, tuple | list) else (() if param is None else (param,))
+    offsets = list(theta) if isinstance(theta, tuple | list) else [theta] * len(names)
+    if len(offsets) != len(names):
+        raise ValueError(f"theta: {len(names)} parameters need {len(names)} offsets, got {len(offsets)}")
+    bound: dict[tuple[str, str], dict[int | None, Any]] = {}
+    for name, offset in zip(names, offsets, strict=True):
+        owner, _, rest = scene.check_param(name).partition(".")
+        kind, _, axis_name = rest.partition(".")
+        bound.setdefault((owner, kind), {})[AXES.index(axis_name) if axis_name else None] = offset
+    return bound
 
 
 def build_state(
-    scene: Scene, param: str | None = None, theta: Any = 0.0, tracer: str = "embree"
+    scene: Scene, param: str | tuple | list | None = None, theta: Any = 0.0, tracer: str = "embree"
 ) -> SceneState:
-    """The :class:`SceneState` of ``scene`` with ``param`` offset by ``theta`` (see module docstring)."""
-    if param is not None:
-        param = scene.check_param(param)
-    owner, kind, axis = None, None, None
-    if param is not None:
-        owner, _, rest = param.partition(".")
-        kind, _, axis_name = rest.partition(".")
-        axis = AXES.index(axis_name) if axis_name else None
+    """The :class:`SceneState` of ``scene`` with ``param`` offset by ``theta`` (see module docstring).
+
+    ``param`` may be a tuple or list of k names with a sequence of k offsets, each applied to what it
+    names (``variables(k)``: the state's Duals carry k tangents, slot i parameter i's).
+    """
+    bound = _bind(scene, param, theta)
+    param = tuple(param) if isinstance(param, list) else param
+    offsets = list(theta) if isinstance(theta, tuple | list) else [theta]
+    k = next((t.k for t in offsets if isinstance(t, Dual)), None)  # None: one tangent (or plain)
 
     triangles, shape_of, uv, fade_kind, fade, albedo, emission = [], [], [], [], [], [], []
     normals, smooth = [], []
     for index, s in enumerate(scene.shapes):
-        mine = owner == s.name
-        translate = (
-            _offset(s.translate, axis, theta) if mine and kind == "translate" else np.array(s.translate)
-        )
-        rotate = _offset(s.rotate, axis, theta) if mine and kind == "rotate" else np.array(s.rotate)
-        scale = s.scale * (1.0 + theta) if mine and kind == "scale" else s.scale
+        mine = {kind: offs for (owner, kind), offs in bound.items() if owner == s.name}
+        translate = _offset(s.translate, mine.get("translate", {}))
+        rotate = _offset(s.rotate, mine.get("rotate", {}))
+        scale = s.scale * (1.0 + mine["scale"][None]) if "scale" in mine else s.scale
         # world = translate + R (scale · local): rotation and scale act about the centre
         rotation_t = np.swapaxes(euler_matrix(rotate), -1, -2)
         world = translate + (scale * s.mesh.vertices) @ rotation_t
@@ -390,33 +348,37 @@ def build_state(
         uv.append(s.mesh.uv[s.mesh.faces])
         fade_kind.append(np.full(n, s.mesh.fade_kind))
         fade.append(np.full(n, s.fade))
-        albedo.append(s.albedo + theta if mine and kind == "albedo" else s.albedo)
-        emission.append(s.emission + theta if mine and kind == "emission" else s.emission)
+        albedo.append(s.albedo + mine["albedo"][None] if "albedo" in mine else s.albedo)
+        emission.append(s.emission + mine["emission"][None] if "emission" in mine else s.emission)
 
     triangles = np.concatenate(triangles)
     normals = np.concatenate(normals)
     shape_of = np.concatenate(shape_of)
     albedo = np.stack(albedo)
     emission = np.stack(emission)
-    sky = scene.sky + theta if owner == "sky" else np.float64(scene.sky)
-    if isinstance(theta, Dual):
+    sky = (
+        scene.sky + bound[("sky", "emission")][None]
+        if ("sky", "emission") in bound
+        else np.float64(scene.sky)
+    )
+    dual = any(isinstance(t, Dual) for t in offsets)
+    if dual:
         # one code path: with a Dual θ every scene quantity is a Dual (most with zero tangent)
         triangles, normals, albedo, emission, sky = (
-            x if isinstance(x, Dual) else Dual(x) for x in (triangles, normals, albedo, emission, sky)
+            x if isinstance(x, Dual) else Dual(x, None, k)
+            for x in (triangles, normals, albedo, emission, sky)
         )
 
-    emitting = [
-        i for i, s in enumerate(scene.shapes) if s.emission > 0.0 or (owner == s.name and kind == "emission")
-    ]
+    emitting = [i for i, s in enumerate(scene.shapes) if s.emission > 0.0 or (s.name, "emission") in bound]
     emitters = np.flatnonzero(np.isin(shape_of, emitting))
     et = triangles[emitters]
     emitter_area = np.sum(triangle_area(et[:, 0], et[:, 1], et[:, 2])) if len(emitters) else 0.0
 
     cam = scene.camera
     forward, right, up = cam.frame()
-    origin = _offset(cam.position, axis, theta) if owner == "camera" else np.array(cam.position)
-    if isinstance(theta, Dual) and not isinstance(origin, Dual):
-        origin = Dual(origin)
+    origin = _offset(cam.position, bound.get(("camera", "translate"), {}))
+    if dual and not isinstance(origin, Dual):
+        origin = Dual(origin, None, k)
     camera = CameraState(
         origin, forward, right, up, float(np.tan(0.5 * cam.fov)), cam.width, cam.height, cam.filter
     )
@@ -438,8 +400,8 @@ def build_state(
         albedo=albedo,
         emission=emission,
         sky=sky,
-        albedo_varies=np.array([owner == s.name and kind == "albedo" for s in scene.shapes]),
-        sky_varies=owner == "sky",
+        albedo_varies=np.array([(s.name, "albedo") in bound for s in scene.shapes]),
+        sky_varies=("sky", "emission") in bound,
         emitters=emitters,
         emitter_area=emitter_area,
         camera=camera,

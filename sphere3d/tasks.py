@@ -24,12 +24,12 @@ import numpy as np
 
 from flatland.core import progress
 from flatland.core.budget import IMAGE_BYTES_PER_PIXEL, Term
-from flatland.core.dual import Dual, detach, tangent
+from flatland.core.dual import Dual, detach, k_of, tangent, variable, variables
 from flatland.core.rng import Draws
 from flatland.core.translation import control_variate
 from flatland.core.validate import check_choice
 from sphere3d import execution
-from sphere3d.film import FILMS, gather, reach, splat_weights, stencil
+from sphere3d.film import FILMS, gather, reach, splat_band, splat_stencils, splat_weights
 from sphere3d.integrator import (
     PRIMARY_UNIFORMS,
     Identity,
@@ -57,21 +57,45 @@ CV_SCOPES = ("pixel", "batch", "off")
 
 @dataclass(frozen=True)
 class Tally:
-    """Per-batch means of the value and of its θ-derivative, shape (batches, ``*output_shape``)."""
+    """Per-batch means of the value and of its θ-derivative, shape (batches, ``*output_shape``); for k
+    parameters the derivative has a leading axis of k, (k, batches, ``*output_shape``)."""
 
     value: np.ndarray
     derivative: np.ndarray
 
 
 def _tally(values: list[Any], shape: tuple[int, ...]) -> Tally:
-    return Tally(
-        value=np.stack([np.asarray(detach(v), dtype=np.float64).reshape(shape) for v in values]),
-        derivative=np.stack([np.asarray(tangent(v), dtype=np.float64).reshape(shape) for v in values]),
+    k = k_of(*values)
+    full = shape if k is None else (k, *shape)
+    deriv = np.stack(
+        [np.asarray(tangent(v), dtype=np.float64).reshape(full) for v in values], axis=-len(shape) - 1
     )
+    value = np.stack([np.asarray(detach(v), dtype=np.float64).reshape(shape) for v in values])
+    return Tally(value=value, derivative=deriv)
+
+
+class _Parameters:
+    """What a task's ``param`` holds: one name (str), None, or a tuple of k names (k tangents)."""
+
+    param: str | tuple[str, ...] | None
+
+    @property
+    def k(self) -> int | None:
+        """The number of parameters of a tuple ``param``; None for one parameter (or none)."""
+        return len(self.param) if isinstance(self.param, tuple) else None
+
+    def dual_offset(self) -> Any:
+        """The offset θ0 = 0 as forward-mode seed(s): ``variable(0.0)``, or for k parameters
+        ``variables(k)`` (parameter i with the unit tangent e_i, :mod:`flatland.core.dual`)."""
+        return variables(self.k) if self.k is not None else variable(0.0)
+
+    def parameters(self) -> tuple[str, ...]:
+        """The parameters, as a tuple (one for a single parameter)."""
+        return self.param if isinstance(self.param, tuple) else () if self.param is None else (self.param,)
 
 
 @dataclass(frozen=True)
-class ImageTask:
+class ImageTask(_Parameters):
     """The pixel integrals of ``scene``'s camera image: ``spp`` samples per pixel in ``batches``.
 
     ``cv_scope``: :meth:`_control_variate`; ``film``: ``"splat"`` (default) or ``"pixel"``
@@ -79,7 +103,7 @@ class ImageTask:
     """
 
     scene: Scene
-    param: str | None
+    param: str | tuple[str, ...] | None
     spp: int
     seed: int
     batches: int
@@ -171,7 +195,7 @@ class ImageTask:
         chunk = functools.partial(self._chunk, state, transforms)
         chunks = range(self._chunk_count())
         if self.film == "splat":
-            tally = self._splat_tiles(chunk, chunks, batches, per_batch)
+            tally = self._splat_tiles(chunk, chunks, batches, per_batch, state.k)
         else:
             parts = execution.map_chunks(chunk, chunks)
             tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
@@ -223,7 +247,7 @@ class ImageTask:
             return execution.map_chunks(chunk, range(first, stop), counted=False)
         pixels = self.shape[0] * self.shape[1]
         lo, hi = first * chunk_pixels, min(pixels, stop * chunk_pixels)
-        out = self._splat_buffers(hi - lo)
+        out = self._splat_buffers(hi - lo, state.k)
         execution.map_chunks(functools.partial(chunk, out=out, offset=lo), range(first, stop), counted=False)
         return out
 
@@ -247,15 +271,16 @@ class ImageTask:
         if self.film != "splat":
             tally = _tally(list(np.concatenate([p for parts in results for p in parts], axis=1)), self.shape)
         else:
-            out = self._splat_buffers(height * width)
+            k = theta.k if isinstance(theta, Dual) else None
+            out = self._splat_buffers(height * width, k)
             for (first, stop), tile in zip(items, results, strict=True):
                 lo, hi = first * self.chunk_pixels, min(height * width, stop * self.chunk_pixels)
                 for whole, part in zip(out, tile, strict=True):
                     if whole is not None:
                         whole[..., lo:hi] = part
-            image = np.empty((2, batches, height, width))
+            image = np.empty((1 + (k or 1), batches, height, width))
             self._splat_rows(out, 0, range(height), per_batch, image)
-            tally = Tally(value=image[0], derivative=image[1])
+            tally = Tally(value=image[0], derivative=image[1] if k is None else image[1:])
         return tally if extra is None else Tally(tally.value, tally.derivative + extra)
 
     @property
@@ -275,13 +300,14 @@ class ImageTask:
 
     def _stencil_bytes(self) -> int:
         r"""Bytes of the splat film's buffers per pixel (:meth:`_splat_buffers`): $Q (2h + 1)^2$ float64 per
-        batch (Q = 4 quantities with the control variate, else 2; h from :func:`~sphere3d.film.reach`),
-        and with the control variate the radiance totals, 2 float64 per pixel (per batch with
-        ``cv_scope="batch"``)."""
+        batch (Q = 2q quantities with the control variate, else q, q = 1 + the number of tangents; h from
+        :func:`~sphere3d.film.reach`), and with the control variate the radiance totals, q float64 per
+        pixel (per batch with ``cv_scope="batch"``)."""
         cv = self._cv_samples(self.batches, self.spp // self.batches) > 0
         _, h = reach(self.scene.camera.filter)
-        stencils = (4 if cv else 2) * self.batches * (2 * h + 1) ** 2 * 8
-        return stencils + (2 * 8 * (1 if self.cv_scope == "pixel" else self.batches) if cv else 0)
+        q = 1 + (self.k or 1)
+        stencils = (2 * q if cv else q) * self.batches * (2 * h + 1) ** 2 * 8
+        return stencils + (q * 8 * (1 if self.cv_scope == "pixel" else self.batches) if cv else 0)
 
     def _tile(self) -> tuple[int, int]:
         r"""The splat film's tiles (:meth:`_splat_tiles`): memory chunks per tile, and the pixels its
@@ -314,15 +340,17 @@ class ImageTask:
         what = "each sample in every pixel its filter covers"
         return (Term("film", self.film, what, block, at_once=held * self._stencil_bytes()),)
 
-    def _splat_buffers(self, pixels: int) -> tuple[np.ndarray, np.ndarray | None]:
+    def _splat_buffers(self, pixels: int, k: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """The chunks' outputs for :meth:`_splat_chunk`, columns for ``pixels`` pixels: stencils
-        (quantities, batches, slots, pixels), four quantities with the control variate and two without,
-        and the pixels' radiance totals (value and tangent)."""
+        (quantities, batches, slots, pixels), 2q quantities with the control variate and q without (q = 1 +
+        the number of tangents: the estimate and its tangents, then the weights and theirs; ``k`` of
+        them, or one), and the pixels' radiance totals (value and tangents)."""
         per_batch = self.spp // self.batches
         cv = self._cv_samples(self.batches, per_batch) > 0
         _, h = reach(self.scene.camera.filter)
-        stencils = np.empty((4 if cv else 2, self.batches, (2 * h + 1) ** 2, pixels))
-        totals = np.empty((2, 1 if self.cv_scope == "pixel" else self.batches, pixels)) if cv else None
+        q = 1 + (k or 1)
+        stencils = np.empty((2 * q if cv else q, self.batches, (2 * h + 1) ** 2, pixels))
+        totals = np.empty((q, 1 if self.cv_scope == "pixel" else self.batches, pixels)) if cv else None
         return stencils, totals
 
     def _splat_chunk(
@@ -348,37 +376,19 @@ class ImageTask:
         :mod:`sphere3d.film`); the $[i ∈ p]$ count n. It removes the noise of the weights'
         sum (a constant radiance gives its value exactly, and its derivative: the radiance's
         $\dot L$ splatted) and the filter derivative's $L \dot w$ (:meth:`_control_variate`).
-        The other pixels' part is applied in :meth:`_splat_image`.
+        The other pixels' part is applied in :meth:`_splat_rows`.
         Off where :meth:`_control_variate` is (``cv_scope="off"``, one sample per scope, box).
+        For k parameters each tangent is one single parameter's (:func:`~sphere3d.film.splat_stencils`).
         """
         _, h = reach(self.scene.camera.filter)
         cols = slice(pix[0] - offset, pix[-1] + 1 - offset)
-        stencils, totals = (part[..., cols] if part is not None else None for part in out)
-        shape = (batches, pix.size, per_batch, samples.weight.shape[-1])
-        slot = samples.slot.reshape(shape)
-        wv, wt = (np.asarray(f(samples.weight), dtype=np.float64).reshape(shape) for f in (detach, tangent))
-        rv, rt = (
-            np.asarray(f(samples.radiance), dtype=np.float64).reshape(*shape[:3], 1)
-            for f in (detach, tangent)
-        )
-        ev, et = rv * wv, rt * wv + rv * wt  # e = radiance * weight, as Dual arithmetic (product rule)
-        if totals is None:
-            stencil((ev, et), slot, h, stencils)
-            return
-        total, scale = self._leave_one_out(rv[..., 0], self._cv_samples(batches, per_batch))
-        total_t, scale_t = self._leave_one_out(rt[..., 0], self._cv_samples(batches, per_batch))
-        centre = (2 * h + 1) * h + h  # the slot of the sample's own pixel
-        own = np.flatnonzero(slot == centre)  # one entry per sample at most: only there is i ∈ p
-        scale = scale.ravel()[own // shape[-1]]  # sample i left out of its own pixel
-        scale_t = scale_t.ravel()[own // shape[-1]]
-        ev.ravel()[own] -= scale * (wv.ravel()[own] - 1.0)
-        et.ravel()[own] -= scale * wt.ravel()[own] + scale_t * (wv.ravel()[own] - 1.0)
-        stencil((ev, et, wv, wt), slot, h, stencils)
-        stencils[2:, :, centre] = 0.0  # the weights of other pixels' samples only
-        totals[0] = total.reshape(totals.shape[1:])
-        totals[1] = total_t.reshape(totals.shape[1:])
+        buffers = tuple(part[..., cols] if part is not None else None for part in out)
+        slot = samples.slot.reshape(batches, pix.size, per_batch, samples.weight.shape[-1])
+        cv = (self._cv_samples(batches, per_batch), self._leave_one_out) if buffers[1] is not None else None
+        k = k_of(samples.radiance, samples.weight)
+        splat_stencils(samples.radiance, samples.weight, slot, k, h, cv, buffers)
 
-    def _splat_tiles(self, chunk: Any, chunks: range, batches: int, per_batch: int) -> Tally:
+    def _splat_tiles(self, chunk: Any, chunks: range, batches: int, per_batch: int, k: int | None) -> Tally:
         r"""The splat film's image, tile by tile: the stencils of a tile of memory chunks (:meth:`_tile`;
         ``chunk(c, out, offset)`` writes chunk c's, :meth:`_splat_chunk`), then every image row whose
         sources are all done (:meth:`_splat_rows`), before the next tile.
@@ -395,8 +405,8 @@ class ImageTask:
         _, h = reach(self.scene.camera.filter)
         pixels, chunk_pixels = height * width, self.chunk_pixels
         tile_chunks, held = self._tile()
-        out = self._splat_buffers(held)
-        image = np.empty((2, batches, height, width))
+        out = self._splat_buffers(held, k)
+        image = np.empty((1 + (k or 1), batches, height, width))
         lo, done = 0, 0  # the pixel in the buffers' column 0; the first image row not made
         progress.start(len(chunks))  # one pass, advanced tile by tile
         for first in range(chunks.start, chunks.stop, tile_chunks):
@@ -414,11 +424,11 @@ class ImageTask:
                     if part is not None:
                         part[..., : stop - keep] = part[..., keep - lo : stop - lo]  # overlap: numpy copies
                 lo = keep
-        return Tally(value=image[0], derivative=image[1])
+        return Tally(value=image[0], derivative=image[1] if k is None else image[1:])
 
     def _splat_rows(self, out: tuple, first: int, rows: range, per_batch: int, image: np.ndarray) -> None:
         """Image ``rows`` from the stencils (:func:`~sphere3d.film.gather`, in bands of rows on the threads),
-        written to ``image`` (value and tangent, batches, height, width): value and tangent, minus the
+        written to ``image`` (value and tangents, batches, height, width): value and tangents, minus the
         other pixels' samples' weights times their target's mean radiance. ``out`` holds the source rows
         from ``first`` on, every row the image rows need."""
         height, width = self.shape
@@ -428,19 +438,16 @@ class ImageTask:
         stencils = stencils[..., : (min(height, rows.stop + h) - first) * width]  # whole rows only
         step = -(-len(rows) // (2 * execution.workers()))
 
-        def band(i: int) -> None:
+        def bands(i: int) -> None:
             part = range(rows.start + i * step, min(rows.stop, rows.start + (i + 1) * step))
             sums = gather(stencils, height, width, h, part, first).reshape(len(stencils), batches, -1)
-            sums = sums / per_batch
-            value, deriv = sums[0], sums[1]
+            mean = None
             if totals is not None:
                 mean = totals[..., (part.start - first) * width : (part.stop - first) * width]
-                mean = mean / self._cv_samples(batches, per_batch)
-                value, deriv = value - mean[0] * sums[2], deriv - mean[0] * sums[3] - mean[1] * sums[2]
-            image[0, :, part.start : part.stop] = value.reshape(batches, len(part), width)
-            image[1, :, part.start : part.stop] = deriv.reshape(batches, len(part), width)
+            for i, band in enumerate(splat_band(sums, mean, per_batch, self._cv_samples(batches, per_batch))):
+                image[i, :, part.start : part.stop] = band.reshape(batches, len(part), width)
 
-        execution.map_chunks(band, range(-(-len(rows) // step)), counted=False)
+        execution.map_chunks(bands, range(-(-len(rows) // step)), counted=False)
 
 
 def _remote(shared: tuple[ImageTask | PointTask, Any, Transforms, int], item: tuple[int, int] | None) -> Any:
@@ -456,11 +463,11 @@ def _remote(shared: tuple[ImageTask | PointTask, Any, Transforms, int], item: tu
 
 
 @dataclass(frozen=True)
-class PointTask:
+class PointTask(_Parameters):
     r"""The irradiance $E = ∫ L_i \cos θ\, dω$ at a fixed point with a fixed unit normal: ``n`` samples."""
 
     scene: Scene
-    param: str | None
+    param: str | tuple[str, ...] | None
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     n: int
@@ -499,7 +506,7 @@ class PointTask:
         count = min(size, per_batch - c * size)
         x, nrm = (np.broadcast_to(np.array(v), (count, 3)).copy() for v in (self.point, self.normal))
         if state.dual:
-            x, nrm = Dual(x), Dual(nrm)
+            x, nrm = Dual(x, None, state.k), Dual(nrm, None, state.k)
         # sample j = b * per_batch + c * size + s of the point: its numbers are keyed on j
         draws = Draws.of(self.seed, b * per_batch + c * size + np.arange(count))
         u = draws.uniforms("samples", 5)

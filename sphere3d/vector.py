@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import Dual, detach
+from flatland.core.dual import Dual, detach, k_of
 
 __all__ = ["cross", "dot", "frame", "norm", "normalize", "scatter", "zeros"]
 
@@ -31,7 +31,12 @@ def cross(a: Any, b: Any) -> Any:
     """
     if not (isinstance(a, Dual) or isinstance(b, Dual)):
         return _cross(a, b)
-    (a, a_dot), (b, b_dot) = _parts(a), _parts(b)
+    k = k_of(a, b)
+    if k is not None:  # k tangents: each lined up after its k axis to the result's value axes
+        ndim = max(np.ndim(detach(a)), np.ndim(detach(b)))
+        (a, a_dot), (b, b_dot) = _parts(a, ndim), _parts(b, ndim)
+    else:
+        (a, a_dot), (b, b_dot) = _parts(a), _parts(b)
     a0, a1, a2 = _columns(a)
     b0, b1, b2 = _columns(b)
     a0_dot, a1_dot, a2_dot = _columns(a_dot)
@@ -40,7 +45,7 @@ def cross(a: Any, b: Any) -> Any:
     t0 = (a1_dot * b2 + a1 * b2_dot) - (a2_dot * b1 + a2 * b1_dot)
     t1 = (a2_dot * b0 + a2 * b0_dot) - (a0_dot * b2 + a0 * b2_dot)
     t2 = (a0_dot * b1 + a0 * b1_dot) - (a1_dot * b0 + a1 * b0_dot)
-    return Dual(_cross(a, b), np.stack(np.broadcast_arrays(t0, t1, t2), axis=-1))
+    return Dual(_cross(a, b), np.stack(np.broadcast_arrays(t0, t1, t2), axis=-1), k)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -49,9 +54,15 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def _parts(x: Any) -> tuple[np.ndarray, Any]:
-    """(value, tangent) of a Dual; a plain array's tangent is the scalar 0, as in the Dual rules."""
-    return (x.value, x.tangent) if isinstance(x, Dual) else (np.asarray(x, dtype=np.float64), 0.0)
+def _parts(x: Any, ndim: int | None = None) -> tuple[np.ndarray, Any]:
+    """(value, tangent) of a Dual; a plain array's tangent is the scalar 0, as in the Dual rules. With
+    ``ndim``: a k-Dual's tangent (k, ...) gets axes of length 1 after k up to ``ndim`` value axes, so it
+    broadcasts against the other operand's value like the values do (each slot's numbers unchanged)."""
+    if not isinstance(x, Dual):
+        return np.asarray(x, dtype=np.float64), 0.0
+    if ndim is not None and x.ndim < ndim:
+        return x.value, x.tangent.reshape((x.k,) + (1,) * (ndim - x.ndim) + x.shape)
+    return x.value, x.tangent
 
 
 def _columns(x: Any) -> tuple[Any, Any, Any]:
@@ -84,19 +95,27 @@ def frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t, s
 
 
-def zeros(shape: tuple[int, ...], dual: bool) -> Any:
-    """Zeros of ``shape``: a Dual (zero tangent) when ``dual``, else a plain array."""
-    return Dual(np.zeros(shape)) if dual else np.zeros(shape)
+def zeros(shape: tuple[int, ...], dual: bool, k: int | None = None) -> Any:
+    """Zeros of ``shape``: a Dual (zero tangent; ``k`` of them, or the classic one) when ``dual``, else a
+    plain array."""
+    return Dual(np.zeros(shape), None, k) if dual else np.zeros(shape)
 
 
 def scatter(
-    n: int, index: np.ndarray, values: Any, dual: bool | None = None, tail: tuple[int, ...] = ()
+    n: int,
+    index: np.ndarray,
+    values: Any,
+    dual: bool | None = None,
+    tail: tuple[int, ...] = (),
+    k: int | None = None,
 ) -> Any:
     """An array of ``n`` rows (times ``tail``), zero except ``out[index] = values``.
 
-    A Dual when ``dual`` is True (or, if ``dual`` is None, when ``values`` is a Dual).
+    A Dual when ``dual`` is True (or, if ``dual`` is None, when ``values`` is a Dual), with the k
+    tangents of ``values`` if it is a Dual, else ``k`` of them (None: the classic single tangent).
     """
-    out = zeros((n, *tail), isinstance(values, Dual) if dual is None else dual)
+    k = values.k if isinstance(values, Dual) else k
+    out = zeros((n, *tail), isinstance(values, Dual) if dual is None else dual, k)
     if isinstance(out, Dual):
         out[index] = values
     else:

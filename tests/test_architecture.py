@@ -169,8 +169,8 @@ def test07_no_module_of_either_package_has_more_than_300_lines_of_code():
 
 LAYERS = {
     "sphere3d": (
-        ("primitives", ("vector", "live", "shapes", "sampling", "rotation", "tracing", "film")),
-        ("scene at θ", ("scene", "state")),
+        ("primitives", ("vector", "live", "shapes", "sampling", "bsdf", "rotation", "tracing", "film")),
+        ("scene at θ", ("scene", "state", "world")),
         ("integrals", ("integrator", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),
@@ -240,7 +240,7 @@ def test08_sphere3d_modules_import_only_their_own_layer_or_below_and_form_no_cyc
 # ------------------------------------------------------------------ the vocabulary both renderers share
 PACKAGES = ("flatland", "sphere3d")
 SHARED_MODULES = {
-    "scene", "state", "tracing", "integrator", "tasks", "sampling", "render",
+    "scene", "state", "tracing", "integrator", "tasks", "sampling", "bsdf", "render",
     "methods", "methods._common", "methods.naive", "methods.finite_difference", "methods.reparam",
     "reparam", "reparam.probes", "reparam.default",
 }  # fmt: skip
@@ -256,6 +256,7 @@ SHARED_NAMES = {
     "integrator": {"PRIMARY_UNIFORMS", "Transforms", "Identity"},
     "tasks": {"CHUNK", "ImageTask", "PointTask", "Tally"},
     "sampling": {"filter_value", "sample_filter", "pdf_filter"},
+    "bsdf": {"eval_ggx", "sample_ggx", "pdf_ggx", "weight_ggx", "albedo_ggx"},
     "render": {"GRADIENT_METHODS", "render", "render_gradient", "irradiance"},
     "methods": {"GRADIENT_METHODS"},
     "methods._common": {"GRADIENT_METHODS"},

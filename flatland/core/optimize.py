@@ -129,8 +129,8 @@ class OptimizeResult:
         Wall time of each step (its renders and the update).
     images : Mapping[int, ndarray]
         The residual renders ``(V, *film)`` at the recorded steps (row indices of ``theta``).
-    targets : ndarray, shape (V, *film)
-        The target images.
+    targets : ndarray
+        The target images, shape ``(V, *film)``.
     lower, upper : ndarray, shape (k,)
         The bounds θ was kept in.
     lr : ndarray, shape (k,)

@@ -253,13 +253,13 @@ def camera_edge_term(
     its own part of the batch's stream: the same numbers as all at once, the splat's sums in chunk order.
     """
     cam = state.camera
-    out = np.zeros(cam.height * cam.width)
+    out = np.zeros(cam.height * cam.width if state.k is None else (state.k, cam.height * cam.width))
     seg = film_edges(state, plain, edges) if segments is None else segments
     count = point_count(points_per_pixel, seg.length)
     n = int(count.sum())
     for lo in range(0, n, POINT_CHUNK):
         _splat_points(out, state, plain, seg, (seed, batch), count, range(lo, min(n, lo + POINT_CHUNK)))
-    return out.reshape(cam.height, cam.width)
+    return out.reshape(*out.shape[:-1], cam.height, cam.width)
 
 
 def _splat_points(
@@ -292,7 +292,7 @@ def _splat_points(
     point = a[k] + s[:, None] * (b[k] - a[k])  # Dual: moves with θ at fixed s
     fx, fy = cam.film(point - cam.origin)
     x = np.stack([detach(fx), detach(fy)], axis=-1)
-    v = np.stack([tangent(fx), tangent(fy)], axis=-1)
+    v = np.stack([tangent(fx), tangent(fy)], axis=-1)  # (count, 2), or (k, count, 2) for k parameters
     seg_film = seg.fb[k] - seg.fa[k]
     seg_length = norm(seg_film)
     # a zero-length image is never drawn (rounding aside: its weight is then 0, not 0/0)
@@ -314,8 +314,10 @@ def _splat_points(
     hits = _side_hits(plain, edges.take(k), d)
     radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits))
     jump = radiance[:count] - radiance[count:]
-    # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2)
-    weight = jump * np.sum(v * normal, axis=1) * share * seen
+    # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2); for k
+    # parameters the same jumps times each parameter's v · n, into its own image
+    slots = [(out, v)] if v.ndim == 2 else list(zip(out, v, strict=True))
+    weights = [jump * np.sum(v_i * normal, axis=1) * share * seen for _, v_i in slots]
     reach = math.ceil(filter_radius(cam.filter) + 0.5)
     base = np.floor(x).astype(np.int64)
     for dy in range(-reach, reach + 1):  # splat to every pixel whose filter support covers x
@@ -323,4 +325,5 @@ def _splat_points(
             col, row = base[:, 0] + dx, base[:, 1] + dy
             inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
             kx = filter_value(np.stack([x[:, 0] - col - 0.5, x[:, 1] - row - 0.5], axis=-1), cam.filter)
-            np.add.at(out, (row * width + col)[inside], (kx * weight)[inside])
+            for (image, _), weight in zip(slots, weights, strict=True):
+                np.add.at(image, (row * width + col)[inside], (kx * weight)[inside])

@@ -19,7 +19,7 @@ state computes every vertex once, so equal positions are bit-equal), across shap
 too, so a segment two shapes share is one edge, counted once. An edge shared by
 three or more faces (non-manifold) is treated like a boundary edge: a candidate from
 every viewpoint. An edge whose two vertices weld together has zero length, which a
-state refuses already (its triangle has zero area, :func:`sphere3d.state.check_world`);
+state refuses already (its triangle has zero area, :func:`sphere3d.world.check_world`);
 such edges would be dropped here. Not handled: an edge that overlaps another edge
 only in part (a T-junction) and lines where surfaces cut through each other, along
 which visibility also jumps; no built-in scene has either.

@@ -45,7 +45,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from sphere3d.boundary.edges import mesh_edges
-from sphere3d.live import any_rows, take_rows
+from sphere3d.live import any_rows, moves, take_rows
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
 from sphere3d.state import per_state
@@ -132,7 +132,8 @@ class EmitterEdgeSamples:
         return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index))
 
     def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
-        r"""The boundary term's estimate (a tangent, shape (k,)) given one rotation per point.
+        r"""The boundary term's estimate (a tangent, shape (n,), or (p, n) for p parameters) given one
+        rotation per point.
 
         ``x``: the points ``index`` (Dual positions); ``rotation``: their emitter rotations.
         Estimate $-P/\mathrm{POINTS} · Σ_\mathrm{faces} F_\mathrm{in} (V_T · n_\mathrm{out})$ per edge point
@@ -143,10 +144,11 @@ class EmitterEdgeSamples:
         tri0 = np.asarray(detach(state.triangles))
         # operands without a tangent enter plain: the Dual rules give the same nonzero tangents
         # (a constant's tangent is a scalar 0), and a zero one ends as +0 in ``out`` either way
-        faces_move = np.any(tangent(state.triangles)[self.table.faces[self.table.faces >= 0]])
+        faces_move = np.any(moves(state.triangles)[self.table.faces[self.table.faces >= 0]])
         tri = state.triangles if faces_move else tri0
-        x = x if np.any(tangent(x)) else detach(x)
-        out = np.zeros(len(self.index))
+        x = x if np.any(moves(x)) else detach(x)
+        p = state.k  # None, or p parameters: each one's term from the same edge points
+        out = np.zeros(len(self.index) if p is None else (p, len(self.index)))
         for j in range(2):  # the edge's two faces (not a loop over samples)
             s = np.flatnonzero(self.front[:, j])
             if s.size == 0:
@@ -155,10 +157,12 @@ class EmitterEdgeSamples:
             it = intersect_triangles(x[s], rotated[s], tri[f])
             t0 = tri0[f]
             # velocity of the re-attached point relative to the emitter, V_T = ḃ₁ e₁ + ḃ₂ e₂
-            v = tangent(it.b1)[:, None] * (t0[:, 1] - t0[:, 0]) + tangent(it.b2)[:, None] * (
-                t0[:, 2] - t0[:, 0]
-            )
-            speed = dot(v, self.table.outward[self.edge[s], j])
+            b1_dots, b2_dots = ([tangent(b)] if p is None else list(tangent(b, p)) for b in (it.b1, it.b2))
+            speeds = []
+            for b1_dot, b2_dot in zip(b1_dots, b2_dots, strict=True):
+                v = b1_dot[:, None] * (t0[:, 1] - t0[:, 0]) + b2_dot[:, None] * (t0[:, 2] - t0[:, 0])
+                speeds.append(dot(v, self.table.outward[self.edge[s], j]))
+            speed = speeds[0] if p is None else np.stack(speeds)
             cos_y = -dot(self.table.normals[self.edge[s], j], self.w[s])  # the face's unit normal, tabled
             d = self.dist[s]
             p_light = d * d / (area * cos_y)  # solid-angle density of the emitter strategy
@@ -166,7 +170,7 @@ class EmitterEdgeSamples:
             # F_in: L_e (just inside: the border fade, if any, is 0 there) cos_x cos_y / d² w_L
             emitted = np.asarray(detach(state.emitted(f, detach(it.b1), detach(it.b2))), dtype=np.float64)
             f_in = emitted * self.cos_x[s] * cos_y / (d * d) * (p_light / (p_light + p_cos))
-            out[s] -= self.weight * f_in * speed
+            out[..., s] -= self.weight * f_in * speed
         return out
 
 
@@ -295,12 +299,12 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
     numbers they would get among all points: draws are keyed on the samples) and traced
     by :meth:`EmitterEdgeSamples.term`.
     """
-    x_moves = any_rows(tangent(shading.x) != 0.0)
-    emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
+    x_moves = any_rows(moves(shading.x))
+    emitters_move = np.any(moves(state.triangles)[state.emitters])
     rows = np.flatnonzero(rotation.active | x_moves | emitters_move)
     sub = shading if rows.size == len(shading) else shading.take(rows)
     edge = sample_emitter_edges(state, sub) if rows.size else None
     if edge is None:
-        return rows[:0], np.zeros(0)
+        return rows[:0], np.zeros(0 if state.k is None else (state.k, 0))
     index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows))
     return rows[index], term

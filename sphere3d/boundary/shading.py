@@ -52,6 +52,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.boundary.edge_tree import compiled, edge_tree
 from sphere3d.boundary.edges import Edges
+from sphere3d.live import moves
 from sphere3d.state import per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
@@ -70,8 +71,8 @@ MAX_EMITTER_TRIANGLES = 64
 
 @per_state
 def _moving_vertices(state) -> np.ndarray:
-    """(T, 3): whether each triangle's vertex has a nonzero tangent (once per state)."""
-    return np.any(tangent(state.triangles) != 0.0, axis=-1)
+    """(T, 3): whether each triangle's vertex has a nonzero tangent, under any parameter (once per state)."""
+    return np.any(moves(state.triangles), axis=-1)
 
 
 def _incident(state, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -271,19 +272,21 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (m,)
-        The tangent to add to the points' irradiance estimates: the mean of the k samples'.
+    ndarray, shape (m,), or (p, m) for p parameters
+        The tangent to add to the points' irradiance estimates: the mean of the k samples'. For p
+        parameters the same draws, among the edges that move under any of them, times each one's
+        normal velocity (a parameter that does not move an edge gives it 0: unbiased for each).
     """
     state = shading.state
     m = len(shading)
-    out = np.zeros(m)
+    out = np.zeros(m if state.k is None else (state.k, m))
     if m == 0 or len(edges) == 0:
         return out
     o = shading.origin
     n0 = np.asarray(detach(shading.n), dtype=np.float64)
     vertex_moves = _moving_vertices(state)
     moving = vertex_moves[edges.face, edges.ia] | vertex_moves[edges.face, edges.ib]
-    point_moves = np.any(tangent(shading.x) != 0.0, axis=-1)
+    point_moves = np.any(moves(shading.x), axis=-1)
     unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
     per_point = u.shape[2]
     draw, k, s0, s1, start, angle, lo, hi, total = _choose(
@@ -312,9 +315,9 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     point = a + s[:, None] * (b - a)
     x = shading.x[live]
     # from the ray origin o = x + ε n (value), moving with x (tangent)
-    seen = point - (x + Dual(o[live] - detach(x)) if isinstance(x, Dual) else o[live])
+    seen = point - (x + Dual(o[live] - detach(x), None, state.k) if isinstance(x, Dual) else o[live])
     omega = seen / norm(seen)[..., None]
-    speed = dot(tangent(omega), normal)  # m·ω̇: the arc's normal velocity
+    speeds = [dot(t, normal) for t in _slots(omega)]  # m·ω̇: the arc's normal velocity
     # the jump f(ω⁻) - f(ω⁺) from rays at δ and 2δ beside the arc, extrapolated to δ → 0 (Richardson):
     # an offset ray crosses another edge near a corner on a length ∝ δ, so J(δ) = J + aδ + O(δ²)
     # and 2 J(δ) - J(2δ) = J + O(δ²)
@@ -325,4 +328,12 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     jump = 2.0 * (f[0] - f[1]) - (f[2] - f[3])
     cos = np.maximum(dot(n0[live], w), 0.0)
     # Reynolds on S²: the side ω⁻ grows into ω⁺ at m·ω̇, density overlap/Γ per radian of arc
-    return np.bincount(live, weights=total / overlap * jump * cos * speed, minlength=m) / per_point
+    terms = [
+        np.bincount(live, weights=total / overlap * jump * cos * s, minlength=m) / per_point for s in speeds
+    ]
+    return terms[0] if state.k is None else np.stack(terms)
+
+
+def _slots(x) -> list[np.ndarray]:
+    """The tangent of ``x``, or its k slots (k parameters), as a list."""
+    return [tangent(x)] if not isinstance(x, Dual) or x.k is None else list(x.tangent)

@@ -72,17 +72,18 @@ class BoundaryTransforms(Identity):
         the points' samples), in slices of :func:`draw_points` points (:func:`draw_bytes`)."""
         if not shading.state.dual:
             return None
-        m, step = len(shading), draw_points(self.per_point)
-        out = np.empty(m)
+        m, step, k = len(shading), draw_points(self.per_point), shading.state.k
+        out = np.empty(m if k is None else (k, m))  # for k parameters: each one's term
         for lo in range(0, max(m, 1), step):
             part = shading if m <= step else shading.take(np.arange(lo, min(m, lo + step)))
             u = part.draws.uniforms("boundary.edge", 2, self.per_point)
-            out[lo : lo + step] = shading_edge_term(part, self.edges, u)
+            out[..., lo : lo + step] = shading_edge_term(part, self.edges, u)
         return out
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
-        """The boundary term of every pixel integral per batch, shape (batches, height, width)
-        (:func:`~sphere3d.boundary.camera.camera_edge_term`), for an image task with tangents."""
+        """The boundary term of every pixel integral per batch, shape (batches, height, width), or (k,
+        batches, height, width) for k parameters (:func:`~sphere3d.boundary.camera.camera_edge_term`), for
+        an image task with tangents."""
         if not state.dual or not hasattr(task, "spp"):
             return None
         plain = plain_state(task.scene, task.param, task.tracer)
@@ -90,4 +91,5 @@ class BoundaryTransforms(Identity):
         segments = film_edges(state, plain, self.edges)  # the same for every batch
         # the batches on the threads: each draws from its own stream (seed, batch)
         term = lambda b: camera_edge_term(state, plain, self.edges, task.seed, b, rate, segments)  # noqa: E731
-        return np.stack(execution.map_chunks(term, range(task.batches), counted=False))
+        per_batch = execution.map_chunks(term, range(task.batches), counted=False)
+        return np.stack(per_batch, axis=0 if state.k is None else 1)

@@ -1,6 +1,8 @@
 """The boundary method: the naive interior term plus the boundary terms of edge sampling.
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), BoundaryTransforms(...))``
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), BoundaryTransforms(...))``
+(``variable(0.0)``, or ``variables(k)`` for k parameters: one pass, the jumps times each parameter's
+normal velocity)
 (:mod:`sphere3d.boundary.transforms`): no change of variables; the shading integrals' boundary
 term (:mod:`sphere3d.boundary.shading`) through ``shading_extra``, the pixel integrals' per batch
 (:mod:`sphere3d.boundary.camera`) through ``pixel_extra``.
@@ -13,7 +15,6 @@ from typing import Any
 
 from flatland.core.budget import Term
 from flatland.core.contract import Option
-from flatland.core.dual import variable
 from flatland.core.validate import check_int, check_positive
 from sphere3d.boundary.camera import POINT_CHUNK, POINT_RAYS, film_edges, point_bytes, point_count
 from sphere3d.boundary.edges import state_edges
@@ -65,7 +66,7 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     finds (:mod:`sphere3d.boundary.edge_tree`).
     """
     edges = state_edges(plain_state(task.scene, task.param, task.tracer))
-    return task.evaluate(variable(0.0), BoundaryTransforms(edges, secondary, rate))
+    return task.evaluate(task.dual_offset(), BoundaryTransforms(edges, secondary, rate))
 
 
 @memory_model("boundary")

@@ -3,10 +3,15 @@
 Where the integrator calls it: three ``task.evaluate`` calls with
 :class:`~sphere3d.integrator.Identity` at the plain-float offsets θ = 0, +h and -h;
 no transform is involved, the method combines the three tallies (the value from θ = 0,
-the derivative as the central difference per batch).
+the derivative as the central difference per batch). For k parameters 2k + 1 calls: the value at
+θ = 0, then each parameter's pair at ±h alone.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
 
 from flatland.core import progress
 from flatland.core.contract import Option
@@ -29,6 +34,11 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     like $1/h$ at edges. Not part of the paper: the reference the other methods are
     checked against. For ``*.scale`` parameters (scale by 1 + θ) h must be < 1.
 
+    For k parameters (a tuple ``task.param``) 2k + 1 renders: the value at θ = 0, then each
+    parameter's pair at ±h alone (the others at 0). Unlike the other methods it shares nothing
+    between the parameters but that value render and the samples; each parameter's derivative is
+    exactly its own call's.
+
     The default h = 1e-2 is ten times flatland's: the step trades the truncation bias
     (O(1) in pixels whose I(θ) has a kink within h) against a variance that grows
     like $1/h$, and the ``shadow`` image has 4096 pixels here and 64 in flatland, at
@@ -38,12 +48,18 @@ def finite_difference(task: ImageTask | PointTask, h: float) -> Tally:
     it places an edge to about 1e-7
     of the scene's size, far inside the band $h |c'|$ that even h = 1e-3 sees.
     """
-    if (task.param or "").endswith(".scale") and h >= 1.0:
-        raise ValidationError(
-            "h", f"must be < 1 for a scale parameter (the scale 1 - h must stay > 0), got {h!r}"
-        )
-    progress.expect(3)  # three renders: the bar's total counts them all
+    for name in task.parameters():
+        if name.endswith(".scale") and h >= 1.0:
+            where = "" if task.k is None else f" ({name!r})"
+            raise ValidationError(
+                "h", f"must be < 1 for a scale parameter{where} (the scale 1 - h must stay > 0), got {h!r}"
+            )
+    progress.expect(1 + 2 * len(task.parameters()))  # every render: the bar's total counts them all
     value = task.evaluate(0.0, Identity())  # first: a scene refused at θ0 is reported without the offset
+    alone = [task] if task.k is None else [replace(task, param=p) for p in task.parameters()]
     # per-batch central difference: common random numbers cancel everything that did not move
-    derivative = central_difference(lambda theta: task.evaluate(theta, Identity()).value, 0.0, h)
-    return Tally(value=value.value, derivative=derivative)
+    derivatives = [
+        central_difference(lambda theta, one=one: one.evaluate(theta, Identity()).value, 0.0, h)
+        for one in alone
+    ]
+    return Tally(value=value.value, derivative=derivatives[0] if task.k is None else np.stack(derivatives))

@@ -1,6 +1,7 @@
 """The naive gradient: differentiate the renderer as it stands (forward mode, no change of variables).
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), Identity())``: the
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), Identity())`` (θ0 = 0 as
+``variable(0.0)``, or ``variables(k)`` for k parameters: one pass, k tangents): the
 camera, emitter and bsdf transforms of :class:`~sphere3d.integrator.Identity` change
 nothing, so the pixel integral and both strategies of the irradiance are
 differentiated as they stand.
@@ -8,7 +9,6 @@ differentiated as they stand.
 
 from __future__ import annotations
 
-from flatland.core.dual import variable
 from sphere3d.integrator import Identity
 from sphere3d.methods._common import GRADIENT_METHODS
 from sphere3d.tasks import ImageTask, PointTask, Tally
@@ -28,4 +28,4 @@ def naive(task: ImageTask | PointTask) -> Tally:
     them, and the estimate converges to the interior term alone: biased by minus the
     boundary term of the Leibniz rule (Loubet et al. 2019, Sec. 3.2). The value is unbiased.
     """
-    return task.evaluate(variable(0.0), Identity())
+    return task.evaluate(task.dual_offset(), Identity())

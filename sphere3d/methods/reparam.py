@@ -1,6 +1,8 @@
 """The ``reparam`` method: rotations chosen by probe rays, vMF convolution kernels, paired samples.
 
-Where the integrator calls it: one ``task.evaluate(variable(0.0), transforms)`` with the
+Where the integrator calls it: one ``task.evaluate(task.dual_offset(), transforms)`` (``variable(0.0)``,
+or ``variables(k)`` for k parameters: the rotations follow the chosen points' motion in all k directions
+at once, :mod:`sphere3d.rotation`) with the
 variant's :class:`~sphere3d.integrator.Transforms`: :class:`~sphere3d.reparam.paper.PaperTransforms`
 (the estimator as published, Loubet et al. 2019, Sec. 4.1-4.3) or
 :class:`~sphere3d.reparam.default.ReparamTransforms` (the default: the paper's estimator and the
@@ -12,12 +14,15 @@ cosine samples; a :class:`~sphere3d.tasks.PointTask` calls only ``emitter`` and 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from functools import partial
 from typing import Any
 
+import numpy as np
+
+from flatland.core import progress
 from flatland.core.budget import Term
 from flatland.core.contract import Option
-from flatland.core.dual import variable
 from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import ValidationError, check_bool, check_choice, check_int, check_positive
 from sphere3d.boundary.emitters import POINTS
@@ -160,7 +165,49 @@ def reparam(
         transforms = ReparamTransforms(
             kappa, kappa_film, probes, emitter_probes, spread, refine, paired, baseline=baseline
         )
-    return task.evaluate(variable(0.0), transforms)
+        if task.k is not None:  # the extensions choose by what moves: one pass per moving thing
+            return _by_motion(task, transforms)
+    return task.evaluate(task.dual_offset(), transforms)
+
+
+def _moves(name: str) -> str | None:
+    """What a parameter moves: its shape (or the camera) for a translation, rotation or scale; None for a
+    radiance (albedo, emission, the sky), which moves no discontinuity."""
+    owner, _, rest = name.partition(".")
+    return owner if rest.partition(".")[0] in ("translate", "rotate", "scale") else None
+
+
+def _by_motion(task: ImageTask | PointTask, transforms: Any) -> Tally:
+    """The default variant for k parameters: one pass per shape (or the camera) that the parameters
+    move, with all the parameters that move nothing (their slots the same in every pass: they follow
+    no motion), so that each parameter gets the changes of variables of its single call.
+
+    The default variant's extensions decide by what moves: a T-junction is a moving silhouette across
+    a *static* edge (:mod:`sphere3d.reparam.junctions`), an affine map follows the nearest *moving*
+    shape (:mod:`sphere3d.reparam.film_affine`, :mod:`sphere3d.reparam.film_corners`,
+    :mod:`sphere3d.reparam.shading_affine`), the aimed emitter probes look at the moving occluders
+    (:mod:`sphere3d.reparam.emitter_probes`). Under parameters that move different shapes a single pass
+    would take "moving" as "moving under any of them", and a parameter would then follow, or hold
+    still, another's motion (its slot would drag its own edge). The parameters of one shape move the
+    same triangles, so a list of one shape's parameters (``hard_shadow``'s occluder: translations,
+    rotations, scale, albedo) is one pass. The value is the same in every pass (the naive primal).
+    """
+    names = task.parameters()
+    groups: dict[str, list[str]] = {}
+    for name in names:
+        if _moves(name) is not None:
+            groups.setdefault(_moves(name), []).append(name)
+    still = [name for name in names if _moves(name) is None]
+    passes = [tuple(group + still) for group in groups.values()] or [tuple(still)]
+    progress.expect(len(passes))  # every pass: the bar's total counts them all
+    derivative: dict[str, Any] = {}
+    tallies = []
+    for group in passes:
+        sub = replace(task, param=group)
+        tallies.append(sub.evaluate(sub.dual_offset(), transforms))
+        for name, d in zip(group, tallies[-1].derivative, strict=True):
+            derivative.setdefault(name, d)
+    return Tally(tallies[0].value, np.stack([derivative[name] for name in names]))
 
 
 @memory_model("reparam")

@@ -222,8 +222,10 @@ class ReparamTransforms(Identity):
             # a moving shape inside the kernel's ring: the chart's map that follows all its edges
             shape = inner_shape_map(sub, mu_l, centre, vmf_spread_angle(self.kappa, self.spread))
             if shape.mask.any():
-                rotated = Dual(rotated.value, np.where(shape.mask[:, None], shape.mu_dot, rotated.tangent))
-                jacobian = Dual(np.ones(len(mu_l)), shape.log_jacobian_dot)  # |J_T|: value 1
+                k = rotated.k
+                t = np.where(shape.mask[:, None], shape.mu_dot, rotated.tangent)
+                rotated = Dual(rotated.value, t, k)
+                jacobian = Dual(np.ones(len(mu_l)), shape.log_jacobian_dot, k)  # |J_T|: value 1
         # f(Tμ) k(Tμ, ω) |J_T| / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
         weights = self._kernel_weight(rotated, centre)
         if jacobian is not None:

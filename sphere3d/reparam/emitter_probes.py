@@ -47,9 +47,9 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import detach, tangent
+from flatland.core.dual import detach
 from sphere3d.boundary.emitters import edge_points, edge_table
-from sphere3d.live import any_rows, emitters_change, take_rows
+from sphere3d.live import any_rows, emitters_change, moves, take_rows
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.paper import direction_towards, mean_point_direction
 from sphere3d.reparam.penumbra import may_see_motion, moving_occluders, moving_sphere
@@ -203,13 +203,13 @@ def emitter_rotation(
     m = len(shading)
     if not state.dual:
         return Rotation.identity((m,))
-    need = np.full(m, emitters_change(state)) | any_rows(tangent(shading.x) != 0.0)
+    need = np.full(m, emitters_change(state)) | any_rows(moves(shading.x))
     rest = np.flatnonzero(~need)  # the cull only where nothing else asks for probes
     need[rest] = may_see_motion(state, take_rows(detach(shading.x), rest))
     if need.all():
         return _probe_rotation(shading, probes, boundary, refine, aim)
     rows = np.flatnonzero(need)
-    target, found = zeros((m, 3), True), np.zeros(m, dtype=bool)
+    target, found = zeros((m, 3), True, state.k), np.zeros(m, dtype=bool)
     if rows.size:
         sub = _probe_rotation(shading.take(rows), probes, boundary, refine, aim, targets=True)
         target[rows], found[rows] = sub
@@ -251,7 +251,7 @@ def _probe_rotation(
         occluded = np.concatenate([occluded, _rows(lack, occluded_a, extra, False)], axis=1)
     visible = usable & ~occluded
     some_occluded, some_visible = any_rows(occluded), any_rows(visible)
-    target = zeros((m, 3), state.dual)
+    target = zeros((m, 3), state.dual, state.k)
     found = np.zeros(m, dtype=bool)
     s = np.flatnonzero(some_occluded & ~some_visible)
     if s.size:  # all occluded: the mean attached hit of the occluded probes (the authors' rule)
@@ -271,8 +271,8 @@ def _probe_rotation(
         point = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
         target[s], found[s] = direction_towards(point, shading.x[s], np.ones(s.size, dtype=bool))
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
-    emitters_move = np.any(tangent(state.triangles)[state.emitters] != 0.0)
-    moving = any_rows(tangent(shading.x) != 0.0) | emitters_move
+    emitters_move = np.any(moves(state.triangles)[state.emitters])
+    moving = any_rows(moves(shading.x)) | emitters_move
     f = np.flatnonzero(~some_occluded & any_rows(usable) & moving)
     if f.size:  # no shadow edge: the mean attached probe point on the emitters
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])

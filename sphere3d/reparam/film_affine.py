@@ -35,6 +35,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent
 from sphere3d.film import AffineFilm
+from sphere3d.live import moves
 from sphere3d.state import SceneState, per_state
 
 __all__ = ["inner_shapes"]
@@ -66,8 +67,8 @@ def _shape_images(state: SceneState) -> _ShapeImages:
     all of whose vertices lie in front of the camera and whose image is not degenerate, with its
     least-squares affine motion (module docstring). O(vertices)."""
     cam = state.camera
-    camera_moves = bool(np.any(tangent(cam.origin) != 0.0))
-    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+    camera_moves = bool(np.any(moves(cam.origin)))
+    moving = np.any(moves(state.triangles), axis=(1, 2))
     rows: list[tuple[int, np.ndarray, float, np.ndarray, np.ndarray]] = []
     forward = np.asarray(cam.forward, dtype=np.float64)
     for s in np.unique(state.shape_of):  # a handful of shapes, each vectorized over its vertices
@@ -79,15 +80,17 @@ def _shape_images(state: SceneState) -> _ShapeImages:
             continue
         fx, fy = cam.film(v)
         p = np.stack([np.asarray(detach(fx)), np.asarray(detach(fy))], axis=1)
-        p_dot = np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=1)
-        centre, rate = p.mean(axis=0), p_dot.mean(axis=0)
+        p_dot = np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=-1)  # ((k,) V, 2)
+        centre = p.mean(axis=0)
         q = p - centre
         scatter = q.T @ q
         extent = float(np.trace(scatter))
         if extent <= 0.0 or np.linalg.eigvalsh(scatter)[0] <= DEGENERATE * extent:
             continue
-        # least squares: Σ (ṗ_i - mean ṗ)(p_i - p̄)ᵀ (Σ (p_i - p̄)(p_i - p̄)ᵀ)⁻¹   (module docstring)
-        b_dot = ((p_dot - rate).T @ q) @ np.linalg.inv(scatter)
+        # least squares: Σ (ṗ_i - mean ṗ)(p_i - p̄)ᵀ (Σ (p_i - p̄)(p_i - p̄)ᵀ)⁻¹   (module docstring), for
+        # k parameters each one's fit as a single parameter's (the rows' axis first, then k)
+        fits = [_fit(slot, q, scatter) for slot in ([p_dot] if p_dot.ndim == 2 else p_dot)]
+        rate, b_dot = (fits[0][i] if p_dot.ndim == 2 else np.stack([f[i] for f in fits]) for i in (0, 1))
         major = np.linalg.eigh(scatter)[1][:, 1]
         along, across = q @ major, q @ np.array([-major[1], major[0]])
         ends = centre + np.outer([along.min(), along.max()], major)
@@ -97,6 +100,13 @@ def _shape_images(state: SceneState) -> _ShapeImages:
         flat, square = np.zeros((0, 2)), np.zeros((0, 2, 2))
         return _ShapeImages(np.zeros(0, np.int64), flat, np.zeros(0), flat, square, square, np.zeros(0))
     return _ShapeImages(*(np.array(column) for column in zip(*rows, strict=True)))
+
+
+def _fit(p_dot: np.ndarray, q: np.ndarray, scatter: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One parameter's least-squares motion of a shape's vertex images: (ȧ, Ḃ) from their velocities
+    ``p_dot`` (V, 2), their offsets ``q`` from the mean and the offsets' ``scatter``."""
+    rate = p_dot.mean(axis=0)
+    return rate, ((p_dot - rate).T @ q) @ np.linalg.inv(scatter)
 
 
 def inner_shapes(state: SceneState, centre: np.ndarray, reach: float) -> AffineFilm:
@@ -113,7 +123,7 @@ def inner_shapes(state: SceneState, centre: np.ndarray, reach: float) -> AffineF
     """
     n = len(centre)
     images = _shape_images(state)
-    out = AffineFilm.none(n)
+    out = AffineFilm.none(n, state.k)
     if not len(images.shape):
         return out
     gap = np.hypot(centre[:, None, 0] - images.centre[:, 0], centre[:, None, 1] - images.centre[:, 1])

@@ -133,14 +133,17 @@ def _corner_table(state: SceneState) -> _Corners:
     vx, vy = cam.film(vertex - cam.origin)
     fx, fy = cam.film(far - cam.origin)
     point = np.stack([np.asarray(detach(vx)), np.asarray(detach(vy))], axis=-1)
-    v_dot = np.stack([np.asarray(tangent(vx)), np.asarray(tangent(vy))], axis=-1)
+    # velocities (rows, 2), or (rows, k, 2) for k parameters: the rows' axis first, then k
+    v_dot = _rows_first(np.stack([np.asarray(tangent(vx)), np.asarray(tangent(vy))], axis=-1))
     e = np.stack([np.asarray(detach(fx)), np.asarray(detach(fy))], axis=-1) - point[corner]
-    e_dot = np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=-1) - v_dot[corner]
+    e_dot = _rows_first(np.stack([np.asarray(tangent(fx)), np.asarray(tangent(fy))], axis=-1)) - v_dot[corner]
     forward = np.asarray(cam.forward, dtype=np.float64)
     v0 = np.asarray(detach(vertex)) - o
     far_depth = (np.asarray(detach(far)) - o) @ forward
     per_corner = lambda bad: np.bincount(corner, weights=bad, minlength=corner_ids.size) > 0  # noqa: E731
-    moves = np.any(v_dot != 0.0, axis=1) | per_corner(np.any(e_dot != 0.0, axis=1))
+    moves = np.any(v_dot.reshape(len(v_dot), -1) != 0.0, axis=1) | per_corner(
+        np.any(e_dot.reshape(len(e_dot), -1) != 0.0, axis=1)
+    )
     ok = (
         moves
         & (v0 @ forward > 0.0)
@@ -173,8 +176,18 @@ def _corner_table(state: SceneState) -> _Corners:
     narrow = gap[gap < np.pi]
     sine = float(np.sin(0.5 * narrow.min())) if narrow.size else 1.0
     longest = float(np.sqrt(np.max(np.sum(e * e, axis=1))))
-    maps = _least_norm_turns(pair, pair_dot)
+    if pair_dot.ndim == 3:
+        maps = _least_norm_turns(pair, pair_dot)
+    else:  # k parameters: each one's turns as a single parameter's
+        maps = np.stack(
+            [_least_norm_turns(pair, pair_dot[:, :, i]) for i in range(pair_dot.shape[2])], axis=1
+        )
     return _Corners(point, v_dot, count, start, angle, maps, cKDTree(point), e, max(sine, 1e-6), longest)
+
+
+def _rows_first(t: np.ndarray) -> np.ndarray:
+    """Film velocities (rows, 2), or for k parameters (k, rows, 2) moved to (rows, k, 2)."""
+    return t if t.ndim == 2 else np.moveaxis(t, 0, 1)
 
 
 def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: np.ndarray) -> AffineFilm:
@@ -188,7 +201,7 @@ def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: 
     centres beyond ``reach`` of their vertex a distance to each of its edges.
     """
     n = len(centre)
-    out = AffineFilm.none(n)
+    out = AffineFilm.none(n, state.k)
     corners = _corner_table(state)
     if corners.tree is None or n == 0:
         return out

@@ -75,7 +75,7 @@ from flatland.core.dual import Dual, detach, tangent
 from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import AffineFilm, FilmTransform
-from sphere3d.live import all_rows, any_rows
+from sphere3d.live import all_rows, any_rows, moves
 from sphere3d.reparam.film_affine import inner_shapes
 from sphere3d.reparam.film_corners import silhouette_corners
 from sphere3d.reparam.junctions import junction_rotation
@@ -172,7 +172,8 @@ def film_transform(
     s, z = np.stack([x, y], axis=-1), sigma * draws.normals("kernel.film", 2)
     centre = np.concatenate([s + z, s - z])  # rows: the n first members, then the n second
     phase = draws.uniforms("probes.film", 2).T.ravel()
-    rotation = Rotation.identity((2 * n,))
+    k = state.k  # None, or k parameters: every tangent below with a leading axis of k
+    rotation = Rotation.identity((2 * n,), k)
     at_junction = np.zeros(2 * n, dtype=bool)
     moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
@@ -182,7 +183,7 @@ def film_transform(
         ring = centre[rows, None] + ring_offsets(spread * sigma, probes, phase[rows])
         d = cam.directions(ring[..., 0], ring[..., 1])
         hits = state.tracer.intersect(detach(cam.origin), d)
-        if not np.any(tangent(cam.origin) != 0.0):  # and only where a probe did see one
+        if not np.any(moves(cam.origin)):  # and only where a probe did see one
             seen = any_rows(hits.on(moving))
             rows, d, hits = rows[seen], d[seen], hits.take(seen)
             if plane:  # one plane in sight, nothing to follow: the identity (module docstring)
@@ -208,15 +209,15 @@ def film_transform(
             sub.target[at] = crossing.target
             sub.active[at] = crossing.active
             if sub.spin is not None:  # the crossing's rotation has no turn of its own
-                sub.spin.tangent[at] = 0.0
+                sub.spin.tangent[..., at] = 0.0
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
         if sub.spin is not None:
-            turn = np.zeros(2 * n)
-            turn[rows] = tangent(sub.spin)
-            rotation = Rotation(rotation.target, rotation.active, Dual(np.zeros(2 * n), turn))
+            turn = np.zeros(2 * n if k is None else (k, 2 * n))
+            turn[..., rows] = tangent(sub.spin)
+            rotation = Rotation(rotation.target, rotation.active, Dual(np.zeros(2 * n), turn, k))
     # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
-    affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n)
+    affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
     if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
         corner = silhouette_corners(state, centre, spread * sigma, np.concatenate([s, s]))
         take = corner.mask & ~affine.mask & ~at_junction  # a junction's static edge: its own rule
@@ -225,9 +226,9 @@ def film_transform(
         affine.centre[take] = corner.centre[take]
     if affine.mask.any():
         rotation.active[affine.mask] = False
-        rotation.target.tangent[affine.mask] = 0.0
+        rotation.target.tangent[affine.mask if k is None else (slice(None), affine.mask)] = 0.0
         if rotation.spin is not None:
-            rotation.spin.tangent[affine.mask] = 0.0
+            rotation.spin.tangent[..., affine.mask] = 0.0
     first, second = slice(0, n), slice(n, 2 * n)  # views, not copies
     return FilmTransform(
         (rotation.take(first), rotation.take(second)),
@@ -289,7 +290,7 @@ def _reaching_motion(state: SceneState, centre: np.ndarray, reach: float) -> np.
     its edges (:func:`_film_hull`); the result is the same, bit for bit, as probing every row.
     """
     cam = state.camera
-    if np.any(tangent(cam.origin) != 0.0):
+    if np.any(moves(cam.origin)):
         return np.arange(len(centre))
     if not _moving_vertices(state).any():
         return np.arange(0)
@@ -318,8 +319,9 @@ float32 rays and of Qhull's joggle, 1e-11 relative)."""
 
 @per_state
 def _moving_vertices(state: SceneState) -> np.ndarray:
-    """Per triangle: True where its vertices carry a tangent (read-only, once per state)."""
-    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+    """Per triangle: True where its vertices carry a tangent, under any parameter (read-only, once per
+    state)."""
+    moving = np.any(moves(state.triangles), axis=(1, 2))
     moving.flags.writeable = False  # shared by every chunk of the render
     return moving
 

@@ -112,7 +112,7 @@ def junction_rotation(
     low = np.where(seen == MOVING, np.iinfo(seen.dtype).max, seen).min(axis=1)
     rows = np.flatnonzero(any_rows(seen == MOVING) & (low < seen.max(axis=1)))
     if rows.size == 0 or refine == 0:
-        return rows[:0], Rotation.identity((0,))
+        return rows[:0], Rotation.identity((0,), state.k)
     d, cls, h = directions[rows], seen[rows], hits.take(rows)
     on_moving, static = cls == MOVING, cls != MOVING
     k = np.arange(rows.size)

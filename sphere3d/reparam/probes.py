@@ -204,10 +204,12 @@ def follow_probes(
     if spin is None or snapped is None:
         return Rotation.following(to, found)
     rows, triangle, lines = snapped
-    turn = np.zeros(len(found))
+    k = state.k  # None, or k parameters: a turn rate for each
+    turn = np.zeros(len(found) if k is None else (k, len(found)))
     ok = lines[:, 0, 0] >= 0
     if ok.any():
         r = rows[ok]
         o = origin if np.ndim(detach(origin)) == 1 else origin[r]
-        turn[r] = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], spin[1])
-    return Rotation.following(to, found, Dual(np.zeros(len(found)), turn))
+        rate = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], spin[1])
+        turn[..., r] = rate
+    return Rotation.following(to, found, Dual(np.zeros(len(found)), turn, k))

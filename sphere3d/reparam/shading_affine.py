@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
+from sphere3d.live import moves
 from sphere3d.state import SceneState, per_state
 from sphere3d.vector import frame
 
@@ -74,8 +75,10 @@ class _Shapes:
 
 @per_state
 def _moving_shapes(state: SceneState) -> _Shapes:
-    """Once per state: the shapes whose vertices carry a tangent, their spheres and anchors. O(vertices)."""
-    moving = np.any(tangent(state.triangles) != 0.0, axis=(1, 2))
+    """Once per state: the shapes whose vertices carry a tangent (under any parameter), their spheres and
+    anchors. O(vertices)."""
+    moving = np.any(moves(state.triangles), axis=(1, 2))
+    k = state.k
     values, tangents, shapes, centres, radii, single = [], [], [], [], [], []
     for s in np.unique(state.shape_of[moving]):  # a handful of shapes, each vectorized
         corners = state.triangles[state.shape_of == s].reshape(-1, 3)
@@ -90,22 +93,23 @@ def _moving_shapes(state: SceneState) -> _Shapes:
         pick = np.resize(first, MAX_ANCHORS)  # padded by repeats: the fit's weights change, not its span
         centre = 0.5 * (rows.min(axis=1) + rows.max(axis=1))
         values.append(plain[pick])
-        tangents.append(np.asarray(tangent(corners))[pick])
+        tangents.append(np.asarray(tangent(corners))[pick] if k is None else corners.tangent[:, pick])
         shapes.append(int(s))
         centres.append(centre)
         radii.append(float(np.sqrt(np.max(np.sum((rows - centre[:, None]) ** 2, axis=0)))))
         single.append(len(corners) == 3)
     if not shapes:
-        none = Dual(np.zeros((0, MAX_ANCHORS, 3)))
+        none = Dual(np.zeros((0, MAX_ANCHORS, 3)), None, k)
         return _Shapes(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), none, np.zeros(0, dtype=bool))
-    anchors = Dual(np.array(values), np.array(tangents))
+    anchors = Dual(np.array(values), np.array(tangents) if k is None else np.stack(tangents, axis=1), k)
     return _Shapes(np.array(shapes), np.array(centres), np.array(radii), anchors, np.array(single))
 
 
 @dataclass(frozen=True)
 class ShadingAffine:
     """Where the chart's map replaces the rotation (``mask`` over the kernels), and its tangents:
-    ``mu_dot`` (n, 3) the evaluation direction's, ``log_jacobian_dot`` (n,) the weight's."""
+    ``mu_dot`` (n, 3) the evaluation direction's, ``log_jacobian_dot`` (n,) the weight's; for k
+    parameters (k, n, 3) and (k, n)."""
 
     mask: np.ndarray
     mu_dot: np.ndarray
@@ -128,8 +132,9 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
 
     Cost: (kernels × moving shapes) comparisons, then (kernels with a shape × anchors).
     """
-    n = len(mu)
-    out = ShadingAffine(np.zeros(n, dtype=bool), np.zeros((n, 3)), np.zeros(n))
+    n, params = len(mu), shading.state.k
+    slots = () if params is None else (params,)
+    out = ShadingAffine(np.zeros(n, dtype=bool), np.zeros((*slots, n, 3)), np.zeros((*slots, n)))
     shapes = _moving_shapes(shading.state)
     if not len(shapes.shape) or n == 0:
         return out
@@ -155,8 +160,8 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
     front = np.all(np.einsum("rax,rx->ra", np.asarray(detach(d)), c) > 0.0, axis=1)  # in the chart
     ux, uy = _chart(d, c[:, None], t[:, None], b[:, None])
     u = np.stack([np.asarray(detach(ux)), np.asarray(detach(uy))], axis=-1)  # (r, A, 2)
-    u_dot = np.stack([np.asarray(tangent(ux)), np.asarray(tangent(uy))], axis=-1)
-    mean, rate = u.mean(axis=1), u_dot.mean(axis=1)
+    u_dot = np.stack([np.asarray(tangent(ux)), np.asarray(tangent(uy))], axis=-1)  # ((p,) r, A, 2)
+    mean = u.mean(axis=1)
     q = u - mean[:, None]
     scatter = np.einsum("rai,raj->rij", q, q)
     extent = np.trace(scatter, axis1=1, axis2=2)
@@ -182,20 +187,34 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
     if not rows.size:
         return out
     c, m, t, b = c[keep_idx], m[keep_idx], t[keep_idx], b[keep_idx]
-    q, scatter, rate, mean = q[keep_idx], scatter[keep_idx], rate[keep_idx], mean[keep_idx]
-    # least squares: Σ (u̇_i - mean u̇)(u_i - ū)ᵀ (Σ (u_i - ū)(u_i - ū)ᵀ)⁻¹   (module docstring)
-    b_dot = np.einsum("rai,raj->rij", u_dot[keep_idx] - rate[:, None], q) @ np.linalg.inv(scatter)
-    # the sample's chart point and its velocity under A
+    q, scatter, mean = q[keep_idx], scatter[keep_idx], mean[keep_idx]
+    # the sample's chart point
     depth = np.einsum("rx,rx->r", m, c)
     um = np.stack([np.einsum("rx,rx->r", m, t), np.einsum("rx,rx->r", m, b)], axis=1) / depth[:, None]
-    um_dot = rate + np.einsum("rij,rj->ri", b_dot, um - mean)
-    # y = (c + u_x t + u_y b) / sqrt(1 + |u|²): its tangent under u̇
     s2 = 1.0 + np.einsum("ri,ri->r", um, um)
     y = (c + um[:, :1] * t + um[:, 1:] * b) / np.sqrt(s2)[:, None]
+    out.mask[rows] = True
+    chart = (q, scatter, mean, um, s2, y, t, b)
+    for i, slot in enumerate([u_dot] if params is None else u_dot):  # each parameter's map as a single one's
+        y_dot, log_jacobian_dot = _map_tangents(slot, keep_idx, *chart)
+        if params is None:
+            out.mu_dot[rows], out.log_jacobian_dot[rows] = y_dot, log_jacobian_dot
+        else:
+            out.mu_dot[i, rows], out.log_jacobian_dot[i, rows] = y_dot, log_jacobian_dot
+    return out
+
+
+def _map_tangents(u_dot: np.ndarray, keep: np.ndarray, q, scatter, mean, um, s2, y, t, b) -> tuple:
+    """One parameter's tangents of the chart's map at the kept samples: the direction's (r, 3) and the
+    log Jacobian's (r,), from the anchors' chart velocities ``u_dot`` (all rows, A, 2) (module
+    docstring)."""
+    rate, u_dot = u_dot.mean(axis=1)[keep], u_dot[keep]
+    # least squares: Σ (u̇_i - mean u̇)(u_i - ū)ᵀ (Σ (u_i - ū)(u_i - ū)ᵀ)⁻¹   (module docstring)
+    b_dot = np.einsum("rai,raj->rij", u_dot - rate[:, None], q) @ np.linalg.inv(scatter)
+    # the sample's chart point's velocity under A
+    um_dot = rate + np.einsum("rij,rj->ri", b_dot, um - mean)
+    # y = (c + u_x t + u_y b) / sqrt(1 + |u|²): its tangent under u̇
     radial = np.einsum("ri,ri->r", um, um_dot) / s2
     y_dot = (um_dot[:, :1] * t + um_dot[:, 1:] * b) / np.sqrt(s2)[:, None] - y * radial[:, None]
-    out.mask[rows] = True
-    out.mu_dot[rows] = y_dot
     # log |J_T|: log det A - (3/2) log((1 + |A u|²) / (1 + |u|²)), its derivative at θ0
-    out.log_jacobian_dot[rows] = np.trace(b_dot, axis1=1, axis2=2) - 3.0 * radial
-    return out
+    return y_dot, np.trace(b_dot, axis1=1, axis2=2) - 3.0 * radial

@@ -154,7 +154,7 @@ def line_spin(
 
     Returns
     -------
-    ndarray, shape (k,)
+    ndarray, shape (k,), or (p, k) for p parameters
         $λ = \dot ψ$, 0 where an edge's line passes through the origin.
     """
     k = np.arange(len(lines))

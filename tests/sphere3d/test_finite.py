@@ -5,7 +5,7 @@ its options at the limits the validators let through: κ at both ends of (0, KAP
 no kernel, one probe, spread 0 and huge, paired; finite-difference steps from 1e-12 to
 just below 1 on a scale; irradiance with tiny and unnormalized normals. Then the
 geometry that validation accepts in local coordinates but that collapses or overflows
-in world space, refused by :func:`sphere3d.state.check_world`.
+in world space, refused by :func:`sphere3d.world.check_world`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import sphere3d as s3
 from flatland.core.validate import ValidationError
 from sphere3d.methods.reparam import KAPPA_MAX
 from sphere3d.reparam.film_kernel import KAPPA_FILM_MAX
-from sphere3d.state import COORD_MAX
+from sphere3d.world import COORD_MAX
 from tests.tiers import sweep
 
 OPTIONS = [
