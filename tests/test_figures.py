@@ -26,8 +26,10 @@ from flatland.__main__ import PACKAGE
 from flatland.app.study import run_study
 from flatland.app.study_config import StudyConfig
 from flatland.core.image import GradientImage, Image
+from flatland.core.optimize import OptimizeResult
 from flatland.core.stats import LEVEL, normal_quantile
 from flatland.plotting import convergence, films, study
+from flatland.plotting import optimize as pto
 from flatland.plotting import probe_rays as prb
 from flatland.plotting import textbook as pt
 from flatland.plotting import tutorials as ptu
@@ -471,22 +473,43 @@ def tutorials_error_time(tmp_path, monkeypatch, flatland_films):
     return figs
 
 
+def _history(method: str, steps: int, views: int, k: int, floor: float) -> OptimizeResult:
+    """A run of the shape tutorial 12 draws: the loss falling from about 3 to ``floor`` (naive: to 1),
+    θ approaching its target, images of 64-pixel views at the first and the last step."""
+    t = np.arange(steps + 1)
+    level = 1.0 if method == "naive" else floor
+    loss = level + (3.0 - level) * np.exp(-t / 8.0) + RNG.normal(0, 0.3 * level, steps + 1).clip(-0.5 * level)
+    truth = RNG.uniform(-0.3, 0.3, k)
+    theta = truth * (1 - np.exp(-t / 10.0))[:, None] * (1 + 0.2 * np.sin(t / 6.0))[:, None]
+    pixels = np.arange(64)
+    target = np.stack([(np.abs(pixels - 32 - 3 * v) > 14).astype(float) for v in range(views)])
+    start = np.stack([(np.abs(pixels - 30 - 2 * v) > 10).astype(float) for v in range(views)])
+    return OptimizeResult(
+        params=tuple(f"p{i}" for i in range(k)), theta=theta, loss=loss, gradient=np.zeros((steps, k)),
+        seconds=np.full(steps, {"naive": 0.02, "finite_difference": 0.05}.get(method, 0.04)),
+        images={0: start, steps: target + RNG.normal(0, 0.02, target.shape)}, targets=target,
+        lower=np.full(k, -np.inf), upper=np.full(k, np.inf), lr=np.full(k, 0.03), decay=0.05,
+        method=method, spp=64, seed=0,
+    )  # fmt: skip
+
+
 def tutorials_descent(tmp_path, monkeypatch, flatland_films):
-    """Tutorial 12: the loss along θ and gradient descent over a dozen iterations."""
-    figs = []
-    grid = np.linspace(-0.5, 1.0, 31)
-    figs.append(
-        pt.plot_curves(
-            grid,
-            {"loss Σ (I − I*)²": 1e-3 + (grid - 0.3) ** 2},
-            logy=True,
-            marks=[0.3],
-            styles={"loss Σ (I − I*)²": {"marker": "o"}},
-            xlabel="θ (occluder offset)",
-            ylabel="loss",
-            title="flatland shadow: loss along θ, target at θ* = 0.3",
-        )
-    )
+    """Tutorial 12: Adam's runs (images, history, loss curves of four methods) and gradient descent
+    over a dozen iterations."""
+    run = _history("reparam", 100, 1, 3, 0.08)
+    blob = _history("reparam", 100, 4, 5, 0.08)
+    runs = {m: _history(m, 100, 1, 3, 0.08) for m in ("reparam", "naive", "boundary", "finite_difference")}
+    figs = [
+        pto.plot_optimize_images(
+            run, labels=["shadow, the camera's view"], title="target, initial, optimised"
+        ),
+        pto.plot_optimize_images(
+            blob, labels=[f"view at {a}°" for a in (0, 45, 90, 135)], title="silhouettes"
+        ),
+        pto.plot_history(run, truth=run.theta[-1], labels=["x", "y", "albedo"], title="loss and parameters"),
+        pto.plot_history(runs["naive"], truth=run.theta[-1], labels=["x", "y", "albedo"], title="naive"),
+        pto.plot_loss_curves(runs, title="the four gradient methods"),
+    ]
     for steps in (12, 20):
         k = np.arange(steps)
         figs.append(

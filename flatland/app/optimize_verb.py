@@ -96,12 +96,12 @@ def verb_optimize(pkg: Package, args: argparse.Namespace) -> int:
     )  # fmt: skip
     seconds = time.perf_counter() - start
     from flatland.plotting.films import save_png  # matplotlib only once there is a figure to draw
-    from flatland.plotting.optimize import loss_curves, optimize_images
+    from flatland.plotting.optimize import plot_loss_curves, plot_optimize_images
 
     out, name = Path(args.out), f"{_stem(args.scene)}_optimize_{args.method}"
     title = f"{_stem(args.scene)}: {', '.join(args.param)}, {args.method}, {args.steps} steps, {args.spp} spp"
-    images = save_png(optimize_images(result, title=title), out / f"{name}_images.png")
-    loss = save_png(loss_curves({args.method: result}, title=title), out / f"{name}_loss.png")
+    images = save_png(plot_optimize_images(result, title=title), out / f"{name}_images.png")
+    loss = save_png(plot_loss_curves({args.method: result}, title=title), out / f"{name}_loss.png")
     table = np.column_stack([np.arange(result.loss.size), result.loss, [*result.seconds, 0.0], result.theta])
     csv = out / f"{name}.csv"
     header = ",".join(["step", "loss", "seconds", *result.params])

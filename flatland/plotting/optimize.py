@@ -1,55 +1,111 @@
-"""Figures of an optimisation (:func:`flatland.optimize.optimize`): the images, and the loss curves.
+"""Figures of an optimisation (:func:`flatland.optimize.optimize`): the images, the history, the loss curves.
 
-:func:`optimize_images` draws, per view, the target, the first and the last recorded image of a run
-(1D films as curves); :func:`loss_curves` draws the loss of one or more runs against the step and
-against the wall time (a method that renders more per step, such as finite differences, is slower
-on the second axis). Both return a Figure (no pyplot); :func:`~flatland.plotting.films.save_png`
-writes it.
+:func:`plot_optimize_images` draws, per view, the target, the first and the last recorded image of a
+run (1D films as curves); :func:`plot_history` draws one run's loss and each parameter's trajectory
+against the step, with the values that made the targets when they are known; :func:`plot_loss_curves`
+draws the loss of one or more runs against the step and against the wall time (a method that renders
+more per step, such as finite differences, is slower on the second axis). Each returns a Figure (no
+pyplot); :func:`~flatland.plotting.films.save_png` writes it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from flatland.core.validate import ValidationError
-from flatland.plotting.style import FIGSIZE, integer_ticks, method_colour, neutral_cycle
+from flatland.plotting.style import FIGSIZE, OTHER_COLOURS, integer_ticks, method_colour, neutral_cycle
 
-__all__ = ["loss_curves", "optimize_images"]
+__all__ = ["plot_history", "plot_loss_curves", "plot_optimize_images"]
 
 
-def optimize_images(result: Any, title: str | None = None, labels: tuple[str, ...] | None = None) -> Figure:
+def plot_optimize_images(
+    result: Any, title: str | None = None, labels: Sequence[str] | None = None
+) -> Figure:
     """One panel per view: the target, the initial (first recorded) and the optimised (last recorded)
-    image of ``result`` (an :class:`~flatland.core.optimize.OptimizeResult` with 1D films)."""
+    image of ``result`` (an :class:`~flatland.core.optimize.OptimizeResult` with 1D films), titled by
+    ``labels`` (default ``view v``); up to three views in a row, more in two rows, the legend below."""
     if len(result.images) < 2:
         raise ValidationError(
             "result", "needs at least two recorded images (record the first and last steps)"
         )
     first, last = min(result.images), max(result.images)
     views = result.targets.shape[0]
-    labels = labels or tuple(f"view {v}" for v in range(views))
-    fig = Figure(figsize=(FIGSIZE[0] * min(views, 4) * 0.8 + 1.0, FIGSIZE[1]), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, views, sharey=True, squeeze=False)[0])
+    labels = tuple(labels) if labels is not None else tuple(f"view {v}" for v in range(views))
+    if len(labels) != views:
+        raise ValidationError("labels", f"must name the {views} views, got {len(labels)} labels")
+    ncols = views if views <= 3 else math.ceil(views / 2)  # four views: two rows of two
+    nrows = math.ceil(views / ncols)
+    fig = Figure(figsize=(FIGSIZE[0] * 0.8 * ncols + 1.0, FIGSIZE[1] * nrows), layout="constrained")
+    grid = fig.subplots(nrows, ncols, sharey=True, squeeze=False).ravel()
+    for ax in grid[views:]:
+        fig.delaxes(ax)
+    axes = grid[:views]
+    pixels = np.arange(result.targets.shape[-1])
     for v, ax in enumerate(axes):
         neutral_cycle(ax)
-        pixels = np.arange(result.targets.shape[-1])
         ax.plot(pixels, result.targets[v], color="black", lw=2.2, alpha=0.5, label="target")
         ax.plot(pixels, result.images[first][v], ls="--", label=f"initial (step {first})")
         ax.plot(pixels, result.images[last][v], label=f"optimised (step {last})")
         ax.set_title(labels[v])
         ax.set_xlabel("pixel")
         ax.grid(True, alpha=0.3)
-    axes[0].set_ylabel("pixel value")
-    axes[0].legend(loc="best", fontsize=8)
+        if v % ncols == 0:
+            ax.set_ylabel("pixel value")
+    # below the panels, never over a silhouette that spans the film
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=3, fontsize=8)
     if title:
         fig.suptitle(title)
     return fig
 
 
-def loss_curves(runs: Mapping[str, Any], title: str | None = None, logy: bool = True) -> Figure:
+def plot_history(
+    result: Any,
+    truth: Any = None,
+    title: str | None = None,
+    labels: Sequence[str] | None = None,
+    logy: bool = True,
+) -> Figure:
+    """One run's loss against the step (left) and each parameter's θ against the step (right, row t of
+    ``result.theta`` at step t), with ``truth`` (the offsets that made the targets, one per parameter)
+    as a dashed line in its parameter's colour; ``labels`` name the parameters (default their names)."""
+    theta = np.asarray(result.theta, dtype=np.float64)
+    k = theta.shape[1]
+    labels = tuple(labels) if labels is not None else tuple(result.params)
+    if len(labels) != k:
+        raise ValidationError("labels", f"must name the {k} parameters, got {len(labels)} labels")
+    if truth is not None:
+        truth = np.asarray(truth, dtype=np.float64).ravel()
+        if truth.size != k:
+            raise ValidationError("truth", f"must hold one value per parameter ({k}), got {truth.size}")
+    fig = Figure(figsize=(FIGSIZE[0] * 1.8, FIGSIZE[1]), layout="constrained")
+    left, right = (neutral_cycle(ax) for ax in fig.subplots(1, 2))
+    steps = np.arange(theta.shape[0])
+    left.plot(steps, result.loss, color=method_colour(result.method), label=result.method)
+    for i in range(k):
+        colour = OTHER_COLOURS[i % len(OTHER_COLOURS)]
+        right.plot(steps, theta[:, i], color=colour, label=labels[i])
+        if truth is not None:
+            right.axhline(truth[i], color=colour, linestyle="--", linewidth=1.0)
+    if logy:
+        left.set_yscale("log")
+    left.set_ylabel("loss Σ (I − I*)²")
+    right.set_ylabel("θ (offset)" if truth is None else "θ (offset); dashed: the target's")
+    for ax in (left, right):
+        ax.set_xlabel("step")
+        integer_ticks(ax.xaxis)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_loss_curves(runs: Mapping[str, Any], title: str | None = None, logy: bool = True) -> Figure:
     """The loss of each run (by label, e.g. its method) against the step (left) and against the wall
     time since the start (right; row t of the loss after the first t steps' seconds)."""
     if not runs:
