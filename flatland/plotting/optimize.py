@@ -1,7 +1,7 @@
 """Figures of an optimisation (:func:`flatland.optimize.optimize`): the images, and the loss curves.
 
 :func:`optimize_images` draws, per view, the target, the first and the last recorded image of a run
-(1D films as curves); :func:`loss_curves` draws the loss of one or more runs against the step and
+(1D films as curves, 2D films as images, a row per view); :func:`loss_curves` draws the loss of one or more runs against the step and
 against the wall time (a method that renders more per step, such as finite differences, is slower
 on the second axis). Both return a Figure (no pyplot); :func:`~flatland.plotting.films.save_png`
 writes it.
@@ -23,7 +23,8 @@ __all__ = ["loss_curves", "optimize_images"]
 
 def optimize_images(result: Any, title: str | None = None, labels: tuple[str, ...] | None = None) -> Figure:
     """One panel per view: the target, the initial (first recorded) and the optimised (last recorded)
-    image of ``result`` (an :class:`~flatland.core.optimize.OptimizeResult` with 1D films)."""
+    image of ``result`` (an :class:`~flatland.core.optimize.OptimizeResult` with 1D films as curves;
+    with 2D films a row per view of the three images on one grey scale)."""
     if len(result.images) < 2:
         raise ValidationError(
             "result", "needs at least two recorded images (record the first and last steps)"
@@ -31,6 +32,8 @@ def optimize_images(result: Any, title: str | None = None, labels: tuple[str, ..
     first, last = min(result.images), max(result.images)
     views = result.targets.shape[0]
     labels = labels or tuple(f"view {v}" for v in range(views))
+    if result.targets.ndim == 3:
+        return _image_grid(result, first, last, labels, title)
     fig = Figure(figsize=(FIGSIZE[0] * min(views, 4) * 0.8 + 1.0, FIGSIZE[1]), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, views, sharey=True, squeeze=False)[0])
     for v, ax in enumerate(axes):
@@ -44,6 +47,26 @@ def optimize_images(result: Any, title: str | None = None, labels: tuple[str, ..
         ax.grid(True, alpha=0.3)
     axes[0].set_ylabel("pixel value")
     axes[0].legend(loc="best", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def _image_grid(result: Any, first: int, last: int, labels: tuple[str, ...], title: str | None) -> Figure:
+    """Rows of (target, initial, optimised) 2D images, one row per view, one grey scale per row."""
+    views = result.targets.shape[0]
+    fig = Figure(figsize=(3 * 2.2 + 0.8, views * 2.2 + 0.6), layout="constrained")
+    axes = fig.subplots(views, 3, squeeze=False)
+    for v in range(views):
+        row = (result.targets[v], result.images[first][v], result.images[last][v])
+        top = max(float(np.max(im)) for im in row) or 1.0
+        names = ("target", f"initial (step {first})", f"optimised (step {last})")
+        for ax, image, name in zip(axes[v], row, names, strict=True):
+            ax.imshow(image, cmap="gray", vmin=0.0, vmax=top, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(name if v == 0 else "", fontsize=9)
+        axes[v][0].set_ylabel(labels[v])
     if title:
         fig.suptitle(title)
     return fig
