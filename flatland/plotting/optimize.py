@@ -1,10 +1,10 @@
 """Figures of an optimisation (:func:`flatland.optimize.optimize`): the images, and the loss curves.
 
 :func:`optimize_images` draws, per view, the target, the first and the last recorded image of a run
-(1D films as curves, 2D films as images, a row per view); :func:`loss_curves` draws the loss of one or more runs against the step and
-against the wall time (a method that renders more per step, such as finite differences, is slower
-on the second axis). Both return a Figure (no pyplot); :func:`~flatland.plotting.films.save_png`
-writes it.
+(1D films as curves, 2D films as images, a row per view); :func:`loss_curves` draws the loss of one
+or more runs against the step and against the wall time (a method that renders more per step, such
+as finite differences, is slower on the second axis). Both return a Figure (no pyplot);
+:func:`~flatland.plotting.films.save_png` writes it.
 """
 
 from __future__ import annotations
