@@ -21,8 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.optimize import OptimizeResult, Views, descend
-from flatland.core.validate import ValidationError, check_finite, check_int, check_positive, check_seed
+from flatland.core.optimize import (
+    OptimizeResult,
+    Views,
+    check_schedule,
+    check_step_sizes,
+    check_targets,
+    descend,
+)
+from flatland.core.validate import ValidationError, check_finite, check_int, check_seed
 from flatland.methods import GRADIENT_METHODS
 from flatland.render import render, render_gradient
 from flatland.scene import Camera, Scene, load_scene
@@ -56,42 +63,6 @@ def _cameras(scene: Scene, views: Any) -> tuple[Camera, ...]:
     return tuple(cameras)
 
 
-def _targets(targets: Any, cameras: tuple[Camera, ...]) -> np.ndarray:
-    """One finite image per view, each of its camera's width: shape ``(V, pixels)``."""
-    if isinstance(targets, np.ndarray) and targets.ndim == 1 and len(cameras) == 1:
-        targets = [targets]
-    if isinstance(targets, str | Mapping) or not hasattr(targets, "__len__") or len(targets) != len(cameras):
-        raise ValidationError(
-            "targets", f"must hold one image per view ({len(cameras)} views), got {_describe(targets)}"
-        )
-    images = []
-    for i, (target, camera) in enumerate(zip(targets, cameras, strict=True)):
-        image = np.asarray(target, dtype=np.float64) if _numeric(target) else None
-        if image is None or image.shape != (camera.pixels,):
-            raise ValidationError(
-                f"targets[{i}]",
-                f"must be an image of the view's {camera.pixels} pixels, got {_describe(target)}",
-            )
-        if not np.all(np.isfinite(image)):
-            raise ValidationError(f"targets[{i}]", "must be finite (it holds NaN or inf)")
-        images.append(image)
-    if len({im.shape for im in images}) > 1:
-        raise ValidationError("targets", "views of different widths cannot share one loss array")
-    return np.stack(images)
-
-
-def _numeric(x: Any) -> bool:
-    try:
-        return np.asarray(x).dtype.kind in "iuf"
-    except (TypeError, ValueError):
-        return False
-
-
-def _describe(x: Any) -> str:
-    shape = np.shape(x) if _numeric(x) else None
-    return f"an array of shape {shape}" if shape is not None else repr(x)[:80]
-
-
 def _bounds(scene: Scene, params: tuple[Any, ...], bounds: Any) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of each offset: ``bounds[name] = (lo, hi)``, or the module docstring's."""
     bounds = {} if bounds is None else bounds
@@ -123,15 +94,6 @@ def _bounds(scene: Scene, params: tuple[Any, ...], bounds: Any) -> tuple[np.ndar
                 )
             lower[i], upper[i] = lo, hi
     return lower, upper
-
-
-def _lr(lr: Any, k: int) -> np.ndarray:
-    values = np.atleast_1d(np.asarray(lr, dtype=np.float64)) if _numeric(lr) else None
-    if values is None or values.ndim != 1 or values.size not in (1, k):
-        raise ValidationError("lr", f"must be a positive step size or one per parameter ({k}), got {lr!r}")
-    for v in values:
-        check_positive("lr", float(v))
-    return np.broadcast_to(values, (k,)).copy()
 
 
 def optimize(
@@ -198,18 +160,12 @@ def optimize(
     spec = GRADIENT_METHODS.lookup(method)
     GRADIENT_METHODS.resolve_options(spec.name, options)  # an unknown or bad option: one error now
     cameras = _cameras(scene, views)
-    images = _targets(targets, cameras)
-    steps = check_int("steps", steps)
+    images = check_targets(targets, [(c.pixels,) for c in cameras])
+    steps, decay, record = check_schedule(steps, decay, record)
     spp, seed = check_int("spp", spp), check_seed("seed", seed)
-    decay = check_finite("decay", decay)
-    if not 0.0 < decay <= 1.0:
-        raise ValidationError("decay", f"must lie in (0, 1], got {decay!r}")
     k = len(parsed)
-    step_sizes = _lr(lr, k)
+    step_sizes = check_step_sizes(lr, k)
     lower, upper = _bounds(scene, parsed, bounds)
-    record = (0, steps) if record is None else tuple(check_int("record", r, minimum=0) for r in record)
-    if any(r > steps for r in record):
-        raise ValidationError("record", f"steps must lie in 0..{steps}, got {list(record)}")
     names = tuple(p.name for p in parsed)
     problem = Views(
         scene_at=lambda theta: moved_scene(scene, names, theta),

@@ -13,6 +13,7 @@ change of variables (:mod:`sphere3d.rotation`), von Mises–Fisher kernels
 """
 
 from flatland.core import Dual, Estimate, GradientImage, Image, detach, relative_error, variable
+from sphere3d.optimize import optimize, render_targets
 from sphere3d.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from sphere3d.scene import list_scenes, load_scene
 
@@ -26,9 +27,11 @@ __all__ = [
     "irradiance",
     "list_scenes",
     "load_scene",
+    "optimize",
     "relative_error",
     "render",
     "render_gradient",
+    "render_targets",
     "variable",
 ]
 

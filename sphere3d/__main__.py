@@ -1,4 +1,5 @@
-"""``python -m sphere3d demo | render SCENE | gradient SCENE | study CONFIG`` (see :mod:`flatland.app.cli`).
+"""``python -m sphere3d demo | render SCENE | gradient SCENE | study CONFIG | optimize SCENE`` (see
+:mod:`flatland.app.cli`).
 
 The same verbs, options and error behaviour as ``python -m flatland``. The demo's
 panel shows ``naive``, ``boundary`` (edge sampling), ``reparam`` and ``finite_difference``;
@@ -24,6 +25,7 @@ from flatland.integrals import INTEGRALS as _INTEGRALS
 from flatland.textbook import METHODS as _ESTIMATORS
 from flatland.textbook import estimate as _estimate
 from sphere3d.film import FILMS
+from sphere3d.optimize import optimize, render_targets
 from sphere3d.render import GRADIENT_METHODS, irradiance, render, render_gradient
 from sphere3d.scene import list_scenes, load_scene, parameter_names
 
@@ -100,6 +102,8 @@ PACKAGE = Package(
     estimators=_ESTIMATORS,
     films=FILMS,  # --film for render and gradient, "splat" (the default) first
     cluster=True,  # --scheduler for render and gradient: tiles on a dask.distributed cluster
+    optimize=optimize,
+    render_targets=render_targets,
 )
 """What the command line and the study runner (:mod:`flatland.app`) need to know about sphere3d."""
 

@@ -1,4 +1,4 @@
-"""Scenes on the sphere: shapes, materials, emitters, camera and parameters; loaded from dicts or JSON.
+r"""Scenes on the sphere: shapes, materials, emitters, camera and parameters; loaded from dicts or JSON.
 
 A scene is a dict (or a JSON file of the same shape)::
 
@@ -38,7 +38,19 @@ applied to the scene as loaded, and gradients are taken at θ = 0:
 ``NAME.albedo``                           add θ to the albedo
 ``camera.translate.x`` / ``.y`` / ``.z``  move the camera (position and look-at)
 ``sky.emission``                          add θ to the sky radiance
+``NAME.shape.K``                          an icosphere's or mesh's shape coefficient K (0 to
+                                          15): move each vertex v to $v (1 + θ Y_K(\hat v))$
 ========================================  ==============================================
+
+Shape coefficients deform an icosphere or a mesh along the directions $\hat v$ from its centre
+(the origin of its own coordinates) by the real spherical harmonics $Y_K$ of degree <= 3, scaled
+to $Y_0 = 1$ and mean square 1 (:mod:`sphere3d.harmonics`, which also carries the vertex normals);
+linear in θ, so offsets add exactly, and with every coefficient 0 the mesh is unchanged bit for bit.
+
+A scene may carry ``offsets`` (``{"occluder.translate.x": 0.3}``): parameter offsets applied when
+its state is built, so the scene as rendered is the scene as written moved by them, and a gradient
+with respect to a parameter it offsets is taken there, the two offsets added in one slot
+(:func:`sphere3d.state.moved_scene` adds to them; a scale's factor is $1 + θ$ in total).
 
 Bad input raises one :class:`~flatland.core.validate.ValidationError` naming the
 field path and the value, e.g. ``shapes[2].radius: must be > 0, got -1.0``.
@@ -48,7 +60,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from dataclasses import field as dataclass_field
 from importlib import resources
 from pathlib import Path
@@ -67,6 +79,8 @@ from flatland.core.validate import (
     read_json,
 )
 from sphere3d import shapes as shp
+from sphere3d.harmonics import TERMS
+from sphere3d.offsets import check_offsets
 from sphere3d.sampling import FILTERS
 
 __all__ = [
@@ -290,10 +304,11 @@ class Scene:
     camera: Camera
     sky: float
     shapes: tuple[Shape, ...]
+    offsets: tuple[tuple[str, float], ...] = ()
 
     @staticmethod
     def from_dict(d: Any, base_dir: Path | None = None) -> Scene:
-        _check_keys("", d, ("name", "camera", "sky", "shapes"), ("name", "camera", "shapes"))
+        _check_keys("", d, ("name", "camera", "sky", "shapes", "offsets"), ("name", "camera", "shapes"))
         name = d["name"]
         if not isinstance(name, str) or not name:
             raise ValidationError("name", f"must be a non-empty string, got {name!r}")
@@ -309,7 +324,8 @@ class Scene:
                     f"shapes[{i}].name", f"duplicate name {s.name!r} (also shapes[{seen[s.name]}])"
                 )
             seen[s.name] = i
-        return Scene(name, camera, sky, shapes)
+        scene = Scene(name, camera, sky, shapes)
+        return replace(scene, offsets=check_offsets(scene, d.get("offsets", {})))
 
     def to_dict(self) -> dict[str, Any]:
         """The scene as a JSON-ready dict; ``load_scene(scene.to_dict())`` gives an equal scene."""
@@ -318,6 +334,7 @@ class Scene:
             "camera": self.camera.to_dict(),
             "sky": self.sky,
             "shapes": [s.to_dict() for s in self.shapes],
+            **({"offsets": dict(self.offsets)} if self.offsets else {}),
         }
 
     # -------------------------------------------------------------- parameters
@@ -328,6 +345,8 @@ class Scene:
         for s in self.shapes:
             names += [f"{s.name}.translate.{a}" for a in AXES] + [f"{s.name}.rotate.{a}" for a in AXES]
             names += [f"{s.name}.scale", f"{s.name}.albedo", f"{s.name}.emission"]
+            if s.type in ("icosphere", "mesh"):
+                names += [f"{s.name}.shape.{k}" for k in range(TERMS)]
         return tuple(names)
 
     def check_param(self, param: Any) -> str:

@@ -7,6 +7,12 @@ for the gradient, taken at θ = 0 as in flatland) —
 and every quantity computed from it (vertex positions, the camera origin, albedos,
 emissions, the total emitter area) carries the tangent. The tracer is built from
 the detached triangles: rays are traced at θ0 and re-attached to these Duals.
+
+A scene's own ``offsets`` (:mod:`sphere3d.offsets`) are applied here too: a parameter the scene
+offsets and :func:`build_state` differentiates gets the sum of both in one slot (a translation,
+a rotation angle, a scale's factor $1 + θ$, a shape coefficient), so the state is that of the
+scene as written at the summed offsets, and a derivative taken at a moved scene
+(:func:`moved_scene`) is the derivative at those offsets. Offsets of 0 change nothing, bit for bit.
 """
 
 from __future__ import annotations
@@ -23,6 +29,8 @@ import numpy as np
 from flatland.core.budget import Term
 from flatland.core.dual import Dual, detach
 from sphere3d import shapes as shp
+from sphere3d.harmonics import deform
+from sphere3d.offsets import check_offsets
 from sphere3d.sampling import triangle_area
 from sphere3d.scene import AXES, Scene
 from sphere3d.tracing import make_tracer
@@ -34,6 +42,7 @@ __all__ = [
     "CameraState",
     "SceneState",
     "build_state",
+    "moved_scene",
     "plain_state",
     "scene_term",
 ]
@@ -302,19 +311,37 @@ def _offset(values: tuple[float, ...], offsets: dict[int | None, Any]) -> Any:
 
 
 def _bind(scene: Scene, param: Any, theta: Any) -> dict[tuple[str, str], dict[int | None, Any]]:
-    """Each parameter's offset by what it moves: (owner, kind) -> {axis (None: no axis): offset}. ``param``
-    is one name (offset ``theta``), None, or a tuple or list of k names with a sequence of k offsets
-    (or one offset for all of them)."""
+    """Each parameter's offset by what it moves: (owner, kind) -> {axis or coefficient (None: neither):
+    offset}. ``param`` is one name (offset ``theta``), None, or a tuple or list of k names with a
+    sequence of k offsets (or one offset for all of them). The scene's own offsets come first: a
+    parameter it offsets gets the sum in its slot; a plain offset of 0.0 is skipped (the identity)."""
     names = tuple(param) if isinstance(param, tuple | list) else (() if param is None else (param,))
     offsets = list(theta) if isinstance(theta, tuple | list) else [theta] * len(names)
     if len(offsets) != len(names):
         raise ValueError(f"theta: {len(names)} parameters need {len(names)} offsets, got {len(offsets)}")
+    given = dict(zip((scene.check_param(name) for name in names), offsets, strict=True))
+    moves = [(name, base + given.pop(name) if name in given else base) for name, base in scene.offsets]
     bound: dict[tuple[str, str], dict[int | None, Any]] = {}
-    for name, offset in zip(names, offsets, strict=True):
-        owner, _, rest = scene.check_param(name).partition(".")
+    for name, offset in [*moves, *given.items()]:
+        if isinstance(offset, float) and offset == 0.0 and name not in names:
+            continue
+        owner, _, rest = name.partition(".")
         kind, _, axis_name = rest.partition(".")
-        bound.setdefault((owner, kind), {})[AXES.index(axis_name) if axis_name else None] = offset
+        slot = int(axis_name) if kind == "shape" else AXES.index(axis_name) if axis_name else None
+        bound.setdefault((owner, kind), {})[slot] = offset
     return bound
+
+
+def moved_scene(scene: Scene, params: str | list[str] | tuple[str, ...], theta: Any) -> Scene:
+    """``scene`` moved by the offsets ``theta`` of ``params`` (added to the scene's own offsets): rendering
+    it renders the scene at those offsets, and differentiating it with respect to ``params``
+    differentiates there. One ValidationError for an unknown name or an offset leaving the scene invalid."""
+    names = [params] if isinstance(params, str) else list(params)
+    values = np.broadcast_to(np.asarray(theta, dtype=np.float64), (len(names),))
+    merged = dict(scene.offsets)
+    for name, value in zip(names, values, strict=True):
+        merged[name] = merged.get(name, 0.0) + float(value)
+    return replace(scene, offsets=check_offsets(scene, merged))
 
 
 def build_state(
@@ -326,6 +353,7 @@ def build_state(
     names (``variables(k)``: the state's Duals carry k tangents, slot i parameter i's).
     """
     bound = _bind(scene, param, theta)
+    varies = _bind(replace(scene, offsets=()), param, theta)  # what the parameters themselves move
     param = tuple(param) if isinstance(param, list) else param
     offsets = list(theta) if isinstance(theta, tuple | list) else [theta]
     k = next((t.k for t in offsets if isinstance(t, Dual)), None)  # None: one tangent (or plain)
@@ -339,9 +367,10 @@ def build_state(
         scale = s.scale * (1.0 + mine["scale"][None]) if "scale" in mine else s.scale
         # world = translate + R (scale · local): rotation and scale act about the centre
         rotation_t = np.swapaxes(euler_matrix(rotate), -1, -2)
-        world = translate + (scale * s.mesh.vertices) @ rotation_t
+        local, local_normals = deform(s.mesh.vertices, s.mesh.normals, mine.get("shape", {}))
+        world = translate + (scale * local) @ rotation_t
         triangles.append(world[s.mesh.faces])
-        normals.append((s.mesh.normals @ rotation_t)[s.mesh.faces])  # a uniform scale leaves them unit
+        normals.append((local_normals @ rotation_t)[s.mesh.faces])  # a uniform scale: still unit
         smooth.append(np.full(len(s.mesh.faces), s.smooth))
         n = len(s.mesh.faces)
         shape_of.append(np.full(n, index))
@@ -400,8 +429,8 @@ def build_state(
         albedo=albedo,
         emission=emission,
         sky=sky,
-        albedo_varies=np.array([(s.name, "albedo") in bound for s in scene.shapes]),
-        sky_varies=("sky", "emission") in bound,
+        albedo_varies=np.array([(s.name, "albedo") in varies for s in scene.shapes]),
+        sky_varies=("sky", "emission") in varies,
         emitters=emitters,
         emitter_area=emitter_area,
         camera=camera,

@@ -169,12 +169,15 @@ def test07_no_module_of_either_package_has_more_than_300_lines_of_code():
 
 LAYERS = {
     "sphere3d": (
-        ("primitives", ("vector", "live", "shapes", "sampling", "bsdf", "rotation", "tracing", "film")),
-        ("scene at θ", ("scene", "state", "world")),
+        (
+            "primitives",
+            ("vector", "live", "shapes", "harmonics", "sampling", "bsdf", "rotation", "tracing", "film"),
+        ),
+        ("scene at θ", ("scene", "offsets", "state", "world")),
         ("integrals", ("integrator", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),
-        ("entry points", ("render", "plot", "__main__", "")),
+        ("entry points", ("render", "optimize", "plot", "__main__", "")),
     ),
 }
 """sphere3d's layers, lowest first (the architecture page draws them): a module imports only modules
@@ -242,14 +245,15 @@ PACKAGES = ("flatland", "sphere3d")
 SHARED_MODULES = {
     "scene", "state", "tracing", "integrator", "tasks", "sampling", "bsdf", "render",
     "methods", "methods._common", "methods.naive", "methods.finite_difference", "methods.reparam",
-    "reparam", "reparam.probes", "reparam.default",
+    "reparam", "reparam.probes", "reparam.default", "optimize",
 }  # fmt: skip
 """Modules both renderers have, with the same role (the table of docs/theory/architecture.md)."""
 RETIRED = {"flatland": {"geometry", "methods.heuristic", "probes"}, "sphere3d": {"probes", "camera_kernel"}}
 """Former module names, gone without compatibility shims."""
 SHARED_NAMES = {
     "scene": {"Scene", "load_scene", "list_scenes", "parameter_names"},
-    "state": {"SceneState", "build_state"},
+    "state": {"SceneState", "build_state", "moved_scene"},
+    "optimize": {"optimize", "render_targets", "silhouette_iou"},
     "tracing": {"Hits", "attached_points"},
     "reparam.probes": {"select_points"},
     "reparam.default": {"ReparamTransforms"},

@@ -30,8 +30,19 @@ import numpy as np
 from flatland.core import progress as _progress
 from flatland.core.adam import AdamState, adam_step
 from flatland.core.rng import stream
+from flatland.core.validate import ValidationError, check_finite, check_int, check_positive
 
-__all__ = ["OptimizeResult", "Views", "descend", "l2_gradient", "l2_loss", "step_seeds"]
+__all__ = [
+    "OptimizeResult",
+    "Views",
+    "check_schedule",
+    "check_step_sizes",
+    "check_targets",
+    "descend",
+    "l2_gradient",
+    "l2_loss",
+    "step_seeds",
+]
 
 
 def l2_loss(values: np.ndarray, targets: np.ndarray) -> float:
@@ -52,6 +63,67 @@ def step_seeds(seed: int, steps: int, views: int) -> np.ndarray:
     for the derivative's (step ``steps`` renders the final image only); a function of ``seed`` alone,
     drawn from its stream ``"optimize"``, so a run is reproducible and no two renders share samples."""
     return stream(seed, "optimize").integers(0, 2**62, size=(steps + 1, views, 2))
+
+
+def _numeric(x: Any) -> bool:
+    try:
+        return np.asarray(x).dtype.kind in "iuf"
+    except (TypeError, ValueError):
+        return False
+
+
+def _describe(x: Any) -> str:
+    shape = np.shape(x) if _numeric(x) else None
+    return f"an array of shape {shape}" if shape is not None else repr(x)[:80]
+
+
+def check_targets(targets: Any, shapes: Sequence[tuple[int, ...]]) -> np.ndarray:
+    """One finite image per view, view v of shape ``shapes[v]`` (the views' films): shape ``(V, *film)``.
+    A single array is the one view's when there is one view. One ValidationError naming ``targets``
+    (the count) or ``targets[v]`` (a wrong shape, NaN or inf) otherwise."""
+    if isinstance(targets, np.ndarray) and targets.ndim == len(shapes[0]) and len(shapes) == 1:
+        targets = [targets]
+    if isinstance(targets, str | Mapping) or not hasattr(targets, "__len__") or len(targets) != len(shapes):
+        raise ValidationError(
+            "targets", f"must hold one image per view ({len(shapes)} views), got {_describe(targets)}"
+        )
+    images = []
+    for i, (target, shape) in enumerate(zip(targets, shapes, strict=True)):
+        image = np.asarray(target, dtype=np.float64) if _numeric(target) else None
+        if image is None or image.shape != tuple(shape):
+            size = " x ".join(str(n) for n in shape)
+            raise ValidationError(
+                f"targets[{i}]", f"must be an image of the view's {size} pixels, got {_describe(target)}"
+            )
+        if not np.all(np.isfinite(image)):
+            raise ValidationError(f"targets[{i}]", "must be finite (it holds NaN or inf)")
+        images.append(image)
+    if len({im.shape for im in images}) > 1:
+        raise ValidationError("targets", "views of different sizes cannot share one loss array")
+    return np.stack(images)
+
+
+def check_step_sizes(lr: Any, k: int) -> np.ndarray:
+    """The first step size of each of k parameters: one positive number for all, or k of them."""
+    values = np.atleast_1d(np.asarray(lr, dtype=np.float64)) if _numeric(lr) else None
+    if values is None or values.ndim != 1 or values.size not in (1, k):
+        raise ValidationError("lr", f"must be a positive step size or one per parameter ({k}), got {lr!r}")
+    for v in values:
+        check_positive("lr", float(v))
+    return np.broadcast_to(values, (k,)).copy()
+
+
+def check_schedule(steps: Any, decay: Any, record: Any) -> tuple[int, float, tuple[int, ...]]:
+    """``steps`` >= 1, ``decay`` in (0, 1] and the recorded steps (default: the first and the last), each
+    in 0..steps; one ValidationError naming the field otherwise."""
+    steps = check_int("steps", steps)
+    decay = check_finite("decay", decay)
+    if not 0.0 < decay <= 1.0:
+        raise ValidationError("decay", f"must lie in (0, 1], got {decay!r}")
+    record = (0, steps) if record is None else tuple(check_int("record", r, minimum=0) for r in record)
+    if any(r > steps for r in record):
+        raise ValidationError("record", f"steps must lie in 0..{steps}, got {list(record)}")
+    return steps, decay, record
 
 
 @dataclass(frozen=True)

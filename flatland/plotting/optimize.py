@@ -1,11 +1,12 @@
 """Figures of an optimisation (:func:`flatland.optimize.optimize`): the images, the history, the loss curves.
 
 :func:`plot_optimize_images` draws, per view, the target, the first and the last recorded image of a
-run (1D films as curves); :func:`plot_history` draws one run's loss and each parameter's trajectory
-against the step, with the values that made the targets when they are known; :func:`plot_loss_curves`
-draws the loss of one or more runs against the step and against the wall time (a method that renders
-more per step, such as finite differences, is slower on the second axis). Each returns a Figure (no
-pyplot); :func:`~flatland.plotting.films.save_png` writes it.
+run (1D films as curves, 2D films as images, a row per view); :func:`plot_history` draws one run's
+loss and each parameter's trajectory against the step, with the values that made the targets when
+they are known; :func:`plot_loss_curves` draws the loss of one or more runs against the step and
+against the wall time (a method that renders more per step, such as finite differences, is slower on
+the second axis). Each returns a Figure (no pyplot); :func:`~flatland.plotting.films.save_png` writes
+it.
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ def plot_optimize_images(
     result: Any, title: str | None = None, labels: Sequence[str] | None = None
 ) -> Figure:
     """One panel per view: the target, the initial (first recorded) and the optimised (last recorded)
-    image of ``result`` (an :class:`~flatland.core.optimize.OptimizeResult` with 1D films), titled by
-    ``labels`` (default ``view v``); up to three views in a row, more in two rows, the legend below."""
+    image of ``result`` (an :class:`~flatland.core.optimize.OptimizeResult`), titled by ``labels``
+    (default ``view v``): 1D films as curves, up to three views in a row, more in two rows, the legend
+    below; 2D films as a row per view of the three images on one grey scale."""
     if len(result.images) < 2:
         raise ValidationError(
             "result", "needs at least two recorded images (record the first and last steps)"
@@ -38,6 +40,8 @@ def plot_optimize_images(
     labels = tuple(labels) if labels is not None else tuple(f"view {v}" for v in range(views))
     if len(labels) != views:
         raise ValidationError("labels", f"must name the {views} views, got {len(labels)} labels")
+    if result.targets.ndim == 3:
+        return _image_grid(result, first, last, labels, title)
     ncols = views if views <= 3 else math.ceil(views / 2)  # four views: two rows of two
     nrows = math.ceil(views / ncols)
     fig = Figure(figsize=(FIGSIZE[0] * 0.8 * ncols + 1.0, FIGSIZE[1] * nrows), layout="constrained")
@@ -100,6 +104,26 @@ def plot_history(
         integer_ticks(ax.xaxis)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(loc="best", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def _image_grid(result: Any, first: int, last: int, labels: tuple[str, ...], title: str | None) -> Figure:
+    """Rows of (target, initial, optimised) 2D images, one row per view, one grey scale per row."""
+    views = result.targets.shape[0]
+    fig = Figure(figsize=(3 * 2.2 + 0.8, views * 2.2 + 0.6), layout="constrained")
+    axes = fig.subplots(views, 3, squeeze=False)
+    for v in range(views):
+        row = (result.targets[v], result.images[first][v], result.images[last][v])
+        top = max(float(np.max(im)) for im in row) or 1.0
+        names = ("target", f"initial (step {first})", f"optimised (step {last})")
+        for ax, image, name in zip(axes[v], row, names, strict=True):
+            ax.imshow(image, cmap="gray", vmin=0.0, vmax=top, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(name if v == 0 else "", fontsize=9)
+        axes[v][0].set_ylabel(labels[v])
     if title:
         fig.suptitle(title)
     return fig

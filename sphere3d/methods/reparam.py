@@ -171,10 +171,10 @@ def reparam(
 
 
 def _moves(name: str) -> str | None:
-    """What a parameter moves: its shape (or the camera) for a translation, rotation or scale; None for a
-    radiance (albedo, emission, the sky), which moves no discontinuity."""
+    """What a parameter moves: its shape (or the camera) for a translation, rotation, scale or shape
+    coefficient; None for a radiance (albedo, emission, the sky), which moves no discontinuity."""
     owner, _, rest = name.partition(".")
-    return owner if rest.partition(".")[0] in ("translate", "rotate", "scale") else None
+    return owner if rest.partition(".")[0] in ("translate", "rotate", "scale", "shape") else None
 
 
 def _by_motion(task: ImageTask | PointTask, transforms: Any) -> Tally:

@@ -142,8 +142,34 @@ def test06_film_option_chooses_the_film_and_a_bad_one_is_one_line(tmp_path, scen
     assert capsys.readouterr().err == "error: film: must be one of splat, pixel; got 'box'\n"
 
 
-def test07_optimize_is_refused_in_one_line_until_render_gradient_takes_lists(tmp_path, capsys):
-    argv = ["optimize", "shadow", "--param", "occluder.translate.x", "--target-theta", "0.1"]
-    assert main([*argv, "--out", str(tmp_path)]) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: optimize: sphere3d has no optimize yet"), lines
+def test07_optimize_writes_images_loss_and_history_and_refuses_bad_targets(tmp_path, scene_file, capsys):
+    """``optimize``: from --target-theta and from a ``render`` .npy (images, loss and CSV written); a
+    wrong-size target, an unknown parameter and a missing target are one line and status 2."""
+    argv = ["optimize", str(scene_file), "--param", "occluder.translate.x", "--param", "occluder.albedo"]
+    small = ["--steps", "3", "--spp", "2", "--target-spp", "8", "--quiet", "--out", str(tmp_path)]
+    assert main([*argv, "--target-theta", "0.1", "-0.2", *small]) == 0
+    out = capsys.readouterr().out
+    assert "occluder.translate.x = " in out and "loss " in out
+    for suffix in ("_images.png", "_loss.png"):
+        assert (tmp_path / f"small_shadow_optimize_reparam{suffix}").stat().st_size > 1000
+    history = np.loadtxt(tmp_path / "small_shadow_optimize_reparam.csv", delimiter=",", skiprows=1)
+    assert history.shape == (4, 5)  # steps 0-3: step, loss, seconds and the two parameters
+    assert main(["render", str(scene_file), "--spp", "2", "--quiet", "--out", str(tmp_path)]) == 0
+    assert main([*argv, "--target", str(tmp_path / "small_shadow.npy"), *small]) == 0
+    capsys.readouterr()
+    np.save(tmp_path / "wrong.npy", np.zeros((H, W + 1)))
+    cases = {
+        "size": (
+            ["--target", str(tmp_path / "wrong.npy")],
+            f"error: targets[0]: must be an image of the view's {H} x {W}",
+        ),
+        "none": ([], "error: optimize: give exactly one of --target FILE.npy and --target-theta"),
+        "param": (
+            ["--param", "occluder.nope", "--target-theta", "0", "0", "0"],
+            "error: params: unknown parameter",
+        ),
+    }
+    for extra, message in cases.values():
+        assert main([*argv, *extra, *small]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(message), lines
