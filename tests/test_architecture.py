@@ -171,7 +171,7 @@ LAYERS = {
     "sphere3d": (
         ("primitives", ("vector", "live", "shapes", "sampling", "bsdf", "rotation", "tracing", "film")),
         ("scene at θ", ("scene", "state", "world")),
-        ("integrals", ("integrator", "execution", "tasks")),
+        ("integrals", ("integrator", "paths", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),
         ("entry points", ("render", "plot", "__main__", "")),
