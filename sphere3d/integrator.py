@@ -1,6 +1,6 @@
 r"""The renderer's integrals, written once, with the change of variables left to the method.
 
-Three nested integrals per pixel (direct illumination only):
+Three nested integrals per pixel (direct illumination; paths of more vertices: :mod:`sphere3d.paths`):
 
 1. **Pixel integral** over the film, $∫ k(s) L(ω(s)) ds$, written over directions
    $∫ k(\mathrm{film}(ω)) J(ω) L(ω) dω$ (J: film area per solid angle). Film offsets are
@@ -71,6 +71,7 @@ __all__ = [
     "Transforms",
     "add_tangent",
     "camera_radiance",
+    "direct",
     "irradiance_samples",
     "pixel_samples",
 ]
@@ -306,24 +307,22 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     origin, direction = take_rows(shading.origin, idx), take_rows(w, idx)
     blocked = state.tracer.occluded(origin, direction, dist[idx] - 2.0 * state.epsilon)
     vis = idx[~blocked]
-    visible = np.zeros(m, dtype=bool)
-    visible[vis] = True
+    visible = np.isin(np.arange(m), vis)  # bool, True at the unoccluded samples
     change = transforms.emitter(shading, visible)
     if vis.size == 0 and change.extra is None:
         return scatter(m, vis, 0.0, state.dual, k=state.k)
-    rotation = change.rotation
     place = np.empty(m, dtype=np.intp)  # row of each point's rotation in the change
     place[change.rows] = np.arange(len(change.rows))
     # tangents only where the point moves, its rotation turns, or an emitter changes (sphere3d.live)
     points_move, lights_change = moving_rows(vis, shading.x, shading.n), emitters_change(state)
-    live = rotation.active[place[vis]] | points_move | lights_change
+    live = change.rotation.active[place[vis]] | points_move | lights_change
     plain, inv_area = state.detached(), 1.0 / float(detach(state.emitter_area))
     # operands whose tangents are all 0 enter plain: the Dual rules give a constant the tangent 0, the same
     # numbers (flatland.core.dual_ufuncs), and skip the products with it
     lights, attached = (state if lights_change else plain), bool(points_move.any())
 
     def estimate(dual: bool, x: Any, n: Any, omega: np.ndarray, row: Any, t: Any, d: Any, c: Any) -> tuple:
-        st, rotated = (lights, rotation.take(row).apply(omega)) if dual else (plain, omega)
+        st, rotated = (lights, change.rotation.take(row).apply(omega)) if dual else (plain, omega)
         x, n = (x, n) if attached else (detach(x), detach(n))
         # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
         it = intersect_triangles(x, rotated, st.triangles[t])
@@ -348,9 +347,8 @@ def add_tangent(estimate: Dual, index: np.ndarray, term: np.ndarray) -> Dual:
     return Dual(estimate.value, t, estimate.k)
 
 
-def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Transforms) -> Any:
-    """Cosine-sampling estimate of E per shading point, at the method's :class:`Members`."""
-    hits = shading.trace(mu)
+def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Transforms, hits: Hits) -> Any:
+    """Cosine-sampling estimate of E per shading point, at the method's :class:`Members` (``hits``: μ's)."""
     members = transforms.bsdf(shading, mu, hits)
     rows = members.rows
     sub, p = (shading, pdf) if rows is None else (shading.take(rows), pdf[rows])
@@ -379,9 +377,13 @@ def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Tr
     return scatter(len(mu), rows, est, shading.state.dual)
 
 
-def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) -> Any:
+def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms, bounce: bool = False) -> Any:
     r"""One MIS estimate of $E = ∫ L_i \cos θ\, dω$ per shading point
-    (uniforms ``u``: 3 emitter + 2 cosine)."""
+    (uniforms ``u``: 3 emitter + 2 cosine).
+
+    With ``bounce``, ``(E, μ, hits)``: also the cosine samples μ (plain, unit) and their first hits,
+    the rays a path continues along (:mod:`sphere3d.paths`).
+    """
     state = shading.state
     total = 0.0
     if len(state.emitters):
@@ -389,11 +391,18 @@ def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms) 
     n0 = detach(shading.n)
     mu = sample_cosine_hemisphere(u[:, 3:5], n0)
     pdf = pdf_cosine_hemisphere(mu, n0)
-    bsdf = _bsdf_term(shading, mu, pdf, transforms)
+    hits = shading.trace(mu)
+    bsdf = _bsdf_term(shading, mu, pdf, transforms, hits)
     extra = transforms.shading_extra(shading)
     if extra is not None:
         bsdf = bsdf + Dual(np.zeros(len(shading)), extra, state.k)  # the value is untouched (+ 0.0)
-    return total + bsdf
+    return (total + bsdf, mu, hits) if bounce else total + bsdf
+
+
+def direct(shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms) -> Any:
+    r"""The radiance $ρ/π\, E$ a diffuse surface of ``albedo`` reflects at shading points: direct
+    illumination, the default ``vertex`` of :func:`camera_radiance`."""
+    return albedo * INV_PI * irradiance_samples(shading, u, transforms)
 
 
 def pixel_samples(
@@ -404,6 +413,7 @@ def pixel_samples(
     u: np.ndarray,
     draws: Draws,
     splat: Any = None,
+    vertex: Any = None,
 ) -> Any:
     """One estimate of the pixel integral per sample (pixel ``rows``, ``cols``; uniforms ``u``).
 
@@ -411,7 +421,8 @@ def pixel_samples(
     The estimate is ``radiance * weight`` (:class:`PixelSamples`); both are Duals when the
     state carries tangents. ``draws`` keys the samples' further random numbers on their indices.
     ``splat(x, y)``: a :class:`~sphere3d.film.Splat` of the film points (x, y), whose weights
-    (n, m), one per reached pixel, replace k / p (film splatting, :mod:`sphere3d.film`).
+    (n, m), one per reached pixel, replace k / p (film splatting, :mod:`sphere3d.film`). ``vertex``:
+    what a diffuse hit reflects, as in :func:`camera_radiance`.
     """
     cam = state.camera
     offsets = sample_filter(u[:, 0:2], cam.filter)
@@ -455,7 +466,8 @@ def pixel_samples(
     else:
         rotated = d
     slot = None if splat is None else splat.slot
-    return PixelSamples(camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws), weight, slot)
+    radiance = camera_radiance(state, transforms, d, rotated, u[:, 2:7], draws, vertex=vertex)
+    return PixelSamples(radiance, weight, slot)
 
 
 def camera_radiance(
@@ -466,13 +478,15 @@ def camera_radiance(
     u: np.ndarray,
     draws: Draws,
     hits: Hits | None = None,
+    vertex: Any = None,
 ) -> Any:
     r"""Radiance arriving at the camera along unit directions ``d`` (plain), re-attached along ``rotated``.
 
     Emission of the first hit's front side plus $ρ/π\, E$ at diffuse hits, E estimated
     with the shading uniforms ``u`` (n, 5) under ``transforms``; the sky where a ray misses.
     ``hits``: the rays' hits if the caller knows them (only ``shape`` and ``triangle`` are
-    read), else they are traced.
+    read), else they are traced. ``vertex(shading, u, albedo, transforms)``: the radiance diffuse hits
+    reflect; None: :func:`direct` (the paths of :mod:`sphere3d.paths` pass theirs).
     """
     n = len(d)
     cam = state.camera
@@ -508,7 +522,7 @@ def camera_radiance(
         if s.size:
             s = slice(None) if s.size == hit.size else s  # all diffuse: views, not copies
             shading = Shading.at(state, point[s], shade_n[s], draws.take(hit[s]), geometric[s])
-            e = irradiance_samples(shading, u[hit[s]], transforms)
-            value = value + scatter(hit.size, s, albedo[s] * INV_PI * e, state.dual)
+            reflected = (vertex or direct)(shading, u[hit[s]], albedo[s], transforms)
+            value = value + scatter(hit.size, s, reflected, state.dual)
         radiance[hit] = value
     return radiance

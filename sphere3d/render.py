@@ -49,8 +49,9 @@ def render(
     film: str = "splat",
     progress: bool | None = None,
     scheduler: str | None = None,
+    max_depth: int = 1,
 ) -> Image:
-    """Render ``scene`` (a built-in name, a .json path, a dict or a Scene).
+    r"""Render ``scene`` (a built-in name, a .json path, a dict or a Scene).
 
     Parameters
     ----------
@@ -72,6 +73,10 @@ def render(
         Address of a ``dask.distributed`` scheduler, e.g. ``"tcp://10.0.0.5:8786"`` (needs the
         ``cluster`` extra): the chunks run as tiles on its workers and the image is bit for bit
         that of a local run (module docstring); None (default): on this machine's threads.
+    max_depth : int
+        Diffuse vertices per path, an integer >= 1: 1 (default) is direct illumination, bit for bit; d
+        gives $L = Σ_{i=0}^{d} \mathcal{T}^i L_e$, each vertex's MIS estimate of the light it reflects and
+        the path continued along its cosine sample (:mod:`sphere3d.paths`).
 
     Returns
     -------
@@ -82,14 +87,14 @@ def render(
     ------
     ValidationError
         One error naming the field and value: unknown scene field, spp < 1, batches not dividing
-        spp, film not one of "pixel", "splat", a scheduler address that is malformed or where no
-        scheduler answers (or dask.distributed missing).
+        spp, film not one of "pixel", "splat", max_depth not an integer >= 1, a scheduler address that
+        is malformed or where no scheduler answers (or dask.distributed missing).
     """
     scene = load_scene(scene)
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    task = ImageTask(scene, None, spp, seed, batches, film=film)
+    task = ImageTask(scene, None, spp, seed, batches, film=film, max_depth=check_int("max_depth", max_depth))
     _check_budget(task, {})
     with execution.cluster(scheduler), _bar(f"render {scene.name}", progress):
         tally = task.evaluate(0.0)
@@ -105,6 +110,7 @@ def _request(task: ImageTask | PointTask, options: dict[str, Any], method: str |
     model = MEMORY_MODELS.get(method or "")
     terms = (*(model(task, options) if model else ()), scene_term(task.scene))  # and the scene's tables
     rays = 3 if model else rays_per_sample(options)  # a model counts its options' rays itself
+    rays *= task.max_depth  # each vertex of a path traces them again (sphere3d.paths.PATH_RAYS: 3 a vertex)
     if isinstance(task, ImageTask):
         pixels, spp, field = task.scene.camera.width * task.scene.camera.height, task.spp, "spp"
         chunk, pixel_bytes = task.chunk_pixels * task.spp, task.pixel_bytes()
@@ -157,6 +163,7 @@ def render_gradient(
     film: str = "splat",
     progress: bool | None = None,
     scheduler: str | None = None,
+    max_depth: int = 1,
     **options: Any,
 ) -> GradientImage | GradientImages:
     """Render ``scene`` and its derivative with respect to ``param`` by ``method``.
@@ -173,6 +180,10 @@ def render_gradient(
         As in :func:`render`; the film (default ``"splat"``) applies to every method alike (their
         values stay equal). With ``scheduler`` every render a method makes (finite differences:
         three) runs on the cluster, its per-image term (boundary's edges on the film) as one more task.
+    max_depth : int
+        Diffuse vertices per path, >= 1, as in :func:`render`. ``naive`` and ``finite_difference`` take
+        any depth; ``reparam`` and ``boundary`` only 1 for now (their changes of variables and boundary
+        terms at the further vertices are not implemented: refused with a ValidationError).
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
@@ -204,7 +215,7 @@ def render_gradient(
     spp = check_int("spp", spp)
     seed = check_seed("seed", seed)
     batches = resolve_batches(spp, batches)
-    task = ImageTask(scene, param, spp, seed, batches, film=film)
+    task = ImageTask(scene, param, spp, seed, batches, film=film, max_depth=check_int("max_depth", max_depth))
     spec, resolved = _resolve(method, task, options)  # every argument checked before a cluster is reached
     with execution.cluster(scheduler), _bar(f"{method} {scene.name}", progress):
         tally = _run(spec, task, resolved)
@@ -225,6 +236,7 @@ def irradiance(
     batches: int | None = None,
     progress: bool | None = None,
     scheduler: str | None = None,
+    max_depth: int = 1,
     **options: Any,
 ) -> Estimate | dict[str, Estimate]:
     r"""Irradiance $E = ∫ L_i(ω) \cos θ\, dω$ at a fixed point and normal, and its derivative.
@@ -251,6 +263,9 @@ def irradiance(
         Address of a ``dask.distributed`` scheduler, e.g. ``"tcp://10.0.0.5:8786"`` (needs the
         ``cluster`` extra): the chunks run as tiles on its workers and the estimate is bit for bit
         that of a local run (module docstring); None (default): on this machine's threads.
+    max_depth : int
+        As in :func:`render`: $L_i$ carries paths of up to d - 1 further diffuse vertices (1: emission
+        and sky only, the default).
 
     Returns
     -------
@@ -281,7 +296,9 @@ def irradiance(
     n = check_int("n", n)
     seed = check_seed("seed", seed)
     batches = resolve_batches(n, batches, "n")
-    task = PointTask(scene, param, point, normal, n, seed, batches)
+    task = PointTask(
+        scene, param, point, normal, n, seed, batches, max_depth=check_int("max_depth", max_depth)
+    )
     if param is None:
         _check_budget(task, {})
         spec, resolved = None, {}

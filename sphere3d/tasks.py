@@ -36,9 +36,9 @@ from sphere3d.integrator import (
     PixelSamples,
     Shading,
     Transforms,
-    irradiance_samples,
     pixel_samples,
 )
+from sphere3d.paths import irradiance_paths, vertex
 from sphere3d.scene import Scene
 from sphere3d.state import build_state
 
@@ -112,6 +112,8 @@ class ImageTask(_Parameters):
     film: str = "splat"
     """``"splat"`` (default): each sample in every pixel its filter covers, weighted by
     $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`); ``"pixel"``: in the pixel that drew it."""
+    max_depth: int = 1
+    """Diffuse vertices per path (:mod:`sphere3d.paths`); 1: direct illumination."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -230,10 +232,10 @@ class ImageTask(_Parameters):
         if out is not None:
             kind = self.scene.camera.filter
             reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
-            est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of)
+            est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of, vertex(self.max_depth))
             self._splat_chunk(est, pix, batches, per_batch, out, offset)
             return None
-        est = pixel_samples(state, transforms, rows, cols, u, draws)
+        est = pixel_samples(state, transforms, rows, cols, u, draws, vertex=vertex(self.max_depth))
         return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
     def _chunk_range(
@@ -464,7 +466,9 @@ def _remote(shared: tuple[ImageTask | PointTask, Any, Transforms, int], item: tu
 
 @dataclass(frozen=True)
 class PointTask(_Parameters):
-    r"""The irradiance $E = ∫ L_i \cos θ\, dω$ at a fixed point with a fixed unit normal: ``n`` samples."""
+    r"""The irradiance $E = ∫ L_i \cos θ\, dω$ at a fixed point with a fixed unit normal: ``n`` samples; with
+    ``max_depth`` d > 1, $L_i$ carries paths of up to d - 1 further diffuse vertices (:mod:`sphere3d.paths`).
+    """
 
     scene: Scene
     param: str | tuple[str, ...] | None
@@ -474,6 +478,7 @@ class PointTask(_Parameters):
     seed: int
     batches: int
     tracer: str = "embree"
+    max_depth: int = 1
 
     @property
     def shape(self) -> tuple[()]:
@@ -510,7 +515,7 @@ class PointTask(_Parameters):
         # sample j = b * per_batch + c * size + s of the point: its numbers are keyed on j
         draws = Draws.of(self.seed, b * per_batch + c * size + np.arange(count))
         u = draws.uniforms("samples", 5)
-        return np.sum(irradiance_samples(Shading.at(state, x, nrm, draws), u, transforms))
+        return np.sum(irradiance_paths(Shading.at(state, x, nrm, draws), u, transforms, self.max_depth))
 
     def _chunk_range(self, state: Any, transforms: Transforms, first: int, stop: int, size: int) -> list[Any]:
         """The sums of memory chunks ``first`` to ``stop`` (exclusive) of ``size`` samples (:meth:`_chunk`),

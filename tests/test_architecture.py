@@ -174,7 +174,7 @@ LAYERS = {
             ("vector", "live", "shapes", "harmonics", "sampling", "bsdf", "rotation", "tracing", "film"),
         ),
         ("scene at θ", ("scene", "offsets", "state", "world")),
-        ("integrals", ("integrator", "execution", "tasks")),
+        ("integrals", ("integrator", "paths", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),
         ("entry points", ("render", "optimize", "plot", "__main__", "")),

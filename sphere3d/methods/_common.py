@@ -14,8 +14,9 @@ from typing import Any
 
 from flatland.core.budget import Term
 from flatland.core.contract import MethodTable
+from flatland.core.validate import ValidationError
 
-__all__ = ["GRADIENT_METHODS", "MEMORY_MODELS", "memory_model"]
+__all__ = ["GRADIENT_METHODS", "MEMORY_MODELS", "direct_only", "memory_model"]
 
 GRADIENT_METHODS = MethodTable("gradient method")
 """Gradient methods by name: ``func(task, **options) -> Tally`` (see :mod:`flatland.core.contract`)."""
@@ -34,3 +35,15 @@ def memory_model(name: str) -> Callable[[MemoryModel], MemoryModel]:
         return model
 
     return decorate
+
+
+def direct_only(task: Any, method: str, missing: str) -> None:
+    """Refuse paths (``task.max_depth`` > 1, :mod:`sphere3d.paths`) for a method whose ``missing`` exist at
+    vertex 1 only."""
+    if task.max_depth > 1:
+        raise ValidationError(
+            "max_depth",
+            f"must be 1 for method {method!r} (not yet supported on paths: its {missing} at vertices "
+            f"beyond the first are not implemented; naive and finite_difference take any depth), "
+            f"got {task.max_depth!r}",
+        )

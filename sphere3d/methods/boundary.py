@@ -19,7 +19,7 @@ from flatland.core.validate import check_int, check_positive
 from sphere3d.boundary.camera import POINT_CHUNK, POINT_RAYS, film_edges, point_bytes, point_count
 from sphere3d.boundary.edges import state_edges
 from sphere3d.boundary.transforms import BoundaryTransforms, draw_bytes, draw_points
-from sphere3d.methods._common import GRADIENT_METHODS, memory_model
+from sphere3d.methods._common import GRADIENT_METHODS, direct_only, memory_model
 from sphere3d.state import plain_state
 from sphere3d.tasks import CHUNK, ImageTask, PointTask, Tally
 
@@ -65,6 +65,7 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     sides of the arc at two offsets) plus the silhouette test against the edges the edge tree
     finds (:mod:`sphere3d.boundary.edge_tree`).
     """
+    direct_only(task, "boundary", "boundary terms")
     edges = state_edges(plain_state(task.scene, task.param, task.tracer))
     return task.evaluate(task.dual_offset(), BoundaryTransforms(edges, secondary, rate))
 

@@ -26,7 +26,7 @@ from flatland.core.contract import Option
 from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import ValidationError, check_bool, check_choice, check_int, check_positive
 from sphere3d.boundary.emitters import POINTS
-from sphere3d.methods._common import GRADIENT_METHODS, memory_model
+from sphere3d.methods._common import GRADIENT_METHODS, direct_only, memory_model
 from sphere3d.reparam.bisection import pair_bytes, pair_rows
 from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.reparam.emitter_probes import PROBES as EMITTER_PROBES
@@ -148,6 +148,7 @@ def reparam(
     each extension removes and what remains in the theory page *extensions*, the measured
     biases in the generated measurement pages.
     """
+    direct_only(task, "reparam", "changes of variables of the shading integrals")
     if isinstance(task, ImageTask):
         check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:
