@@ -234,17 +234,25 @@ def _parser(pkg: Package) -> _Parser:
                 " the local image (default: none, on this machine)",
             )  # fmt: skip
 
+    def depth_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--max-depth", type=int, default=None,
+            help="path vertices (default 1: direct light only); reparam and boundary take only 1",
+        )  # fmt: skip
+
     demo = verbs.add_parser("demo", help="the default scene: panel of methods and error table (< 1 min)")
     common(demo, f"samples per pixel (default {pkg.demo_spp})", None)
     demo.set_defaults(func=verb_demo)
 
     render = verbs.add_parser("render", help="render SCENE to PNG and .npy")
     scene_arg(render)
+    depth_arg(render)
     common(render, "samples per pixel (default 64)", 64)
     render.set_defaults(func=verb_render)
 
     gradient = verbs.add_parser("gradient", help="derivative image of SCENE w.r.t. --param, PNG and .npy")
     scene_arg(gradient)
+    depth_arg(gradient)
     gradient.add_argument(
         "--param", default=None,
         help="scene parameter, e.g. occluder.translate.x (no default: omit it to list the scene's)",

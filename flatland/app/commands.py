@@ -97,6 +97,11 @@ def _scheduler(args: argparse.Namespace) -> dict[str, Any]:
     return {} if getattr(args, "scheduler", None) is None else {"scheduler": args.scheduler}
 
 
+def _depth(args: argparse.Namespace) -> dict[str, Any]:
+    """``max_depth=`` when ``--max-depth`` was given (default: the renderers' own, 1)."""
+    return {} if getattr(args, "max_depth", None) is None else {"max_depth": args.max_depth}
+
+
 def _reference_needed(gradients: Mapping[str, Any], reference: Any, ref_spp: int) -> int | None:
     """Reference spp that makes its film-sum stderr 1/4 of the smallest unbiased method's (x 1.25
     for the scatter of the estimated errors), or None if it already is."""
@@ -219,7 +224,7 @@ def verb_render(pkg: Package, args: argparse.Namespace) -> int:
     scene = _load_scene(pkg, args.scene)
     image = pkg.render(
         scene, spp=args.spp, seed=args.seed, batches=args.batches, progress=_progress(args),
-        **_film(args), **_scheduler(args),
+        **_film(args), **_scheduler(args), **_depth(args),
     )  # fmt: skip
     name = _stem(args.scene)
     out = Path(args.out)
@@ -239,7 +244,7 @@ def verb_gradient(pkg: Package, args: argparse.Namespace) -> int:
         raise UsageError(f"gradient: --param is required; parameters of {scene.name!r}: {names}")
     g = pkg.render_gradient(
         scene, args.param, method=args.method, spp=args.spp, seed=args.seed, batches=args.batches,
-        progress=_progress(args), **_film(args), **_scheduler(args), **_options(args),
+        progress=_progress(args), **_film(args), **_scheduler(args), **_options(args), **_depth(args),
     )  # fmt: skip
     name = f"{_stem(args.scene)}_{args.param}_{args.method}"  # parameter names contain dots: no with_suffix
     out = Path(args.out)

@@ -352,3 +352,24 @@ def test18_optimize_writes_images_loss_and_history_and_refuses_bad_targets(tmp_p
         assert main([*argv, *extra, *small]) == 2
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith(message), lines
+
+
+def test19_max_depth_renders_longer_paths_and_a_bad_one_is_one_line(tmp_path, scene_file, capsys):
+    """``--max-depth`` reaches render and gradient: depth 3 adds light (never removes it; in this scene
+    the first extra light is the floor's, bounced off the occluder's underside back to the floor: three
+    vertices), naive takes it, reparam refuses it and 0 is refused, one line each."""
+    base = ["render", str(scene_file), "--spp", "4", "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "d1")]) == 0
+    assert main([*base, "--max-depth", "3", "--out", str(tmp_path / "d2")]) == 0
+    one, two = (np.load(tmp_path / d / "small_shadow.npy")["value"] for d in ("d1", "d2"))
+    assert np.all(two >= one - 1e-12) and np.any(two > one)
+    grad = ["gradient", str(scene_file), "--param", "occluder.albedo", "--spp", "4", "--quiet"]
+    assert main([*grad, "--method", "naive", "--max-depth", "2", "--out", str(tmp_path)]) == 0
+    capsys.readouterr()
+    for argv, message in (
+        ([*base, "--max-depth", "0", "--out", str(tmp_path)], "error: max_depth: "),
+        ([*grad, "--method", "reparam", "--max-depth", "2", "--out", str(tmp_path)], "error: max_depth: "),
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(message)
