@@ -24,12 +24,14 @@ import numpy as np
 from flatland.core.optimize import (
     OptimizeResult,
     Views,
+    check_bounds,
     check_schedule,
     check_step_sizes,
     check_targets,
     descend,
+    narrow_bounds,
 )
-from flatland.core.validate import ValidationError, check_finite, check_int, check_seed
+from flatland.core.validate import ValidationError, check_int, check_seed
 from flatland.methods import GRADIENT_METHODS
 from flatland.render import render, render_gradient
 from flatland.scene import Camera, Scene, load_scene
@@ -65,13 +67,8 @@ def _cameras(scene: Scene, views: Any) -> tuple[Camera, ...]:
 
 def _bounds(scene: Scene, params: tuple[Any, ...], bounds: Any) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of each offset: ``bounds[name] = (lo, hi)``, or the module docstring's."""
-    bounds = {} if bounds is None else bounds
-    if not isinstance(bounds, Mapping):
-        raise ValidationError("bounds", f"must map parameter names to (low, high), got {bounds!r}")
     names = [p.name for p in params]
-    for name in bounds:
-        if name not in names:
-            raise ValidationError("bounds", f"{name!r} is not one of the parameters {names}")
+    bounds = check_bounds(bounds, names)
     lower, upper = np.full(len(params), -np.inf), np.full(len(params), np.inf)
     for i, p in enumerate(params):
         shape = scene.shape(p.target) if p.target != "camera" else None
@@ -81,19 +78,7 @@ def _bounds(scene: Scene, params: tuple[Any, ...], bounds: Any) -> tuple[np.ndar
             lower[i] = -shape.emission
         elif p.kind == "scale":
             lower[i] = MIN_SCALE - 1.0
-        if p.name in bounds:
-            pair = bounds[p.name]
-            if not isinstance(pair, Sequence) or len(pair) != 2:
-                raise ValidationError(f"bounds[{p.name!r}]", f"must be a pair (low, high), got {pair!r}")
-            lo, hi = (check_finite(f"bounds[{p.name!r}]", v) for v in pair)
-            if not lower[i] <= lo <= 0.0 <= hi <= upper[i]:
-                raise ValidationError(
-                    f"bounds[{p.name!r}]",
-                    f"must satisfy {lower[i]:g} <= low <= 0 <= high <= {upper[i]:g} (offsets from the scene),"
-                    f" got {pair!r}",
-                )
-            lower[i], upper[i] = lo, hi
-    return lower, upper
+    return narrow_bounds(bounds, names, lower, upper)
 
 
 def optimize(

@@ -24,12 +24,14 @@ import numpy as np
 from flatland.core.optimize import (
     OptimizeResult,
     Views,
+    check_bounds,
     check_schedule,
     check_step_sizes,
     check_targets,
     descend,
+    narrow_bounds,
 )
-from flatland.core.validate import ValidationError, check_finite, check_int, check_seed
+from flatland.core.validate import ValidationError, check_int, check_seed
 from sphere3d.render import GRADIENT_METHODS, render, render_gradient
 from sphere3d.scene import Camera, Scene, load_scene
 from sphere3d.state import build_state, moved_scene
@@ -72,12 +74,7 @@ def _params(scene: Scene, params: Any) -> tuple[str, ...]:
 def _bounds(scene: Scene, names: tuple[str, ...], bounds: Any) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of each offset: ``bounds[name] = (lo, hi)``, or the module docstring's
     (from the scene as given, its own offsets included)."""
-    bounds = {} if bounds is None else bounds
-    if not isinstance(bounds, Mapping):
-        raise ValidationError("bounds", f"must map parameter names to (low, high), got {bounds!r}")
-    for name in bounds:
-        if name not in names:
-            raise ValidationError("bounds", f"{name!r} is not one of the parameters {list(names)}")
+    bounds = check_bounds(bounds, names)
     lower, upper = np.full(len(names), -np.inf), np.full(len(names), np.inf)
     offsets = dict(scene.offsets)
     for i, name in enumerate(names):
@@ -92,19 +89,7 @@ def _bounds(scene: Scene, names: tuple[str, ...], bounds: Any) -> tuple[np.ndarr
             )
         elif kind == "scale":
             lower[i] = MIN_SCALE - 1.0 - base  # the total factor 1 + base + θ >= MIN_SCALE
-        if name in bounds:
-            pair = bounds[name]
-            if not isinstance(pair, Sequence) or len(pair) != 2:
-                raise ValidationError(f"bounds[{name!r}]", f"must be a pair (low, high), got {pair!r}")
-            lo, hi = (check_finite(f"bounds[{name!r}]", v) for v in pair)
-            if not lower[i] <= lo <= 0.0 <= hi <= upper[i]:
-                raise ValidationError(
-                    f"bounds[{name!r}]",
-                    f"must satisfy {lower[i]:g} <= low <= 0 <= high <= {upper[i]:g} (offsets from the scene),"
-                    f" got {pair!r}",
-                )
-            lower[i], upper[i] = lo, hi
-    return lower, upper
+    return narrow_bounds(bounds, names, lower, upper)
 
 
 def optimize(

@@ -35,12 +35,14 @@ from flatland.core.validate import ValidationError, check_finite, check_int, che
 __all__ = [
     "OptimizeResult",
     "Views",
+    "check_bounds",
     "check_schedule",
     "check_step_sizes",
     "check_targets",
     "descend",
     "l2_gradient",
     "l2_loss",
+    "narrow_bounds",
     "step_seeds",
 ]
 
@@ -111,6 +113,40 @@ def check_step_sizes(lr: Any, k: int) -> np.ndarray:
     for v in values:
         check_positive("lr", float(v))
     return np.broadcast_to(values, (k,)).copy()
+
+
+def check_bounds(bounds: Any, names: Sequence[str]) -> Mapping[str, Any]:
+    """The user's ``bounds``, a mapping (None: empty) whose keys are among the parameters ``names``."""
+    bounds = {} if bounds is None else bounds
+    if not isinstance(bounds, Mapping):
+        raise ValidationError("bounds", f"must map parameter names to (low, high), got {bounds!r}")
+    for name in bounds:
+        if name not in names:
+            raise ValidationError("bounds", f"{name!r} is not one of the parameters {list(names)}")
+    return bounds
+
+
+def narrow_bounds(
+    bounds: Mapping[str, Any], names: Sequence[str], lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``lower``, ``upper`` (the widest valid offsets of each parameter) with the user's ``bounds[name] =
+    (low, high)`` put in, each checked to keep the offset 0 and to stay within the valid ones."""
+    lower, upper = lower.copy(), upper.copy()
+    for i, name in enumerate(names):
+        if name not in bounds:
+            continue
+        pair = bounds[name]
+        if not isinstance(pair, Sequence) or len(pair) != 2:
+            raise ValidationError(f"bounds[{name!r}]", f"must be a pair (low, high), got {pair!r}")
+        lo, hi = (check_finite(f"bounds[{name!r}]", v) for v in pair)
+        if not lower[i] <= lo <= 0.0 <= hi <= upper[i]:
+            raise ValidationError(
+                f"bounds[{name!r}]",
+                f"must satisfy {lower[i]:g} <= low <= 0 <= high <= {upper[i]:g} (offsets from the scene),"
+                f" got {pair!r}",
+            )
+        lower[i], upper[i] = lo, hi
+    return lower, upper
 
 
 def check_schedule(steps: Any, decay: Any, record: Any) -> tuple[int, float, tuple[int, ...]]:
