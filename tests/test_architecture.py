@@ -171,7 +171,18 @@ LAYERS = {
     "sphere3d": (
         (
             "primitives",
-            ("vector", "live", "shapes", "harmonics", "sampling", "bsdf", "rotation", "tracing", "film"),
+            (
+                "vector",
+                "jit",
+                "live",
+                "shapes",
+                "harmonics",
+                "sampling",
+                "bsdf",
+                "rotation",
+                "tracing",
+                "film",
+            ),
         ),
         ("scene at θ", ("scene", "offsets", "state", "world")),
         ("integrals", ("integrator", "paths", "execution", "tasks")),

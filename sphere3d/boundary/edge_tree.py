@@ -33,10 +33,14 @@ gets the exact tests: the silhouette test, and the same cone tests with the edge
 so the pairs found are exactly those of the exact tests on every pair; the pairs the image test
 drops have arcs wholly outside the emitters' images, which the shading term clips to nothing.
 
-Construction, O(E log E) per state: the edges sorted by the Morton code of their midpoints (30 bits),
-leaves of :data:`LEAF` consecutive edges, a complete binary tree above them (heap order: node i has
-children 2i and 2i + 1), each node's bounds merged from its children's; each edge's two planes
-$n_k·p = n_k·a$ stored in leaf order beside it.
+Construction, O(E log E) per state: a complete binary tree over slots of :data:`LEAF` edges (heap
+order: node i has children 2i and 2i + 1), filled top down, each node splitting its edges at the
+median of their midpoints along the longest side of their bounding box (one selection per node,
+O(E) per level: :mod:`sphere3d.boundary.tree_build`), so that leaves are compact patches of about
+LEAF edges; each leaf's sphere is centred in the box around its edges' spheres, just wide enough to
+hold them, each node's the smallest holding its children's, its cone merged from theirs; each
+edge's two planes $n_k·p = n_k·a$ stored in leaf order beside it. The tree's shape changes which
+nodes a walk visits, never the pairs it finds, which come sorted by edge index within a point.
 
 Query (:meth:`EdgeTree.silhouettes`): every point walks the tree depth first, dropping the nodes
 the culls reject, and at the leaves it reaches runs the exact silhouette test on each edge (the
@@ -61,9 +65,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from sphere3d.boundary.edges import Edges
+from sphere3d.boundary.tree_build import compiled_split, leaf_bounds
+from sphere3d.jit import compiled
 from sphere3d.vector import dot, norm
 
-__all__ = ["LEAF", "SLACK", "EdgeTree", "compiled", "edge_tree", "walk"]
+__all__ = ["LEAF", "SLACK", "EdgeTree", "edge_tree", "walk"]
 
 LEAF = 32
 """Edges per leaf."""
@@ -71,17 +77,6 @@ SLACK = 1e-9
 """Kept in every cull's cosine comparison beyond the bounds (their rounding is about 1e-15)."""
 PAIRS_PER_POINT = 64
 """First size of the pair buffers of :meth:`EdgeTree.silhouettes`, per point (doubled when full)."""
-
-
-def _morton(points: np.ndarray) -> np.ndarray:
-    """30-bit Morton codes of ``points`` (N, 3) in their bounding box: 10 bits per axis, interleaved."""
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    cell = ((points - lo) / np.where(hi > lo, hi - lo, 1.0) * 1023.0).astype(np.int64)
-    code = np.zeros(len(points), dtype=np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((cell[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return code
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -135,61 +130,53 @@ class EdgeTree:
     @staticmethod
     def build(edges: Edges, subset: np.ndarray, first: np.ndarray | None = None) -> EdgeTree:
         """The tree over the edges ``subset`` (indices into ``edges``); with a mask ``first`` (E,), its
-        edges before the others, each group in the Morton order of its own bounding box, so that only
-        the nodes on the path to the leaf where the groups meet hold both (:meth:`restrict`)."""
+        edges before the others, each group split on its own (:mod:`~sphere3d.boundary.tree_build`),
+        so that only the nodes on the path to the leaf where the groups meet hold both
+        (:meth:`restrict`)."""
         n = subset.size
         depth = max(0, int(np.ceil(np.log2(max(n, 1) / LEAF))))
         leaves = 1 << depth
-        mid = 0.5 * (edges.a + edges.b)[subset]
         group = np.zeros(n, dtype=bool) if first is None else ~first[subset]
-        code = np.zeros(n, dtype=np.int64)
-        for g in (False, True):
-            if np.any(group == g):
-                code[group == g] = _morton(mid[group == g])
-        by_code = np.lexsort((code, group)) if n else np.zeros(0, dtype=np.int64)
+        ranked = np.argsort(group, kind="stable")  # the first group's edges, then the others
+        mid = np.ascontiguousarray((0.5 * (edges.a + edges.b))[subset[ranked]].T)
+        placed = compiled_split()(mid, int(np.sum(~group)), depth, LEAF)
         order = np.full(leaves * LEAF, -1, dtype=np.int64)
-        order[:n] = subset[by_code]
-        slots = order.reshape(leaves, LEAF)
-        real = slots >= 0
-        e = slots.clip(0)
-        m, h = 0.5 * (edges.a + edges.b)[e], 0.5 * norm(edges.b - edges.a)[e]
-        # heap arrays; an empty node has lo = +inf, hi = -inf, so min / max merge it away
+        order[:n] = subset[ranked[placed]]
+        # heap arrays; the leaves' bounds compiled (tree_build.leaf_bounds), the levels above merged
         size = 2 * leaves
-        lo, hi = np.full((size, 3), np.inf), np.full((size, 3), -np.inf)
-        filled, axis, spread = np.zeros(size, dtype=bool), np.zeros((size, 3)), np.full(size, np.pi)
+        centre, radius = np.zeros((size, 3)), np.full(size, -1.0)
+        axis, spread = np.zeros((size, 3)), np.full(size, np.pi)
         leaf = slice(leaves, size)
-        lo[leaf] = np.min(np.where(real[..., None], m - h[..., None], np.inf), axis=1)
-        hi[leaf] = np.max(np.where(real[..., None], m + h[..., None], -np.inf), axis=1)
-        filled[leaf] = real[:, 0]
-        total = np.sum(np.where(real[..., None], edges.n1[e] + edges.n2[e], 0.0), axis=1)
-        length = norm(total)
-        d = total / np.where(length > 0.0, length, 1.0)[:, None]
-        worst = np.maximum(_angle(edges.n1[e], d[:, None]), _angle(edges.n2[e], d[:, None]))
-        open_edge = np.any(real & edges.always[e], axis=1)  # a silhouette from every point
-        axis[leaf] = d
-        spread[leaf] = np.where(
-            open_edge | (length == 0.0), np.pi, np.max(np.where(real, worst, 0.0), axis=1)
-        )
+        compiled(leaf_bounds)(
+            order, LEAF, edges.a, edges.b, edges.n1, edges.n2, edges.always,
+            centre[leaf], radius[leaf], axis[leaf], spread[leaf],
+        )  # fmt: skip
+        filled = radius >= 0.0
         for level in range(depth - 1, -1, -1):  # the parents of each level, up to the root
             node = np.arange(1 << level, 2 << level)
-            left, right = 2 * node, 2 * node + 1
-            lo[node] = np.minimum(lo[left], lo[right])
-            hi[node] = np.maximum(hi[left], hi[right])
-            fl, fr = filled[left], filled[right]
-            filled[node] = fl | fr
+            kids = np.stack([2 * node, 2 * node + 1])  # (2, nodes)
+            full = filled[kids]
+            filled[node] = full[0] | full[1]
+            # the sphere about the mean of the children's centres (radius-weighted ends of the span),
+            # just wide enough to hold both spheres
+            c = np.where(full[..., None], centre[kids], centre[kids[::-1]])
+            r = np.where(full, radius[kids], radius[kids[::-1]])
+            gap = norm(c[1] - c[0])
+            lo = np.minimum(-r[0], gap - r[1])  # the span of both spheres along c0 -> c1, from c0
+            hi = np.maximum(r[0], gap + r[1])
+            u = (c[1] - c[0]) / np.where(gap > 0.0, gap, 1.0)[:, None]
+            centre[node] = c[0] + (0.5 * (lo + hi))[:, None] * u
+            radius[node] = np.where(filled[node], 0.5 * (hi - lo) * (1.0 + 1e-12), -1.0)
             # the merged cone: about the children's mean axis, wide enough to hold both cones
-            s = axis[left] * fl[:, None] + axis[right] * fr[:, None]
+            s = axis[kids[0]] * full[0, :, None] + axis[kids[1]] * full[1, :, None]
             length = norm(s)
             merged = s / np.where(length > 0.0, length, 1.0)[:, None]
             reach = np.maximum(
-                np.where(fl, _angle(merged, axis[left]) + spread[left], 0.0),
-                np.where(fr, _angle(merged, axis[right]) + spread[right], 0.0),
+                np.where(full[0], _angle(merged, axis[kids[0]]) + spread[kids[0]], 0.0),
+                np.where(full[1], _angle(merged, axis[kids[1]]) + spread[kids[1]], 0.0),
             )
             axis[node] = merged
             spread[node] = np.where(length > 0.0, np.minimum(reach, np.pi), np.pi)
-        lo, hi = np.where(filled[:, None], lo, 0.0), np.where(filled[:, None], hi, 0.0)
-        centre = 0.5 * (lo + hi)
-        radius = np.where(filled, 0.5 * norm(hi - lo), -1.0)
         slot, real = order.clip(0), (order >= 0)[:, None]
         n1, n2, a = edges.n1[slot], edges.n2[slot], edges.a[slot]
         planes = np.concatenate([n1, dot(n1, a)[:, None], n2, dot(n2, a)[:, None]], axis=1)
@@ -236,8 +223,8 @@ class EdgeTree:
         """(rows, edges): every pair (point ``o[row]``, edge of the tree) where the edge is a silhouette
         seen from the point and, given the emitters' bounding sphere ``(centre, radius)``, its cone
         from the point meets theirs and, given the emitter ``triangles`` (T, 3, 3), the image of one
-        of them the point sees the front of (the exact tests, module docstring); grouped by point, in
-        leaf order within one.
+        of them the point sees the front of (the exact tests, module docstring); grouped by point, by
+        edge index within one.
         Memory: the pairs found (buffers doubled when full)."""
         o = np.ascontiguousarray(o, dtype=np.float64)
         emit = np.array([0.0, 0.0, 0.0, -1.0]) if emitters is None else np.array([*emitters[0], emitters[1]])
@@ -376,6 +363,7 @@ def walk(
                 rows[count] = i
                 cols[count] = order[j]
                 count += 1
+        cols[begin:count].sort()  # the point's pairs by edge index, whatever the tree's shape
     return o.shape[0], count
 
 
@@ -394,15 +382,6 @@ def _meets(ux: float, uy: float, uz: float, sin_b: float, sides: np.ndarray, fac
         if inside:
             return True
     return False
-
-
-@functools.cache
-def compiled(func: Callable) -> Callable:
-    """``func`` compiled by Numba (imported here, on first use: the import alone takes a second), its
-    machine code cached on disk; ``nogil``: the render's worker threads run it at once."""
-    import numba
-
-    return numba.njit(cache=True, nogil=True)(func)
 
 
 @functools.cache

@@ -50,8 +50,9 @@ from __future__ import annotations
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from sphere3d.boundary.edge_tree import compiled, edge_tree
+from sphere3d.boundary.edge_tree import edge_tree
 from sphere3d.boundary.edges import Edges
+from sphere3d.jit import compiled
 from sphere3d.live import moves
 from sphere3d.state import per_state
 from sphere3d.tracing import face_normals
@@ -108,7 +109,7 @@ def _emitter_bounds(state) -> tuple[np.ndarray, np.ndarray, float] | None:
 def _found(edges: Edges, o: np.ndarray, moving, point_moves, bounds) -> tuple[np.ndarray, np.ndarray]:
     r"""Every silhouette pair (rows, edges) of the points ``o`` whose edge moves or is seen from a
     moving point and whose arc may meet the emitters (under a black sky), sorted by point, in the
-    edge tree's order within one: a fixed point walks the tree's moving edges, a moving point every
+    order of edge index within one: a fixed point walks the tree's moving edges, a moving point every
     edge (a pair of a fixed edge and a fixed point has $m·\dot ω = 0$): one tree, the moving edges in
     subtrees of their own (:func:`~sphere3d.boundary.edge_tree.edge_tree`)."""
     near = None if bounds is None else (bounds[1], bounds[2])
@@ -166,7 +167,7 @@ def clip_arcs(
     point's horizon, written to ``s0``, ``s1`` (the edge parameters of its ends), and its sub-arcs
     $[lo, hi]$ of $[0, γ]$ in the images of the emitter triangles, written to ``lo``, ``hi`` (P, T);
     where ``clip[cols[p]]`` is False or T = 0, one sub-arc, the whole arc, in column 0. Scalar Python
-    compiled by Numba (:func:`sphere3d.boundary.edge_tree.compiled`).
+    compiled by Numba (:func:`sphere3d.jit.compiled`).
 
     Horizon: $h(s) = n·(a + s (b - a) - o)$ is linear in s; the part with h > 0 is kept.
     Images (``sides``, ``front``: :func:`_image_sides` per point): on the arc
