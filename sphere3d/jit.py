@@ -8,16 +8,25 @@ kernel is written as plain Python over scalars and arrays, readable and testable
 
 from __future__ import annotations
 
-import functools
+import threading
 from collections.abc import Callable
 
 __all__ = ["compiled"]
 
+_COMPILED: dict[Callable, Callable] = {}
+_LOCK = threading.Lock()
 
-@functools.cache
+
 def compiled(func: Callable) -> Callable:
     """``func`` compiled by Numba (imported here, on first use: the import alone takes a second), its
-    machine code cached on disk; ``nogil``: the render's worker threads run it at once."""
-    import numba
+    machine code cached on disk; ``nogil``: the render's worker threads run it at once. Once per
+    function, whichever thread asks first (the others wait); a compiled function is returned as it
+    is (a kernel that calls another by its global name replaces that name by the compiled one)."""
+    if getattr(func, "py_func", None) is not None:  # compiled already
+        return func
+    with _LOCK:
+        if func not in _COMPILED:
+            import numba
 
-    return numba.njit(cache=True, nogil=True)(func)
+            _COMPILED[func] = numba.njit(cache=True, nogil=True)(func)
+        return _COMPILED[func]

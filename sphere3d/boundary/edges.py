@@ -32,11 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from flatland.core.dual import detach
+from sphere3d.jit import compiled
 from sphere3d.state import SceneState, per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import dot
 
-__all__ = ["COPLANAR_TOL", "Edges", "mesh_edges", "row_ids", "state_edges"]
+__all__ = ["COPLANAR_TOL", "Edges", "edge_groups", "mesh_edges", "row_ids", "sort_ties", "state_edges"]
 
 COPLANAR_TOL = 1e-9
 """Two faces are coplanar (their common edge is no crease) when ``1 - n₁·n₂ <= COPLANAR_TOL``."""
@@ -103,47 +104,68 @@ class Edges:
 
 
 def row_ids(rows: np.ndarray) -> np.ndarray:
-    """Ids of the distinct rows of ``rows`` (N, k), numbered in the rows' lexicographic order: the
-    ``return_inverse`` of ``np.unique(rows, axis=0)``, from one ``np.lexsort`` of the k columns
-    (O(N log N); ``np.unique`` with an axis sorts the rows as opaque records, several times slower)."""
-    n = len(rows)
-    if n == 0:
+    """Ids of the distinct rows of ``rows`` (N, 3), numbered in the rows' lexicographic order (the
+    ``return_inverse`` of ``np.unique(rows, axis=0)``; equal by value: -0.0 and 0.0 are one vertex),
+    from one sort of the first column and :func:`sort_ties`."""
+    rows = np.ascontiguousarray(rows, dtype=np.float64)
+    if len(rows) == 0:
         return np.zeros(0, dtype=np.int64)
-    order = np.lexsort(rows.T[::-1])  # first column the primary key, as np.unique(axis=0)
+    order = np.argsort(rows[:, 0])  # numpy's sort of one column (vectorized), its ties then in order
+    compiled(sort_ties)(order, rows)
     ranked = rows[order]
-    new = np.empty(n, dtype=bool)
+    new = np.empty(len(rows), dtype=bool)
     new[0] = True
-    np.any(ranked[1:] != ranked[:-1], axis=1, out=new[1:])  # by value: -0.0 and 0.0 are one vertex
-    ids = np.empty(n, dtype=np.int64)
+    np.any(ranked[1:] != ranked[:-1], axis=1, out=new[1:])
+    ids = np.empty(len(rows), dtype=np.int64)
     ids[order] = np.cumsum(new) - 1
     return ids
+
+
+def sort_ties(order: np.ndarray, rows: np.ndarray) -> None:
+    """Complete ``order``, a permutation sorting ``rows`` (N, 3) by their first column, into a
+    lexicographic one (ties in any order), in place: each run of rows equal in the columns before c
+    sorted by column c, for c = 1, 2. Runs are short (a vertex's copies, one per triangle corner), so
+    this and one sort of a column are several times faster than a stable sort by each column in turn
+    (``np.lexsort``). Scalar Python for Numba (:func:`sphere3d.jit.compiled`)."""
+    n = rows.shape[0]
+    for col in range(1, rows.shape[1]):
+        i = 0
+        while i < n:
+            j = i + 1
+            while j < n:
+                equal = True
+                for c in range(col):
+                    equal = equal and rows[order[j], c] == rows[order[i], c]
+                if not equal:
+                    break
+                j += 1
+            if j - i > 32:  # a long run (a grid's vertices share coordinates): a sort, O(r log r)
+                run = order[i:j].copy()
+                keys = np.empty(j - i)
+                for a in range(j - i):
+                    keys[a] = rows[run[a], col]
+                order[i:j] = run[np.argsort(keys, kind="mergesort")]  # stable: as the insertion sort
+            elif j - i > 1:  # insertion sort of the run by column col (runs of a few rows)
+                for a in range(i + 1, j):
+                    moving, b = order[a], a
+                    while b > i and rows[order[b - 1], col] > rows[moving, col]:
+                        order[b] = order[b - 1]
+                        b -= 1
+                    order[b] = moving
+            i = j
 
 
 def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
     """The unique edges of ``triangles`` (T, 3, 3), welded by exact position (see the module doc).
 
-    Vectorized, O(T log T): vertex ids from one sort of the positions (:func:`row_ids`), edges as
-    sorted id pairs (one integer key each), their faces from one stable sort of the three
-    half-edges of every face.
+    O(T log T): vertex ids from one sort of the positions (:func:`row_ids`), then the half-edges
+    grouped into edges by their id pairs (:func:`edge_groups`).
     """
     tri = np.asarray(detach(triangles), dtype=np.float64)
-    t = len(tri)
-    vid = row_ids(tri.reshape(-1, 3)).reshape(t, 3)
-    slots = np.array([[0, 1], [1, 2], [2, 0]])
-    face = np.repeat(np.arange(t), 3)
-    ia, ib = np.tile(slots[:, 0], t), np.tile(slots[:, 1], t)
-    ends = np.stack([vid[face, ia], vid[face, ib]], axis=1)
-    keep = ends[:, 0] != ends[:, 1]  # zero-length edges (refused earlier by check_world) are dropped
-    face, ia, ib, ends = face[keep], ia[keep], ib[keep], np.sort(ends[keep], axis=1)
-    # one key per (lower id, higher id): its order is the pairs' lexicographic order
-    _, edge, count = np.unique(ends[:, 0] * (3 * t) + ends[:, 1], return_inverse=True, return_counts=True)
-    order = np.argsort(edge, kind="stable")  # half-edges grouped by edge, faces in index order
-    first = np.searchsorted(edge[order], np.arange(count.size))
-    h1 = order[first]
-    h2 = order[np.minimum(first + 1, order.size - 1)]
+    vid = row_ids(tri.reshape(-1, 3)).reshape(len(tri), 3)
+    face1, slot1, other, count = compiled(edge_groups)(vid)
     two = count == 2
-    other = np.where(two, face[h2], -1)
-    face1 = face[h1]
+    ia, ib = slot1, (slot1 + 1) % 3
     normals = face_normals(tri)
     n1 = normals[face1]
     n2 = np.where(two[:, None], normals[np.maximum(other, 0)], n1)
@@ -151,17 +173,70 @@ def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
     crease = two & (1.0 - dot(n1, n2) > COPLANAR_TOL)
     return Edges(
         face=face1,
-        ia=ia[h1],
-        ib=ib[h1],
+        ia=ia,
+        ib=ib,
         other=other,
         count=count,
         always=~two | between_shapes,
         crease=crease,
-        a=tri[face1, ia[h1]],
-        b=tri[face1, ib[h1]],
+        a=tri[face1, ia],
+        b=tri[face1, ib],
         n1=n1,
         n2=n2,
     )
+
+
+def edge_groups(vid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The edges of triangles with vertex ids ``vid`` (T, 3), in the lexicographic order of their id pairs
+    (lower, higher): per edge the first face holding it and the slot j of its half-edge there (from
+    vertex slot j to slot (j + 1) mod 3), the second face (-1 unless exactly two share it) and the
+    number of faces. A half-edge whose two ids are equal (zero length) is dropped. The half-edges of
+    one edge in the order of their faces (face index, then slot).
+
+    O(T) plus short sorts: a stable counting sort of the half-edges by their lower id, then each
+    bucket (the edges of one vertex) stably by the higher id. Scalar Python for Numba
+    (:func:`sphere3d.jit.compiled`).
+    """
+    t = vid.shape[0]
+    low, high = np.empty(3 * t, dtype=np.int64), np.empty(3 * t, dtype=np.int64)
+    ids = 0
+    for h in range(3 * t):
+        a, b = vid[h // 3, h % 3], vid[h // 3, (h % 3 + 1) % 3]
+        low[h], high[h] = min(a, b), max(a, b)
+        ids = max(ids, b + 1)
+    start = np.zeros(ids + 1, dtype=np.int64)
+    for h in range(3 * t):
+        if low[h] != high[h]:
+            start[low[h] + 1] += 1
+    for i in range(ids):
+        start[i + 1] += start[i]
+    fill = start.copy()
+    by_low = np.empty(start[ids], dtype=np.int64)
+    for h in range(3 * t):  # in half-edge order: stable
+        if low[h] != high[h]:
+            by_low[fill[low[h]]] = h
+            fill[low[h]] += 1
+    for i in range(ids):  # each vertex's half-edges by the higher id, stably
+        bucket = by_low[start[i] : start[i + 1]]
+        if bucket.size > 1:
+            by_low[start[i] : start[i + 1]] = bucket[np.argsort(high[bucket], kind="mergesort")]
+    m = by_low.size
+    first = np.empty(m, dtype=np.int64)
+    edges = 0
+    for p in range(m):  # a new edge where the id pair changes
+        h = by_low[p]
+        if p == 0 or low[h] != low[by_low[p - 1]] or high[h] != high[by_low[p - 1]]:
+            first[edges] = p
+            edges += 1
+    face, slot = np.empty(edges, dtype=np.int64), np.empty(edges, dtype=np.int64)
+    other, count = np.full(edges, -1, dtype=np.int64), np.empty(edges, dtype=np.int64)
+    for e in range(edges):
+        p = first[e]
+        count[e] = (first[e + 1] if e + 1 < edges else m) - p
+        face[e], slot[e] = by_low[p] // 3, by_low[p] % 3
+        if count[e] == 2:
+            other[e] = by_low[p + 1] // 3
+    return face, slot, other, count
 
 
 @per_state

@@ -175,7 +175,9 @@ def clip_arcs(
     keeps the half-circle $|φ - φ_c| ≤ π/2$; as $γ ≤ π$ the arc meets it in one interval, found with $φ_c$
     taken in $(-π/2, 3π/2]$ (for $φ_c ≤ -π/2$ the half-circle around $φ_c$ meets $[0, π]$ in
     $\{0\}$ at most, the one around $φ_c + 2π$ in the rest). A triangle seen from behind: empty
-    (hi = lo)."""
+    (hi = lo). Shortcuts, exact as $γ ≤ π$ (a sinusoid $R \cos(φ - φ_c)$ of one sign at both ends of
+    $[0, γ]$ keeps it between them): both ends beyond one side, empty; both strictly within every
+    side, the whole arc; most arcs are one or the other, and skip the angles."""
     n_tris = sides.shape[1]
     for p in range(rows.shape[0]):
         i, k = rows[p], cols[p]
@@ -208,6 +210,19 @@ def clip_arcs(
         px, py, pz = px / length, py / length, pz / length
         for t in range(n_tris):
             start, stop = 0.0, gamma
+            if not front[i, t]:
+                lo[p, t], hi[p, t] = 0.0, 0.0
+                continue
+            # both ends beyond one side: the arc (γ <= π) lies beyond it; both within every side: inside
+            outside, inside = False, True
+            for j in range(3):
+                c0, c1, c2 = sides[i, t, j, 0], sides[i, t, j, 1], sides[i, t, j, 2]
+                da, db = qax * c0 + qay * c1 + qaz * c2, qbx * c0 + qby * c1 + qbz * c2
+                outside = outside or (da < 0.0 and db < 0.0)
+                inside = inside and da > 0.0 and db > 0.0
+            if outside or inside:
+                lo[p, t], hi[p, t] = 0.0, 0.0 if outside else gamma
+                continue
             for j in range(3):
                 c0, c1, c2 = sides[i, t, j, 0], sides[i, t, j, 1], sides[i, t, j, 2]
                 phi_c = np.arctan2(px * c0 + py * c1 + pz * c2, wx * c0 + wy * c1 + wz * c2)
@@ -215,7 +230,7 @@ def clip_arcs(
                     phi_c += 2.0 * np.pi
                 start = max(start, phi_c - 0.5 * np.pi)
                 stop = min(stop, phi_c + 0.5 * np.pi)
-            lo[p, t], hi[p, t] = start, stop if front[i, t] else start
+            lo[p, t], hi[p, t] = start, stop
 
 
 def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np.ndarray, ...]:

@@ -25,6 +25,7 @@ import pytest
 import sphere3d as s3
 from sphere3d import jit
 from sphere3d.boundary import edge_tree, shading, tree_build
+from sphere3d.boundary import edges as edges_module
 from sphere3d.boundary.edge_tree import EdgeTree
 from sphere3d.boundary.edges import mesh_edges
 from sphere3d.state import build_state
@@ -269,3 +270,51 @@ def test08_the_compiled_build_returns_what_its_python_returns():
         outputs.append(out)
     for a, b in zip(*outputs, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-15)
+
+
+def _grid_mesh(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Triangles (T, 3, 3) of an n × n height field on an integer grid (many equal coordinates: long
+    runs for the weld's sort), with some faces repeated (edges of three or four faces), shuffled."""
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    height = rng.integers(0, 3, (n + 1, n + 1)).astype(float) * 0.5
+    corner = lambda a, b: np.stack([a, b, height[a, b]], axis=-1)  # noqa: E731
+    lower = np.stack([corner(i, j), corner(i + 1, j), corner(i + 1, j + 1)], axis=-2)
+    upper = np.stack([corner(i, j), corner(i + 1, j + 1), corner(i, j + 1)], axis=-2)
+    tri = np.concatenate([lower.reshape(-1, 3, 3), upper.reshape(-1, 3, 3)])
+    tri = np.concatenate([tri, tri[rng.choice(len(tri), 7, replace=False)]])
+    return tri[rng.permutation(len(tri))]
+
+
+@pytest.mark.parametrize("mesh", ["icosphere", "grid"])
+def test09_the_welded_edges_are_those_of_a_dictionary_of_vertex_pairs(mesh):
+    # mesh_edges' weld (sort_ties) and grouping (edge_groups) run compiled: against np.unique's ids
+    # and a dictionary of (lower id, higher id) -> half-edges, built one half-edge at a time
+    rng = np.random.default_rng(11)
+    if mesh == "icosphere":
+        tri = np.asarray(build_state(s3.load_scene(_hard_shadow(3))).triangles, dtype=np.float64)
+    else:
+        tri = _grid_mesh(40, rng)
+    rows = tri.reshape(-1, 3)
+    expected_ids = np.unique(rows, axis=0, return_inverse=True)[1].ravel()
+    ids = edges_module.row_ids(rows)
+    assert np.array_equal(ids, expected_ids)
+    order = np.argsort(rows[:, 0])
+    python, compiled_order = order.copy(), order.copy()
+    edges_module.sort_ties(python, rows)
+    jit.compiled(edges_module.sort_ties)(compiled_order, rows)
+    assert np.array_equal(python, compiled_order)
+    vid = ids.reshape(-1, 3)
+    groups: dict[tuple[int, int], list[int]] = {}
+    for h in range(3 * len(vid)):
+        a, b = vid[h // 3, h % 3], vid[h // 3, (h % 3 + 1) % 3]
+        if a != b:
+            groups.setdefault((min(a, b), max(a, b)), []).append(h)
+    keys = sorted(groups)
+    face, slot, other, count = jit.compiled(edges_module.edge_groups)(vid)
+    assert np.array_equal(face, [groups[k][0] // 3 for k in keys])
+    assert np.array_equal(slot, [groups[k][0] % 3 for k in keys])
+    assert np.array_equal(count, [len(groups[k]) for k in keys])
+    assert np.array_equal(other, [groups[k][1] // 3 if len(groups[k]) == 2 else -1 for k in keys])
+    assert count.max() >= (3 if mesh == "grid" else 2)
+    for got, want in zip(edges_module.edge_groups(vid), (face, slot, other, count), strict=True):
+        assert np.array_equal(got, want)  # the Python it is compiled from
