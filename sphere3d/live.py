@@ -57,8 +57,10 @@ def all_rows(mask: np.ndarray) -> np.ndarray:
 def moves(x: Any) -> np.ndarray:
     """Where ``x`` carries a nonzero tangent, a boolean array of its value's shape: for a Dual with k
     tangents, under any of the k parameters (False everywhere for a plain array)."""
+    if not isinstance(x, Dual):  # no tangent to compare: O(size) booleans, not a zero tangent first
+        return np.zeros(np.shape(x), dtype=bool)
     t = tangent(x) != 0.0
-    return np.any(t, axis=0) if isinstance(x, Dual) and x.k is not None else t
+    return np.any(t, axis=0) if x.k is not None else t
 
 
 def moving_rows(rows: np.ndarray, *sources: Any) -> np.ndarray:
@@ -122,12 +124,16 @@ def on_rows(func: Callable[..., Any], rows: np.ndarray, live: np.ndarray, *sourc
 
 def triangles_change(state: Any) -> np.ndarray:
     """Per triangle: True if its vertices, vertex normals or its shape's emission carry a tangent."""
+    if not state.dual:  # a plain state (the boundary term's radiance beside an edge): nothing moves
+        return np.zeros(len(state.shape_of), dtype=bool)
     change = np.any(moves(state.triangles), axis=(1, 2)) | np.any(moves(state.normals), axis=(1, 2))
     return change | moves(state.emission)[state.shape_of]
 
 
 def emitters_change(state: Any) -> bool:
     """True if an emitter's triangles, emission or total area carry a tangent."""
+    if not state.dual:
+        return False
     return bool(
         np.any(moves(state.triangles)[state.emitters])
         or np.any(moves(state.emission))
