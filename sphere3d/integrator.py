@@ -399,9 +399,10 @@ def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms, 
     return (total + bsdf, mu, hits) if bounce else total + bsdf
 
 
-def direct(shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms) -> Any:
+def direct(shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms, shape: Any = None) -> Any:
     r"""The radiance $ρ/π\, E$ a diffuse surface of ``albedo`` reflects at shading points: direct
-    illumination, the default ``vertex`` of :func:`camera_radiance`."""
+    illumination, the default ``vertex`` of :func:`camera_radiance` (``shape``, the points' shapes,
+    unused: every shape of a scene without glossy ones is diffuse)."""
     return albedo * INV_PI * irradiance_samples(shading, u, transforms)
 
 
@@ -485,8 +486,8 @@ def camera_radiance(
     Emission of the first hit's front side plus $ρ/π\, E$ at diffuse hits, E estimated
     with the shading uniforms ``u`` (n, 5) under ``transforms``; the sky where a ray misses.
     ``hits``: the rays' hits if the caller knows them (only ``shape`` and ``triangle`` are
-    read), else they are traced. ``vertex(shading, u, albedo, transforms)``: the radiance diffuse hits
-    reflect; None: :func:`direct` (the paths of :mod:`sphere3d.paths` pass theirs).
+    read), else they are traced. ``vertex(shading, u, albedo, transforms, shape)``: the radiance the hits
+    reflect; None: :func:`direct` (the paths and glossy shapes of :mod:`sphere3d.paths` pass theirs).
     """
     n = len(d)
     cam = state.camera
@@ -522,7 +523,7 @@ def camera_radiance(
         if s.size:
             s = slice(None) if s.size == hit.size else s  # all diffuse: views, not copies
             shading = Shading.at(state, point[s], shade_n[s], draws.take(hit[s]), geometric[s])
-            reflected = (vertex or direct)(shading, u[hit[s]], albedo[s], transforms)
+            reflected = (vertex or direct)(shading, u[hit[s]], albedo[s], transforms, shape[s])
             value = value + scatter(hit.size, s, reflected, state.dual)
         radiance[hit] = value
     return radiance

@@ -232,10 +232,12 @@ class ImageTask(_Parameters):
         if out is not None:
             kind = self.scene.camera.filter
             reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
-            est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of, vertex(self.max_depth))
+            est = pixel_samples(
+                state, transforms, rows, cols, u, draws, reach_of, vertex(self.max_depth, state)
+            )
             self._splat_chunk(est, pix, batches, per_batch, out, offset)
             return None
-        est = pixel_samples(state, transforms, rows, cols, u, draws, vertex=vertex(self.max_depth))
+        est = pixel_samples(state, transforms, rows, cols, u, draws, vertex=vertex(self.max_depth, state))
         return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
     def _chunk_range(

@@ -39,7 +39,15 @@ def memory_model(name: str) -> Callable[[MemoryModel], MemoryModel]:
 
 def direct_only(task: Any, method: str, missing: str) -> None:
     """Refuse paths (``task.max_depth`` > 1, :mod:`sphere3d.paths`) for a method whose ``missing`` exist at
-    vertex 1 only."""
+    vertex 1 of diffuse surfaces only, and scenes with glossy shapes (:mod:`sphere3d.glossy`)."""
+    for i, shape in enumerate(task.scene.shapes):
+        if shape.roughness is not None:
+            raise ValidationError(
+                f"shapes[{i}].roughness",
+                f"glossy shapes are not supported by method {method!r} (its {missing} for the glossy BSDF's "
+                f"integrals are not implemented; naive and finite_difference take them), "
+                f"got {shape.roughness!r}",
+            )
     if task.max_depth > 1:
         raise ValidationError(
             "max_depth",
