@@ -1,4 +1,4 @@
-r"""Light paths of up to ``max_depth`` diffuse vertices (theory/radiometry, "Paths").
+r"""Light paths of up to ``max_depth`` vertices (theory/radiometry, "Paths"; glossy ones: theory/bsdf).
 
 With ``max_depth`` d = 1 the renderer is direct illumination (:mod:`sphere3d.integrator`), and nothing
 here runs. With d > 1 a path goes on from every diffuse shading point along its cosine sample (the
@@ -16,6 +16,12 @@ keyed on the primary sample (:class:`~flatland.core.rng.Draws`), so images do no
 or threads. No Russian roulette (no bias, no early end): a path ends at d, on a miss, or at an albedo
 of 0 that no parameter moves. Only the identity transforms (``naive``, ``finite_difference``) continue
 paths; ``reparam`` and ``boundary`` refuse d > 1 (:func:`sphere3d.methods._common.direct_only`).
+
+A scene with glossy shapes (``roughness``, :mod:`sphere3d.glossy`) takes :class:`MixedPaths` at every d,
+1 included: each vertex reflects by its own material (a glossy one by
+:func:`~sphere3d.glossy.glossy_samples` towards the camera or the previous vertex, throughput
+$f \cos / p_f$), the path going on along its cosine or BSDF sample. A scene without them takes the
+code above, unchanged.
 """
 
 from __future__ import annotations

@@ -18,8 +18,8 @@ shape, and of a mesh whose ``center`` is true (its bounding box's centre; the de
 for a mesh loaded from a file, whose own origin is arbitrary; inline ``vertices`` are
 kept as written unless ``"center": true``, so with them the centre is their origin),
 ``albedo`` (diffuse reflectance in [0, 1]; a glossy shape's Fresnel reflectance F), ``roughness``
-(absent: diffuse; α in (0, 1]: a rough GGX conductor, :mod:`sphere3d.materials`), ``emission`` (radiance of its front side,
-the side its normals face), ``fade`` (emitter border fade, rectangle and disk
+(absent: diffuse; α in (0, 1]: a rough GGX conductor, :mod:`sphere3d.materials`), ``emission``
+(radiance of its front side, the side its normals face), ``fade`` (emitter border fade, rectangle and disk
 only) and ``smooth`` (false, the default: shade with the face normals; true: with
 the vertex normals of :mod:`sphere3d.shapes` interpolated over each triangle, e.g.
 an OBJ file's ``vn``; rays still leave along the face normal); a mesh also takes

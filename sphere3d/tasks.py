@@ -113,7 +113,7 @@ class ImageTask(_Parameters):
     """``"splat"`` (default): each sample in every pixel its filter covers, weighted by
     $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`); ``"pixel"``: in the pixel that drew it."""
     max_depth: int = 1
-    """Diffuse vertices per path (:mod:`sphere3d.paths`); 1: direct illumination."""
+    """Vertices per path (:mod:`sphere3d.paths`); 1: direct illumination."""
 
     @property
     def shape(self) -> tuple[int, int]:
