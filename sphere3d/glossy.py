@@ -19,10 +19,10 @@ Both MIS weights are evaluated with θ-dependent densities (the moving point, no
 so they sum to 1 at every θ; each estimate divides by its θ-free sampling density, so its
 forward-mode derivative is the naive one (Loubet et al. 2019, Sec. 3.1): the integrand differentiated
 at fixed samples. The BSDF sample is also the direction a path goes on along (:mod:`sphere3d.paths`),
-with throughput $f (n·w_o) / p_f$ (:func:`~sphere3d.bsdf.weight_ggx`'s value). Only the identity
-transforms (``naive``, ``finite_difference``) shade glossy points: a change of variables or edge
-terms for these integrals are not implemented, and ``reparam`` and ``boundary`` refuse scenes with
-glossy shapes (:func:`sphere3d.methods._common.diffuse_only`). Vectorized over points.
+with throughput $f (n·w_o) / p_f$ (:func:`~sphere3d.bsdf.weight_ggx`'s value). The method's rotations
+are not applied (the identity's: ``naive``, ``finite_difference``, and ``boundary``, whose edge terms
+come through the ``shading_extra`` hook weighted by the BSDF at θ0); ``reparam`` refuses scenes with
+glossy shapes (:func:`sphere3d.methods._common.direct_only`). Vectorized over points.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import detach
+from flatland.core.dual import Dual, detach
 from sphere3d.bsdf import eval_ggx, pdf_ggx, sample_ggx
 from sphere3d.integrator import Shading
 from sphere3d.live import take_rows
@@ -120,7 +120,9 @@ def _incident(shading: Shading, wi: Any, mu: np.ndarray, hits: Hits, alpha: Any)
     return out
 
 
-def glossy_samples(shading: Shading, wi: Any, u: np.ndarray, alpha: Any, albedo: Any) -> GlossySamples:
+def glossy_samples(
+    shading: Shading, wi: Any, u: np.ndarray, alpha: Any, albedo: Any, transforms: Any = None
+) -> GlossySamples:
     r"""The MIS estimate of $L_r(w_i)$ at glossy points (module docstring), uniforms ``u`` (m, 5):
     3 for the emitter sample, 2 for the BSDF sample.
 
@@ -132,6 +134,10 @@ def glossy_samples(shading: Shading, wi: Any, u: np.ndarray, alpha: Any, albedo:
         Unit directions towards the camera or the previous vertex.
     alpha, albedo : Dual or ndarray, shape (m,)
         GGX roughness and Fresnel reflectance F per point.
+    transforms : Transforms, optional
+        The method's: its ``shading_extra`` hook, given the BSDF at θ0 as the weight of its
+        directions, adds its derivative-only term (``boundary``'s edges, theory/bsdf); its rotations
+        are not used (the identity's: methods that change variables refuse glossy shapes).
     """
     state = shading.state
     total = _emitter_term(shading, wi, u[:, 0:3], alpha, albedo) if len(state.emitters) else 0.0
@@ -144,4 +150,11 @@ def glossy_samples(shading: Shading, wi: Any, u: np.ndarray, alpha: Any, albedo:
     f = eval_ggx(wi, mu, shading.n, alpha, albedo) * np.maximum(dot(shading.n, mu), 0.0)
     throughput = np.where(above, f / np.where(above, p0, 1.0), 0.0)
     radiance = total + throughput * _incident(shading, wi, mu, hits, alpha)
+    if transforms is not None and state.dual:
+        f0 = (np.asarray(detach(v), dtype=np.float64) for v in (alpha, albedo))
+        alpha0, albedo0 = f0
+        bsdf = lambda rows, w: eval_ggx(wi0[rows], w, n0[rows], alpha0[rows], albedo0[rows])  # noqa: E731
+        extra = transforms.shading_extra(shading, bsdf)
+        if extra is not None:  # derivative only: the value is untouched (+ 0.0)
+            radiance = radiance + Dual(np.zeros(len(shading)), extra, state.k)
     return GlossySamples(radiance, mu, hits, throughput, above)

@@ -261,8 +261,9 @@ class Transforms(Protocol):
         first hits, :meth:`Shading.trace`); random numbers from ``shading.draws``."""
         ...
 
-    def shading_extra(self, shading: Shading) -> np.ndarray | None:
-        """A derivative-only term added to E at each shading point (None: nothing)."""
+    def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
+        r"""A derivative-only term added to E at each shading point (None: nothing); with ``weight(rows,
+        ω)`` (plain BSDF values at θ0, :mod:`sphere3d.glossy`) the term of $∫ L_i\, weight \cos θ\, dω$."""
         ...
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
@@ -283,7 +284,7 @@ class Identity:
     def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
         return Members(mu if not shading.state.dual else Dual(mu, None, shading.state.k))
 
-    def shading_extra(self, shading: Shading) -> np.ndarray | None:
+    def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
         return None
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:

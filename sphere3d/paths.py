@@ -142,7 +142,7 @@ def _reflect(
             continue
         sub = shading.take(rows)
         if glossy[rows[0]]:
-            g = glossy_samples(sub, wi[rows], u[rows], state.roughness[shape[rows]], albedo[rows])
+            g = glossy_samples(sub, wi[rows], u[rows], state.roughness[shape[rows]], albedo[rows], transforms)
             radiance[rows], throughput[rows], mu[rows], above[rows] = g.radiance, g.throughput, g.mu, g.above
             parts.append((rows, g.hits))
         else:

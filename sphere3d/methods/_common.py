@@ -37,11 +37,12 @@ def memory_model(name: str) -> Callable[[MemoryModel], MemoryModel]:
     return decorate
 
 
-def direct_only(task: Any, method: str, missing: str) -> None:
+def direct_only(task: Any, method: str, missing: str, glossy: bool = False) -> None:
     """Refuse paths (``task.max_depth`` > 1, :mod:`sphere3d.paths`) for a method whose ``missing`` exist at
-    vertex 1 of diffuse surfaces only, and scenes with glossy shapes (:mod:`sphere3d.glossy`)."""
+    vertex 1 only, and, unless ``glossy`` (they exist at glossy vertex 1 too), scenes with glossy shapes
+    (:mod:`sphere3d.glossy`)."""
     for i, shape in enumerate(task.scene.shapes):
-        if shape.roughness is not None:
+        if shape.roughness is not None and not glossy:
             raise ValidationError(
                 f"shapes[{i}].roughness",
                 f"glossy shapes are not supported by method {method!r} (its {missing} for the glossy BSDF's "
