@@ -251,9 +251,10 @@ class Transforms(Protocol):
         ``draws`` per sample."""
         ...
 
-    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+    def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
         """Rotations for the emitter-sampling strategy at least where ``visible`` (bool, one per shading
-        point: its emitter sample is unoccluded); draws: ``shading.draws``."""
+        point: its emitter sample is unoccluded); draws: ``shading.draws``; ``bsdf``: glossy points'
+        :class:`~sphere3d.glossy.Lobe` (None: diffuse), for the ``extra`` term's integrand."""
         ...
 
     def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
@@ -277,7 +278,7 @@ class Identity:
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         return FilmTransform.identity(x.shape, state.k)
 
-    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+    def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
         rows = np.flatnonzero(visible)
         return EmitterChange(Rotation.identity((len(rows),), shading.state.k), rows)
 

@@ -183,9 +183,8 @@ def render_gradient(
         three) runs on the cluster, its per-image term (boundary's edges on the film) as one more task.
     max_depth : int
         Vertices per path, >= 1, as in :func:`render`. ``naive`` and ``finite_difference`` take
-        any depth and glossy shapes; ``reparam`` and ``boundary`` only 1 for now, and ``reparam`` only
-        diffuse shapes (their changes of variables and boundary terms at the further vertices, and
-        reparam's for the glossy BSDF, are not implemented: refused with a ValidationError).
+        any depth; ``reparam`` and ``boundary`` only 1 for now (their changes of variables and boundary
+        terms at the further vertices are not implemented: refused with a ValidationError).
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,

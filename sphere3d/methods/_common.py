@@ -37,18 +37,9 @@ def memory_model(name: str) -> Callable[[MemoryModel], MemoryModel]:
     return decorate
 
 
-def direct_only(task: Any, method: str, missing: str, glossy: bool = False) -> None:
+def direct_only(task: Any, method: str, missing: str) -> None:
     """Refuse paths (``task.max_depth`` > 1, :mod:`sphere3d.paths`) for a method whose ``missing`` exist at
-    vertex 1 only, and, unless ``glossy`` (they exist at glossy vertex 1 too), scenes with glossy shapes
-    (:mod:`sphere3d.glossy`)."""
-    for i, shape in enumerate(task.scene.shapes):
-        if shape.roughness is not None and not glossy:
-            raise ValidationError(
-                f"shapes[{i}].roughness",
-                f"glossy shapes are not supported by method {method!r} (its {missing} for the glossy BSDF's "
-                f"integrals are not implemented; naive and finite_difference take them), "
-                f"got {shape.roughness!r}",
-            )
+    vertex 1 only (diffuse or glossy, :mod:`sphere3d.glossy`)."""
     if task.max_depth > 1:
         raise ValidationError(
             "max_depth",

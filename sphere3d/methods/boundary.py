@@ -65,7 +65,7 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int) -> Tally:
     sides of the arc at two offsets) plus the silhouette test against the edges the edge tree
     finds (:mod:`sphere3d.boundary.edge_tree`).
     """
-    direct_only(task, "boundary", "boundary terms", glossy=True)
+    direct_only(task, "boundary", "boundary terms")
     edges = state_edges(plain_state(task.scene, task.param, task.tracer))
     return task.evaluate(task.dual_offset(), BoundaryTransforms(edges, secondary, rate))
 
