@@ -42,7 +42,7 @@ from flatland.core.rng import Draws
 from flatland.core.stats import family_quantile
 from flatland.core.validate import ValidationError
 from sphere3d.__main__ import main
-from sphere3d.bsdf import albedo_ggx
+from sphere3d.bsdf import albedo_ggx, weight_ggx
 from sphere3d.glossy import glossy_samples
 from sphere3d.integrator import Shading
 from sphere3d.methods import GRADIENT_METHODS
@@ -179,7 +179,8 @@ def test03_a_glossy_point_under_an_area_light_against_quadrature():
 
 def test04_white_furnace_the_glossy_albedo_and_its_roughness_derivative():
     """Under a uniform sky of radiance 1 (no emitter) $L_r(w_i) = A(θ_i)$, the directional albedo; its
-    forward-mode α-derivative against the quadrature's central difference; every sample at most F."""
+    forward-mode α-derivative against the quadrature's central difference; every sample at most F, and
+    the throughput a path would carry on equal to :func:`~sphere3d.bsdf.weight_ggx`."""
     cosines, alpha, f = (0.05, 0.3, 0.7, 1.0), 0.5, 0.8
     scene = load_scene(_glossy_floor(alpha, f, sky=1.0, light=False))
     state = build_state(scene, "ground.roughness", variable(0.0))
@@ -191,6 +192,10 @@ def test04_white_furnace_the_glossy_albedo_and_its_roughness_derivative():
         g = glossy_samples(shading, wi_n, u, state.roughness[rows], state.albedo[rows])
         value = np.asarray(g.radiance.value)
         assert np.all(value <= f * (1.0 + 1e-12))  # weight_ggx <= F: each sample's energy at most F
+        # a path's throughput at the vertex: f cos / p = F G2 / G1 (weight_ggx's closed form), 0 below
+        weight = weight_ggx(wi_n, g.mu, np.array([0.0, 0.0, 1.0]), alpha, f)
+        np.testing.assert_allclose(g.throughput.value, weight, rtol=1e-10, atol=1e-14)
+        assert np.array_equal(g.above, weight > 0.0)
         estimates += [_mean(value), _mean(tangent(g.radiance))]
         h = 1e-4  # the quadrature converges geometrically (nodes 24): its difference is exact to ~1e-8
         slope = (albedo_ggx(c, alpha + h, f, nodes=24) - albedo_ggx(c, alpha - h, f, nodes=24)) / (2 * h)
