@@ -37,6 +37,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+from benchmarks.bench_glossy import regions as regions_of
+from benchmarks.bench_glossy import shadow_halves
 from flatland.core.dual import tangent, variable
 from flatland.core.rng import Draws
 from flatland.core.stats import family_quantile
@@ -248,26 +250,6 @@ def test06_affine_in_the_emission_naive_is_finite_differences(scene, depth):
     np.testing.assert_allclose(naive.derivative, fd.derivative, rtol=0.0, atol=1e-9 * max(1.0, scale))
 
 
-def _shadow_halves(scene, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels whose centre's primary ray meets the floor within 0.6 of the occluder's shadow centre (the
-    light's centre projected through the occluder's centre onto z = 0), on its trailing (x below the
-    centre) and leading side for a move along +x."""
-    state = build_state(scene)
-    names = [s.name for s in scene.shapes]
-    rows, cols = np.mgrid[0:width, 0:width]
-    d = state.camera.directions(cols.ravel() + 0.5, rows.ravel() + 0.5)
-    origin = np.broadcast_to(np.asarray(state.camera.origin), d.shape).copy()
-    hits = state.tracer.intersect(origin, d)
-    point = origin + np.where(hits.hit, hits.t, 0.0)[:, None] * d
-    light = np.array(scene.shapes[names.index("light")].translate)
-    occluder = np.array(scene.shapes[names.index("occluder")].translate)
-    centre = light + (occluder - light) * light[2] / (light[2] - occluder[2])
-    floor = hits.shape == names.index("ground" if "ground" in names else "floor")
-    shadow = floor & (np.linalg.norm(point - centre, axis=1) < 0.6)
-    trailing = shadow & (point[:, 0] < centre[0])
-    return trailing.reshape(width, width), (shadow & ~trailing).reshape(width, width)
-
-
 @pytest.mark.parametrize(
     ("scene", "depth"), sweep([(s, d) for s in ("glossy_reflection", "interreflection") for d in DEPTHS],
                              [("glossy_reflection", 4), ("interreflection", 2)])
@@ -283,7 +265,7 @@ def test07_naive_misses_the_moving_shadow_at_every_depth(scene, depth):
     d = load_scene(scene).to_dict()
     d["camera"].update(width=width, height=width)
     loaded = load_scene(d)
-    trailing, leading = _shadow_halves(loaded, width)
+    trailing, leading = shadow_halves(loaded, width)
     assert trailing.sum() >= 8 and leading.sum() >= 8
     stats = {}
     for method, seed in (("naive", 1), ("finite_difference", 2)):
@@ -308,25 +290,6 @@ def test08_reparam_and_boundary_refuse_glossy_paths_and_reparam_paired_samples(m
         assert err.value.field == "paired" and "glossy" in str(err.value)
 
 
-def _reflection(scene, width: int) -> np.ndarray:
-    """Floor pixels (pixel centres) whose mirror ray passes within 0.5 of the occluder's centre, off its
-    shadow: where the glossy floor reflects the occluder (and, at depth 1, the occluder hides part of
-    the light's reflection)."""
-    state = build_state(scene)
-    names = [s.name for s in scene.shapes]
-    rows, cols = np.mgrid[0:width, 0:width]
-    d = state.camera.directions(cols.ravel() + 0.5, rows.ravel() + 0.5)
-    origin = np.broadcast_to(np.asarray(state.camera.origin), d.shape).copy()
-    hits = state.tracer.intersect(origin, d)
-    point = origin + np.where(hits.hit, hits.t, 0.0)[:, None] * d
-    mirror = d * np.array([1.0, 1.0, -1.0])
-    to = np.array(scene.shapes[names.index("occluder")].translate) - point
-    miss = np.linalg.norm(to - np.sum(to * mirror, axis=1)[:, None] * mirror, axis=1)
-    trailing, leading = _shadow_halves(scene, width)
-    floor = hits.shape == names.index("ground")
-    return (floor & (miss < 0.5)).reshape(width, width) & ~trailing & ~leading
-
-
 def test09_boundary_against_finite_differences_by_region_on_the_glossy_floor():
     """``glossy_reflection`` at depth 1, the occluder's x-translation: the boundary method (its edge terms
     at glossy points weighted by the BSDF at the edge direction, the film's edges shaded by their
@@ -337,7 +300,8 @@ def test09_boundary_against_finite_differences_by_region_on_the_glossy_floor():
     d = load_scene("glossy_reflection").to_dict()
     d["camera"].update(width=width, height=width)
     scene = load_scene(d)
-    regions = _regions(scene, width)
+    regions = regions_of(scene, width)
+    assert all(r.sum() >= 8 for r in regions.values())
     sums = {}
     for method, seed in (("boundary", 1), ("finite_difference", 2), ("naive", 3)):
         task = ImageTask(scene, "occluder.translate.x", 128, seed, BATCHES, film="pixel")
@@ -352,21 +316,6 @@ def test09_boundary_against_finite_differences_by_region_on_the_glossy_floor():
     assert sums["naive"]["trailing"] == (0.0, 0.0) and sums["naive"]["leading"] == (0.0, 0.0)
 
 
-def _regions(scene, width: int) -> dict[str, np.ndarray]:
-    """The shadow's halves, the occluder's reflection and the occluder's own pixels (pixel centres)."""
-    trailing, leading = _shadow_halves(scene, width)
-    names = [s.name for s in scene.shapes]
-    state = build_state(scene)
-    rows, cols = np.mgrid[0:width, 0:width]
-    dirs = state.camera.directions(cols.ravel() + 0.5, rows.ravel() + 0.5)
-    origin = np.broadcast_to(np.asarray(state.camera.origin), dirs.shape).copy()
-    occluder = (state.tracer.intersect(origin, dirs).shape == names.index("occluder")).reshape(width, width)
-    regions = {"trailing": trailing, "leading": leading, "reflection": _reflection(scene, width)}
-    regions["occluder"] = occluder
-    assert all(r.sum() >= 8 for r in regions.values())
-    return regions
-
-
 def test10_reparam_against_boundary_by_region_on_the_glossy_floor():
     """``glossy_reflection`` at depth 1, the occluder's x-translation: ``reparam`` (the emitter rotation and
     the vMF kernel of the BSDF-sampled integral applied to the glossy integrand; the emitters' edge term
@@ -379,7 +328,8 @@ def test10_reparam_against_boundary_by_region_on_the_glossy_floor():
     d = load_scene("glossy_reflection").to_dict()
     d["camera"].update(width=width, height=width)
     scene = load_scene(d)
-    regions = _regions(scene, width)
+    regions = regions_of(scene, width)
+    assert all(r.sum() >= 8 for r in regions.values())
     sums = {}
     for method, seed in (("reparam", 1), ("boundary", 4)):
         g = GRADIENT_METHODS.run(
