@@ -12,7 +12,8 @@ and occluder. Rows:
   test09), the RMSE at 16, 64 and 256 spp (mean over :data:`SEEDS`), the bias floor at 256 spp
   (:func:`benchmarks.bench_hard_shadow.bias_floor`: the rms per-pixel bias of the mean over the
   seeds, their noise and the reference's subtracted) and the seconds per image at 64 spp, for
-  ``reparam``, ``boundary`` and ``naive`` (naive's error is its missing boundary terms);
+  ``reparam``, ``boundary`` and ``naive`` (naive's error is its missing boundary terms; boundary's
+  floor, against a reference of its own, says only that its seeds agree);
 - the region sums of that derivative image (32 x 32, 1024 spp, 16 batches) for ``reparam`` and
   ``boundary``: the shadow's trailing and leading halves, the occluder's reflection, the occluder
   (tests/sphere3d/test_glossy.py), mean and standard error over the batches.

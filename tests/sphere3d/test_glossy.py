@@ -321,9 +321,9 @@ def test10_reparam_against_boundary_by_region_on_the_glossy_floor():
     the vMF kernel of the BSDF-sampled integral applied to the glossy integrand; the emitters' edge term
     with the BSDF) against ``boundary`` (itself against finite differences, test09), region by region.
     The shadow's trailing half, the reflection and the occluder agree within noise. The leading half
-    carries reparam's emitter-rotation bias, the same as on the diffuse ``hard_shadow`` (measured at 1024
-    spp, 32 x 32: -21.6 +- 0.23 against -22.8 +- 0.06 here, 5 %; -36.9 +- 0.41 against -38.5 +- 0.06 on
-    hard_shadow, 4 %): tested as a bias of at most 10 % of the region's gradient, beyond the noise."""
+    carries reparam's emitter-rotation bias, which the diffuse ``hard_shadow`` shows alike (about 5 % and
+    4 % of the region's sum; docs/measurements/glossy.md): tested as a bias of at most 10 % of the
+    region's gradient, beyond the noise."""
     width = 32
     d = load_scene("glossy_reflection").to_dict()
     d["camera"].update(width=width, height=width)
