@@ -348,3 +348,14 @@ def _task_scene() -> dict:
     d = load_scene("glossy_reflection").to_dict()
     d["camera"].update(width=8, height=8)
     return d
+
+
+def test11_the_optimiser_keeps_a_glossy_shape_rough():
+    """sphere3d.optimize's default bounds on a roughness offset keep α in [MIN_ROUGHNESS, 1] (a mirror,
+    α = 0, would be refused mid-run), from the scene's own offsets on."""
+    from sphere3d.optimize import MIN_ROUGHNESS, _bounds
+
+    scene = load_scene(dict(load_scene("furnace").to_dict(), offsets={"floor.roughness": 0.1}))
+    lower, upper = _bounds(scene, ("floor.roughness", "floor.albedo"), None)
+    np.testing.assert_allclose(lower, [MIN_ROUGHNESS - 0.6, -1.0])
+    np.testing.assert_allclose(upper, [1.0 - 0.6, 0.0])
