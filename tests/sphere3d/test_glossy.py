@@ -23,6 +23,8 @@ r"""Glossy shapes in sphere3d (a ``roughness``: the rough GGX conductor of :mod:
    reflection, occluder), ``reparam`` against finite differences and ``boundary`` (its emitter-rotation
    bias in the shadow's leading half, as on the diffuse floor, bounded); both refuse glossy paths
    beyond depth 1, and ``reparam`` its paired kernel samples on glossy shapes.
+7. A glossy vertex beyond the first: the irradiance under a glossy floor lit by a uniform sky, with
+   one further vertex, against $2π S ∫ A(c) c\, dc$ by quadrature; the optimiser's bounds on roughness.
 
 Tolerances: $|mean - reference| <= q · stderr$, q the normal quantile (point estimates from 2^17
 samples) or the Student-t quantile of 16 batches, Šidák-corrected over each test's comparisons at
@@ -48,7 +50,7 @@ from sphere3d.bsdf import albedo_ggx, weight_ggx
 from sphere3d.glossy import glossy_samples
 from sphere3d.integrator import Shading
 from sphere3d.methods import GRADIENT_METHODS
-from sphere3d.render import render, render_gradient
+from sphere3d.render import irradiance, render, render_gradient
 from sphere3d.scene import load_scene
 from sphere3d.state import build_state
 from sphere3d.tasks import ImageTask
@@ -361,3 +363,29 @@ def test11_the_optimiser_keeps_a_glossy_shape_rough():
     lower, upper = _bounds(scene, ("floor.roughness", "floor.albedo"), None)
     np.testing.assert_allclose(lower, [MIN_ROUGHNESS - 0.6, -1.0])
     np.testing.assert_allclose(upper, [1.0 - 0.6, 0.0])
+
+
+def test12_a_glossy_vertex_beyond_the_first_against_the_albedo_quadrature():
+    r"""A glossy vertex reached by a path (its $w_i = -μ$, towards the previous vertex): the irradiance at a
+    point 0.01 above a 40 x 40 glossy floor (α = 0.5, F = 0.8), facing it, under a uniform sky of
+    radiance S = 1. Every direction of the lower hemisphere meets the floor (but beyond 89.97°), which
+    reflects $S A(c)$ towards the point, c the cosine at the floor, so with one further vertex
+
+    $E_2 = ∫ S A(c) c\, dω = 2π S ∫_0^1 A(c)\, c\, dc$
+
+    (Gauss-Legendre in c over :func:`~sphere3d.bsdf.albedo_ggx`; the floor's edge changes it by
+    $< 10^{-6}$ relative). At depth 1 only the sky beyond the edge is seen ($E_1 < 10^{-6}$); at depth 3 the
+    floor's samples escape to the sky: $E_3 = E_2$ bit for bit."""
+    floor = {"name": "floor", "type": "rectangle", "size": [40.0, 40.0], "albedo": 0.8, "roughness": 0.5}
+    camera = load_scene("furnace").to_dict()["camera"]
+    scene = {"name": "under", "camera": camera, "sky": 1.0, "shapes": [floor]}
+    at = dict(point=(0.0, 0.0, 0.01), normal=(0.0, 0.0, -1.0), n=2**16, seed=3, batches=BATCHES)
+    c, w = np.polynomial.legendre.leggauss(64)
+    c, w = 0.5 * (c + 1.0), 0.5 * w
+    reference = 2.0 * np.pi * float(np.sum(w * c * albedo_ggx(c, 0.5, 0.8, nodes=16)))
+    e1, e2, e3 = (irradiance(scene, max_depth=d, **at) for d in (1, 2, 3))
+    assert e1.value < 1e-6 * reference
+    assert e2.value == e3.value and e2.value_stderr > 0.0
+    q = family_quantile(1, 1.0 - ALPHA, dof=BATCHES - 1)
+    assert abs(e2.value - reference) <= q * e2.value_stderr, (e2.value, reference, e2.value_stderr)
+    assert reference < 0.8 * np.pi  # below F π: the lobe loses energy (the test sees A, not F)
