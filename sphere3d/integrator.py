@@ -251,9 +251,10 @@ class Transforms(Protocol):
         ``draws`` per sample."""
         ...
 
-    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+    def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
         """Rotations for the emitter-sampling strategy at least where ``visible`` (bool, one per shading
-        point: its emitter sample is unoccluded); draws: ``shading.draws``."""
+        point: its emitter sample is unoccluded); draws: ``shading.draws``; ``bsdf``: glossy points'
+        :class:`~sphere3d.glossy.Lobe` (None: diffuse), for the ``extra`` term's integrand."""
         ...
 
     def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
@@ -261,8 +262,9 @@ class Transforms(Protocol):
         first hits, :meth:`Shading.trace`); random numbers from ``shading.draws``."""
         ...
 
-    def shading_extra(self, shading: Shading) -> np.ndarray | None:
-        """A derivative-only term added to E at each shading point (None: nothing)."""
+    def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
+        r"""A derivative-only term added to E at each shading point (None: nothing); with ``weight(rows,
+        ω)`` (plain BSDF values at θ0, :mod:`sphere3d.glossy`) the term of $∫ L_i\, weight \cos θ\, dω$."""
         ...
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
@@ -276,14 +278,14 @@ class Identity:
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         return FilmTransform.identity(x.shape, state.k)
 
-    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+    def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
         rows = np.flatnonzero(visible)
         return EmitterChange(Rotation.identity((len(rows),), shading.state.k), rows)
 
     def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
         return Members(mu if not shading.state.dual else Dual(mu, None, shading.state.k))
 
-    def shading_extra(self, shading: Shading) -> np.ndarray | None:
+    def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
         return None
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
@@ -399,9 +401,10 @@ def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms, 
     return (total + bsdf, mu, hits) if bounce else total + bsdf
 
 
-def direct(shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms) -> Any:
+def direct(shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms, shape: Any = None) -> Any:
     r"""The radiance $ρ/π\, E$ a diffuse surface of ``albedo`` reflects at shading points: direct
-    illumination, the default ``vertex`` of :func:`camera_radiance`."""
+    illumination, the default ``vertex`` of :func:`camera_radiance` (``shape``, the points' shapes,
+    unused: every shape of a scene without glossy ones is diffuse)."""
     return albedo * INV_PI * irradiance_samples(shading, u, transforms)
 
 
@@ -485,8 +488,8 @@ def camera_radiance(
     Emission of the first hit's front side plus $ρ/π\, E$ at diffuse hits, E estimated
     with the shading uniforms ``u`` (n, 5) under ``transforms``; the sky where a ray misses.
     ``hits``: the rays' hits if the caller knows them (only ``shape`` and ``triangle`` are
-    read), else they are traced. ``vertex(shading, u, albedo, transforms)``: the radiance diffuse hits
-    reflect; None: :func:`direct` (the paths of :mod:`sphere3d.paths` pass theirs).
+    read), else they are traced. ``vertex(shading, u, albedo, transforms, shape)``: the radiance the hits
+    reflect; None: :func:`direct` (the paths and glossy shapes of :mod:`sphere3d.paths` pass theirs).
     """
     n = len(d)
     cam = state.camera
@@ -522,7 +525,7 @@ def camera_radiance(
         if s.size:
             s = slice(None) if s.size == hit.size else s  # all diffuse: views, not copies
             shading = Shading.at(state, point[s], shade_n[s], draws.take(hit[s]), geometric[s])
-            reflected = (vertex or direct)(shading, u[hit[s]], albedo[s], transforms)
+            reflected = (vertex or direct)(shading, u[hit[s]], albedo[s], transforms, shape[s])
             value = value + scatter(hit.size, s, reflected, state.dual)
         radiance[hit] = value
     return radiance

@@ -20,7 +20,8 @@ __all__ = ["check_offsets"]
 def check_offsets(scene: Any, offsets: Any, field: str = "offsets") -> tuple[tuple[str, float], ...]:
     """A mapping (or pairs) from parameter names to finite offsets, checked against ``scene``: one
     ValidationError naming ``field`` when a name is unknown, or the offsets leave an albedo outside
-    [0, 1], an emission (or the sky) below 0 or a scale factor $1 + θ$ at or below 0."""
+    [0, 1], an emission (or the sky) below 0, a roughness at or below 0 or a scale factor $1 + θ$ at or
+    below 0."""
     pairs = list(offsets.items()) if isinstance(offsets, Mapping) else offsets
     if not isinstance(pairs, list | tuple) or not all(
         isinstance(p, list | tuple) and len(p) == 2 for p in pairs
@@ -43,6 +44,10 @@ def check_offsets(scene: Any, offsets: Any, field: str = "offsets") -> tuple[tup
             )
         if kind == "emission" and (base if owner == "sky" else base.emission) + theta < 0.0:
             raise ValidationError(field, f"{name} = {theta!r} leaves the emission below 0")
+        if kind == "roughness" and not base.roughness + theta > 0.0:
+            raise ValidationError(
+                field, f"{name} = {theta!r} leaves the roughness {base.roughness + theta!r} <= 0 (a mirror)"
+            )
         if kind == "scale" and not 1.0 + theta > 0.0:
             raise ValidationError(field, f"{name} = {theta!r} makes the scale factor 1 + θ <= 0")
         out.append((name, theta))

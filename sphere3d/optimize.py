@@ -9,7 +9,8 @@ renders the targets of a known θ; :func:`silhouette` and :func:`silhouette_iou`
 silhouettes.
 
 A parameter's default bounds keep the scene valid: an albedo offset keeps the albedo in [0, 1], an
-emission offset keeps the emission >= 0, a scale offset keeps the factor $1 + θ >= 0.05$; the others
+emission offset keeps the emission >= 0, a scale offset keeps the factor $1 + θ >= 0.05$, a roughness
+offset keeps a glossy shape's α in [0.01, 1] (:data:`MIN_ROUGHNESS`; 0 is a mirror, refused); the others
 (translations, rotations, shape coefficients) are unbounded unless ``bounds`` says otherwise.
 """
 
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core.microfacet import ALPHA_MAX
 from flatland.core.optimize import (
     OptimizeResult,
     Views,
@@ -40,6 +42,8 @@ __all__ = ["optimize", "render_targets", "silhouette", "silhouette_iou"]
 
 MIN_SCALE = 0.05
 """The smallest scale factor $1 + θ$ a scale parameter's default bounds allow."""
+MIN_ROUGHNESS = 0.01
+"""The smallest GGX α a roughness parameter's default bounds allow (α > 0: a mirror is refused)."""
 
 
 def _cameras(scene: Scene, views: Any) -> tuple[Camera, ...]:
@@ -89,6 +93,9 @@ def _bounds(scene: Scene, names: tuple[str, ...], bounds: Any) -> tuple[np.ndarr
             )
         elif kind == "scale":
             lower[i] = MIN_SCALE - 1.0 - base  # the total factor 1 + base + θ >= MIN_SCALE
+        elif kind == "roughness":
+            alpha = scene.shapes[scene.shape_index(owner)].roughness + base
+            lower[i], upper[i] = MIN_ROUGHNESS - alpha, ALPHA_MAX - alpha
     return narrow_bounds(bounds, names, lower, upper)
 
 

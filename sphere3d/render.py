@@ -74,9 +74,10 @@ def render(
         ``cluster`` extra): the chunks run as tiles on its workers and the image is bit for bit
         that of a local run (module docstring); None (default): on this machine's threads.
     max_depth : int
-        Diffuse vertices per path, an integer >= 1: 1 (default) is direct illumination, bit for bit; d
+        Vertices per path, an integer >= 1: 1 (default) is direct illumination, bit for bit; d
         gives $L = Σ_{i=0}^{d} \mathcal{T}^i L_e$, each vertex's MIS estimate of the light it reflects and
-        the path continued along its cosine sample (:mod:`sphere3d.paths`).
+        the path continued along its cosine sample, or at a glossy shape its BSDF sample
+        (:mod:`sphere3d.paths`, :mod:`sphere3d.glossy`).
 
     Returns
     -------
@@ -181,7 +182,7 @@ def render_gradient(
         values stay equal). With ``scheduler`` every render a method makes (finite differences:
         three) runs on the cluster, its per-image term (boundary's edges on the film) as one more task.
     max_depth : int
-        Diffuse vertices per path, >= 1, as in :func:`render`. ``naive`` and ``finite_difference`` take
+        Vertices per path, >= 1, as in :func:`render`. ``naive`` and ``finite_difference`` take
         any depth; ``reparam`` and ``boundary`` only 1 for now (their changes of variables and boundary
         terms at the further vertices are not implemented: refused with a ValidationError).
     **options

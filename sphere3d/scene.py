@@ -17,8 +17,9 @@ centre being the origin of the shape's own coordinates: the middle of every buil
 shape, and of a mesh whose ``center`` is true (its bounding box's centre; the default
 for a mesh loaded from a file, whose own origin is arbitrary; inline ``vertices`` are
 kept as written unless ``"center": true``, so with them the centre is their origin),
-``albedo`` (diffuse reflectance in [0, 1]), ``emission`` (radiance of its front side,
-the side its normals face), ``fade`` (emitter border fade, rectangle and disk
+``albedo`` (diffuse reflectance in [0, 1]; a glossy shape's Fresnel reflectance F), ``roughness``
+(absent: diffuse; α in (0, 1]: a rough GGX conductor, :mod:`sphere3d.materials`), ``emission``
+(radiance of its front side, the side its normals face), ``fade`` (emitter border fade, rectangle and disk
 only) and ``smooth`` (false, the default: shade with the face normals; true: with
 the vertex normals of :mod:`sphere3d.shapes` interpolated over each triangle, e.g.
 an OBJ file's ``vn``; rays still leave along the face normal); a mesh also takes
@@ -36,6 +37,7 @@ applied to the scene as loaded, and gradients are taken at θ = 0:
 ``NAME.scale``                            scale by 1 + θ about the shape's centre
 ``NAME.emission``                         add θ to the emitted radiance
 ``NAME.albedo``                           add θ to the albedo
+``NAME.roughness``                        add θ to a glossy shape's GGX α (shapes with ``roughness``)
 ``camera.translate.x`` / ``.y`` / ``.z``  move the camera (position and look-at)
 ``sky.emission``                          add θ to the sky radiance
 ``NAME.shape.K``                          an icosphere's or mesh's shape coefficient K (0 to
@@ -70,7 +72,6 @@ import numpy as np
 
 from flatland.core.validate import (
     ValidationError,
-    check_bool,
     check_choice,
     check_depth,
     check_finite,
@@ -80,6 +81,7 @@ from flatland.core.validate import (
 )
 from sphere3d import shapes as shp
 from sphere3d.harmonics import TERMS
+from sphere3d.materials import materials
 from sphere3d.offsets import check_offsets
 from sphere3d.sampling import FILTERS
 
@@ -98,7 +100,8 @@ __all__ = [
 ]
 
 SHAPE_TYPES = ("rectangle", "box", "icosphere", "disk", "mesh")
-COMMON_KEYS = ("name", "type", "translate", "rotate", "scale", "albedo", "emission", "fade", "smooth")
+MATERIAL_KEYS = ("albedo", "emission", "fade", "smooth", "roughness")
+COMMON_KEYS = ("name", "type", "translate", "rotate", "scale", *MATERIAL_KEYS)
 SHAPE_KEYS: Mapping[str, tuple[str, ...]] = {
     "rectangle": ("size",),
     "box": ("size",),
@@ -153,13 +156,6 @@ def check_vector(field: str, value: Any, n: int = 3, positive: bool = False) -> 
 def _json_value(value: Any) -> Any:
     """A validated field as JSON writes it: tuples as lists."""
     return list(value) if isinstance(value, tuple) else value
-
-
-def _unit_interval(field: str, value: Any) -> float:
-    out = check_finite(field, value)
-    if not 0.0 <= out <= 1.0:
-        raise ValidationError(field, f"must lie in [0, 1], got {value!r}")
-    return out
 
 
 @dataclass(frozen=True)
@@ -225,6 +221,7 @@ class Shape:
     smooth: bool
     geometry: tuple[tuple[str, Any], ...]
     mesh: shp.LocalMesh = dataclass_field(compare=False, repr=False)
+    roughness: float | None = None  # GGX α of a glossy conductor (sphere3d.bsdf); None: diffuse
 
     @staticmethod
     def from_dict(field: str, d: Any, base_dir: Path | None) -> Shape:
@@ -239,25 +236,15 @@ class Shape:
             )
         d = {**DEFAULTS, **d}
         geometry, mesh = _geometry(field, kind, d, base_dir)
-        fade = _unit_interval(f"{field}.fade", d["fade"])
-        if fade > 0.0 and mesh.fade_kind == shp.FADE_NONE:
-            raise ValidationError(
-                f"{field}.fade", f"is only defined for rectangle and disk emitters, got {fade!r}"
-            )
-        if fade >= 1.0 and mesh.fade_kind != shp.FADE_NONE:
-            raise ValidationError(f"{field}.fade", f"must be < 1, got {fade!r}")
         return Shape(
             name=name,
             type=kind,
             translate=check_vector(f"{field}.translate", d["translate"]),
             rotate=check_vector(f"{field}.rotate", d["rotate"]),
             scale=check_positive(f"{field}.scale", d["scale"]),
-            albedo=_unit_interval(f"{field}.albedo", d["albedo"]),
-            emission=check_positive(f"{field}.emission", d["emission"], allow_zero=True),
-            fade=fade,
-            smooth=check_bool(f"{field}.smooth", d["smooth"]),
             geometry=geometry,
             mesh=mesh,
+            **materials(field, d, mesh),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -268,6 +255,7 @@ class Shape:
             (f.name, _json_value(getattr(self, f.name)))
             for f in fields(self)
             if f.name not in ("name", "type", "geometry", "mesh")
+            and (self.roughness or f.name != "roughness")
         )
         return out
 
@@ -345,6 +333,7 @@ class Scene:
         for s in self.shapes:
             names += [f"{s.name}.translate.{a}" for a in AXES] + [f"{s.name}.rotate.{a}" for a in AXES]
             names += [f"{s.name}.scale", f"{s.name}.albedo", f"{s.name}.emission"]
+            names += [] if s.roughness is None else [f"{s.name}.roughness"]
             if s.type in ("icosphere", "mesh"):
                 names += [f"{s.name}.shape.{k}" for k in range(TERMS)]
         return tuple(names)

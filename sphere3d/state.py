@@ -132,6 +132,9 @@ class SceneState:
         Triangles of smooth shapes, shaded with the interpolated ``normals``.
     albedo, emission : Dual or ndarray, shape (S,)
         Per shape. ``sky``: the environment radiance.
+    roughness : Dual or ndarray, shape (S,)
+        GGX α of the glossy shapes (:mod:`sphere3d.glossy`), 0 for diffuse ones; ``glossy`` (bool,
+        shape (S,)) marks the glossy ones.
     albedo_varies : ndarray of bool, shape (S,)
         The shapes whose albedo is the parameter: a method must not skip them where their
         albedo is 0 at θ0 (its derivative need not be).
@@ -167,6 +170,8 @@ class SceneState:
     camera: CameraState
     tracer: Any
     epsilon: float
+    roughness: Any = None
+    glossy: np.ndarray | None = None
 
     @property
     def dual(self) -> bool:
@@ -180,7 +185,10 @@ class SceneState:
 
     def detached(self) -> SceneState:
         """The same state without tangents (values unchanged), for rows whose tangents are known to be 0."""
-        plain = {f: detach(getattr(self, f)) for f in ("triangles", "normals", "albedo", "emission", "sky")}
+        plain = {
+            f: detach(getattr(self, f))
+            for f in ("triangles", "normals", "albedo", "emission", "sky", "roughness")
+        }
         camera = replace(self.camera, origin=detach(self.camera.origin))
         return replace(self, **plain, emitter_area=detach(self.emitter_area), camera=camera)
 
@@ -359,7 +367,7 @@ def build_state(
     k = next((t.k for t in offsets if isinstance(t, Dual)), None)  # None: one tangent (or plain)
 
     triangles, shape_of, uv, fade_kind, fade, albedo, emission = [], [], [], [], [], [], []
-    normals, smooth = [], []
+    normals, smooth, roughness = [], [], []
     for index, s in enumerate(scene.shapes):
         mine = {kind: offs for (owner, kind), offs in bound.items() if owner == s.name}
         translate = _offset(s.translate, mine.get("translate", {}))
@@ -379,12 +387,15 @@ def build_state(
         fade.append(np.full(n, s.fade))
         albedo.append(s.albedo + mine["albedo"][None] if "albedo" in mine else s.albedo)
         emission.append(s.emission + mine["emission"][None] if "emission" in mine else s.emission)
+        rough = s.roughness or 0.0  # 0: a diffuse shape
+        roughness.append(rough + mine["roughness"][None] if "roughness" in mine else rough)
 
     triangles = np.concatenate(triangles)
     normals = np.concatenate(normals)
     shape_of = np.concatenate(shape_of)
     albedo = np.stack(albedo)
     emission = np.stack(emission)
+    roughness = np.stack(roughness)
     sky = (
         scene.sky + bound[("sky", "emission")][None]
         if ("sky", "emission") in bound
@@ -393,9 +404,9 @@ def build_state(
     dual = any(isinstance(t, Dual) for t in offsets)
     if dual:
         # one code path: with a Dual θ every scene quantity is a Dual (most with zero tangent)
-        triangles, normals, albedo, emission, sky = (
+        triangles, normals, albedo, emission, sky, roughness = (
             x if isinstance(x, Dual) else Dual(x, None, k)
-            for x in (triangles, normals, albedo, emission, sky)
+            for x in (triangles, normals, albedo, emission, sky, roughness)
         )
 
     emitting = [i for i, s in enumerate(scene.shapes) if s.emission > 0.0 or (s.name, "emission") in bound]
@@ -436,6 +447,8 @@ def build_state(
         camera=camera,
         tracer=_tracer(scene, param, plain, shape_of, tracer),
         epsilon=1e-4 * max(extent, 1e-3),
+        roughness=roughness,
+        glossy=np.array([s.roughness is not None for s in scene.shapes]),
     )
 
 

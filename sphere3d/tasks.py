@@ -113,7 +113,7 @@ class ImageTask(_Parameters):
     """``"splat"`` (default): each sample in every pixel its filter covers, weighted by
     $k(s - p) / Σ_{p'} p(s - p')$ (:mod:`sphere3d.film`); ``"pixel"``: in the pixel that drew it."""
     max_depth: int = 1
-    """Diffuse vertices per path (:mod:`sphere3d.paths`); 1: direct illumination."""
+    """Vertices per path (:mod:`sphere3d.paths`); 1: direct illumination."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -232,10 +232,12 @@ class ImageTask(_Parameters):
         if out is not None:
             kind = self.scene.camera.filter
             reach_of = lambda x, y: splat_weights(x, y, rows, cols, width, height, kind)  # noqa: E731
-            est = pixel_samples(state, transforms, rows, cols, u, draws, reach_of, vertex(self.max_depth))
+            est = pixel_samples(
+                state, transforms, rows, cols, u, draws, reach_of, vertex(self.max_depth, state)
+            )
             self._splat_chunk(est, pix, batches, per_batch, out, offset)
             return None
-        est = pixel_samples(state, transforms, rows, cols, u, draws, vertex=vertex(self.max_depth))
+        est = pixel_samples(state, transforms, rows, cols, u, draws, vertex=vertex(self.max_depth, state))
         return np.mean(self._control_variate(est, batches, per_batch), axis=1).reshape(batches, pix.size)
 
     def _chunk_range(

@@ -57,6 +57,7 @@ from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
 from sphere3d.boundary.edges import Edges
 from sphere3d.integrator import Identity, camera_radiance
+from sphere3d.paths import vertex
 from sphere3d.sampling import filter_radius, filter_value
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
@@ -312,7 +313,10 @@ def _splat_points(
     # keyed per batch, apart from the primary samples' keys (below 2^62): no draw shared between batches
     draws = Draws.of(key[0], (1 << 62) + key[1] * (1 << 40) + i).tile(2)
     hits = _side_hits(plain, edges.take(k), d)
-    radiance = np.asarray(camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits))
+    shade = vertex(1, plain)  # direct light, glossy shapes by their BSDF (sphere3d.paths)
+    radiance = np.asarray(
+        camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits, shade)
+    )
     jump = radiance[:count] - radiance[count:]
     # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2); for k
     # parameters the same jumps times each parameter's v · n, into its own image

@@ -119,7 +119,9 @@ class EmitterEdgeSamples:
         fields = [take_rows(getattr(self, f), rows) for f in names]  # rows by np.take (live.take_rows)
         return EmitterEdgeSamples(*fields, self.table, self.weight)
 
-    def term(self, state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
+    def term(
+        self, state: Any, shading: Any, rotation: Rotation, bsdf: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The shading points and the boundary term's tangents, given one emitter rotation per shading point.
 
         Every edge point gets its shadow ray, and the visible ones the estimate of
@@ -129,9 +131,9 @@ class EmitterEdgeSamples:
         tmax = self.dist - 2.0 * state.epsilon
         k = np.flatnonzero(~state.tracer.occluded(take_rows(shading.origin, self.index), self.w, tmax))
         sub = self.take(k)
-        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index))
+        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index), bsdf)
 
-    def tangent_term(self, state: Any, x: Any, rotation: Rotation) -> np.ndarray:
+    def tangent_term(self, state: Any, x: Any, rotation: Rotation, bsdf: Any = None) -> np.ndarray:
         r"""The boundary term's estimate (a tangent, shape (n,), or (p, n) for p parameters) given one
         rotation per point.
 
@@ -166,12 +168,28 @@ class EmitterEdgeSamples:
             cos_y = -dot(self.table.normals[self.edge[s], j], self.w[s])  # the face's unit normal, tabled
             d = self.dist[s]
             p_light = d * d / (area * cos_y)  # solid-angle density of the emitter strategy
-            p_cos = self.cos_x[s] * INV_PI
+            p_cos = self.cos_x[s] * INV_PI if bsdf is None else bsdf.pdf(self.index[s], self.w[s])
             # F_in: L_e (just inside: the border fade, if any, is 0 there) cos_x cos_y / d² w_L
             emitted = np.asarray(detach(state.emitted(f, detach(it.b1), detach(it.b2))), dtype=np.float64)
             f_in = emitted * self.cos_x[s] * cos_y / (d * d) * (p_light / (p_light + p_cos))
+            if bsdf is not None:  # a glossy point: its BSDF at the edge point's direction
+                f_in = f_in * bsdf.value(self.index[s], self.w[s])
             out[..., s] -= self.weight * f_in * speed
         return out
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """A lobe (``value``, ``pdf`` by row) read at rows ``rows`` of the shading points it was made for."""
+
+    lobe: Any
+    rows: np.ndarray
+
+    def value(self, r: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return self.lobe.value(self.rows[r], w)
+
+    def pdf(self, r: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return self.lobe.pdf(self.rows[r], w)
 
 
 def _faded_out(state: Any, edges: Any) -> np.ndarray:
@@ -290,14 +308,18 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
     )
 
 
-def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.ndarray, np.ndarray]:
-    """The boundary term's shading points and tangents, given one emitter rotation per shading point.
+def emitter_edge_term(
+    state: Any, shading: Any, rotation: Rotation, bsdf: Any = None
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""The boundary term's shading points and tangents, given one emitter rotation per shading point.
 
     V_T is exactly 0 where the rotation is the identity (no point followed) and neither
     the shading point nor an emitter moves (on ``hard_shadow`` the lit ground): those
     points get no edge samples. The others' are drawn by :func:`sample_emitter_edges` (the
     numbers they would get among all points: draws are keyed on the samples) and traced
-    by :meth:`EmitterEdgeSamples.term`.
+    by :meth:`EmitterEdgeSamples.term`. ``bsdf``: at glossy points their lobe at θ0
+    (:class:`~sphere3d.glossy.Lobe`, rows of ``shading``): $F_\mathrm{in}$ then holds $f(w_i, w)$ for
+    ρ/π's place and the BSDF density in the balance weight (the reflected radiance's term, not E's).
     """
     x_moves = any_rows(moves(shading.x))
     emitters_move = np.any(moves(state.triangles)[state.emitters])
@@ -306,5 +328,6 @@ def emitter_edge_term(state: Any, shading: Any, rotation: Rotation) -> tuple[np.
     edge = sample_emitter_edges(state, sub) if rows.size else None
     if edge is None:
         return rows[:0], np.zeros(0 if state.k is None else (state.k, 0))
-    index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows))
+    lobe = None if bsdf is None else _Rows(bsdf, rows)
+    index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows), lobe)
     return rows[index], term

@@ -274,8 +274,13 @@ def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np
     return live, cols[p], s0[p], s1[p], lo[p, sub[j]], angle[j], lo[p], hi[p], total[row[live]]
 
 
-def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
-    """One estimate per shading point of the boundary term of E (see the module docstring).
+def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.ndarray:
+    r"""One estimate per shading point of the boundary term of E (see the module docstring).
+
+    With ``weight(rows, ω)``, plain values per draw (its shading point's row, its direction), the
+    boundary term of $∫ L_i(ω)\, weight(ω) \max(0, n·ω)\, dω$ instead: a glossy point's BSDF
+    $f(w_i, ω)$ at θ0 (:mod:`sphere3d.glossy`), continuous across every arc, so the jump is
+    $[L_i(ω^-) - L_i(ω^+)]\, f(w_i, ω) \cos θ$.
 
     Parameters
     ----------
@@ -343,6 +348,8 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray) -> np.ndarray:
     f = _incident(state, np.tile(o[live], (4, 1)), side).reshape(4, live.size)
     jump = 2.0 * (f[0] - f[1]) - (f[2] - f[3])
     cos = np.maximum(dot(n0[live], w), 0.0)
+    if weight is not None:  # a glossy point: its BSDF at the edge direction, the same on both sides
+        cos = cos * weight(live, w)
     # Reynolds on S²: the side ω⁻ grows into ω⁺ at m·ω̇, density overlap/Γ per radian of arc
     terms = [
         np.bincount(live, weights=total / overlap * jump * cos * s, minlength=m) / per_point for s in speeds

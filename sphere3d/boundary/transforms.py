@@ -66,10 +66,11 @@ class BoundaryTransforms(Identity):
     per_point: int = 1
     rate: float = 2.0
 
-    def shading_extra(self, shading: Shading) -> np.ndarray | None:
-        """The mean of ``per_point`` edge samples of the boundary term of E per shading point
+    def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
+        r"""The mean of ``per_point`` edge samples of the boundary term of E per shading point
         (:func:`~sphere3d.boundary.shading.shading_edge_term`; uniforms ``"boundary.edge"``, keyed on
-        the points' samples), in slices of :func:`draw_points` points (:func:`draw_bytes`)."""
+        the points' samples), in slices of :func:`draw_points` points (:func:`draw_bytes`); with
+        ``weight(rows, ω)``, of $∫ L_i\, weight \cos θ\, dω$ (a glossy point's BSDF at θ0)."""
         if not shading.state.dual:
             return None
         m, step, k = len(shading), draw_points(self.per_point), shading.state.k
@@ -77,7 +78,8 @@ class BoundaryTransforms(Identity):
         for lo in range(0, max(m, 1), step):
             part = shading if m <= step else shading.take(np.arange(lo, min(m, lo + step)))
             u = part.draws.uniforms("boundary.edge", 2, self.per_point)
-            out[..., lo : lo + step] = shading_edge_term(part, self.edges, u)
+            sliced = None if weight is None else (lambda rows, w, lo=lo: weight(lo + rows, w))
+            out[..., lo : lo + step] = shading_edge_term(part, self.edges, u, sliced)
         return out
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:

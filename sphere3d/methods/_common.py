@@ -39,7 +39,7 @@ def memory_model(name: str) -> Callable[[MemoryModel], MemoryModel]:
 
 def direct_only(task: Any, method: str, missing: str) -> None:
     """Refuse paths (``task.max_depth`` > 1, :mod:`sphere3d.paths`) for a method whose ``missing`` exist at
-    vertex 1 only."""
+    vertex 1 only (diffuse or glossy, :mod:`sphere3d.glossy`)."""
     if task.max_depth > 1:
         raise ValidationError(
             "max_depth",

@@ -149,6 +149,8 @@ def reparam(
     biases in the generated measurement pages.
     """
     direct_only(task, "reparam", "changes of variables of the shading integrals")
+    if paired and any(shape.roughness is not None for shape in task.scene.shapes):
+        raise ValidationError("paired", "is not supported on glossy shapes (roughness), got True")
     if isinstance(task, ImageTask):
         check_continuous_filter(task.scene.camera.filter)
     if paired and kappa is None:

@@ -151,17 +151,18 @@ class ReparamTransforms(Identity):
             self.film_junctions, self.film_shapes, self.film_corners,
         )  # fmt: skip
 
-    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
-        """Emitter sampling: one rotation per shading point from shadow probes (Sec. 4.3), following
+    def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
+        r"""Emitter sampling: one rotation per shading point from shadow probes (Sec. 4.3), following
         the occluder's silhouette between a shadowed and a lit probe
         (:func:`~sphere3d.reparam.emitter_probes.emitter_rotation`). With ``emitter_edges`` the
         emitters' sharp edges are held fixed under it by their boundary term
         (:func:`~sphere3d.boundary.emitters.emitter_edge_term`), at every point (any may have edge
-        samples); else only where an emitter sample is visible."""
+        samples); else only where an emitter sample is visible. ``bsdf``: glossy points' lobe at θ0
+        (:class:`~sphere3d.glossy.Lobe`), the edge term's integrand then $L_e f \cos θ_x$."""
         m = len(shading)
         rows = np.arange(m) if self.emitter_edges else np.flatnonzero(visible)
         rotation = emitter_rotation(shading if rows.size == m else shading.take(rows), self.emitter_probes)
-        extra = emitter_edge_term(shading.state, shading, rotation) if self.emitter_edges else None
+        extra = emitter_edge_term(shading.state, shading, rotation, bsdf) if self.emitter_edges else None
         return EmitterChange(rotation, rows, extra)
 
     def _probe_rotation(self, shading: Shading, centre: np.ndarray) -> tuple[Rotation, np.ndarray]:

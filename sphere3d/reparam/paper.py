@@ -249,7 +249,7 @@ class PaperTransforms(Identity):
         hits = state.tracer.intersect(detach(cam.origin), d)
         return FilmTransform((follow(state, cam.origin, d, hits),), (centre,), self.kappa_film)
 
-    def emitter(self, shading: Shading, visible: np.ndarray) -> EmitterChange:
+    def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
         """The mean attached hit of the occluded shadow probes, one rotation per shading point."""
         rows = np.flatnonzero(visible)
         sub = shading.take(rows)

@@ -69,8 +69,11 @@ def test02_fade_is_zero_on_the_border_one_inside_and_smooth():
 
 def test03_builtin_scenes_load_and_round_trip():
     assert list_scenes() == (
+        "furnace",
+        "glossy_reflection",
         "hard_shadow",
         "hard_shadow_cube",
+        "interreflection",
         "shadow",
         "silhouette",
         "sky",
@@ -226,7 +229,7 @@ def test06_bad_scenes_raise_one_error_naming_the_field(mutate, message):
 
 
 def test07_bad_sources_and_parameters():
-    with pytest.raises(ValidationError, match="unknown scene 'nope'; built-in scenes: hard_shadow"):
+    with pytest.raises(ValidationError, match="unknown scene 'nope'; built-in scenes: furnace, glossy_"):
         load_scene("nope")
     with pytest.raises(ValidationError, match=r"scene file 'missing\.json': no such file"):
         load_scene("missing.json")
