@@ -19,6 +19,11 @@ $β (ρ_y/2) \hat E(y)$ with the same MIS estimate, up to d vertices (:func:`tra
 $L = L_e + \mathcal{T} L_e + … + \mathcal{T}^d L_e$ for the reflection operator $\mathcal{T}$
 (theory/radiometry). d = 1 is the direct illumination above, bit for bit.
 
+Glossy shapes. A point on a glossy shape (a ``roughness``, :mod:`flatland.glossy`) reflects
+$L_r = ∫ L_i w\, dφ$ with the GGX lobe $w = f \cos$: :func:`shade` takes its BSDF sample in place of
+the cosine sample in the same MIS, and a path goes on along it with throughput $w / p_\mathrm{bsdf}$
+(theory/bsdf). Scenes without glossy shapes run the diffuse code alone, bit for bit.
+
 Transforms. A gradient method changes *where* the integrands are evaluated, never the
 samples: its :class:`Transforms` maps each film sample t to evaluation points $T(t)$
 (``camera``) and each direction sample φ to $T(φ)$ (``directions``), with a weight
@@ -176,7 +181,7 @@ class Identity:
 @dataclass(frozen=True)
 class Context:
     """What the transforms may use: the scene state (θ-dependent and detached) and the emitters;
-    and how many diffuse vertices a path has, ``max_depth`` (1: direct illumination).
+    and how many vertices a path has, ``max_depth`` (1: direct illumination).
 
     Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
     argument), keyed on the primary samples, never from a per-chunk stream.
