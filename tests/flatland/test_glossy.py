@@ -410,3 +410,16 @@ def test10_boundary_and_reparam_on_a_glossy_floor_by_region():
         else:
             assert abs(f) > 10.0 * sf  # the region's derivative is resolved: the comparison has power
             assert abs(r - f) <= q * np.hypot(sr, sf), (name, r, f)
+
+
+@pytest.mark.parametrize(("method", "depth"), [("naive", 1), ("boundary", 1), ("reparam", 1), ("naive", 3)])
+def test11_every_parameter_of_a_glossy_scene_in_one_pass_is_its_single_call_bit_for_bit(method, depth):
+    """k tangents through the lobe (roughness, albedo, emission and the occluder's translations of
+    glossy_reflection at once): each slot is the single-parameter call's derivative, bit for bit."""
+    scene = load_scene("glossy_reflection").with_camera(pixels=8)
+    args = {"spp": 64, "seed": 3, "progress": False, "max_depth": depth}
+    together = render_gradient(scene, list(scene.parameters), method, **args)
+    for param in scene.parameters:
+        alone = render_gradient(scene, param, method, **args)
+        assert np.array_equal(together[param].derivative, alone.derivative), param
+        assert np.array_equal(together[param].value, alone.value), param
