@@ -19,6 +19,11 @@ $β (ρ_y/2) \hat E(y)$ with the same MIS estimate, up to d vertices (:func:`tra
 $L = L_e + \mathcal{T} L_e + … + \mathcal{T}^d L_e$ for the reflection operator $\mathcal{T}$
 (theory/radiometry). d = 1 is the direct illumination above, bit for bit.
 
+Glossy shapes. A point on a glossy shape (a ``roughness``, :mod:`flatland.glossy`) reflects
+$L_r = ∫ L_i w\, dφ$ with the GGX lobe $w = f \cos$: :func:`shade` takes its BSDF sample in place of
+the cosine sample in the same MIS, and a path goes on along it with throughput $w / p_\mathrm{bsdf}$
+(theory/bsdf). Scenes without glossy shapes run the diffuse code alone, bit for bit.
+
 Transforms. A gradient method changes *where* the integrands are evaluated, never the
 samples: its :class:`Transforms` maps each film sample t to evaluation points $T(t)$
 (``camera``) and each direction sample φ to $T(φ)$ (``directions``), with a weight
@@ -45,9 +50,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from flatland import glossy
 from flatland.core.dual import Dual, detach, is_dual, k_of, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import paired_combine
+from flatland.glossy import Lobe
 from flatland.lights import Lights
 from flatland.sampling import filter_value, pdf_filter, sample_filter
 from flatland.state import SceneState
@@ -135,9 +142,12 @@ class Transforms(Protocol):
         """Direction evaluation points for direction samples ``phi`` from shading points ``x``."""
         ...
 
-    def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray | None:
+    def shading_extra(
+        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None
+    ) -> np.ndarray | None:
         """2D only: a derivative-only term added to E at each shading point, shape (n,), or (k, n) for
-        k parameters (``ctx.geom.k``) (None: nothing)."""
+        k parameters (``ctx.geom.k``) (None: nothing). With a ``lobe`` (glossy scenes), a term of the
+        reflected radiance $∫ L_i w$ instead (:mod:`flatland.glossy`)."""
         ...
 
     def pixel_extra(
@@ -157,7 +167,9 @@ class Identity:
     def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         return Members(phi[:, None])
 
-    def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray | None:
+    def shading_extra(
+        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None
+    ) -> np.ndarray | None:
         return None
 
     def pixel_extra(
@@ -169,7 +181,7 @@ class Identity:
 @dataclass(frozen=True)
 class Context:
     """What the transforms may use: the scene state (θ-dependent and detached) and the emitters;
-    and how many diffuse vertices a path has, ``max_depth`` (1: direct illumination).
+    and how many vertices a path has, ``max_depth`` (1: direct illumination).
 
     Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
     argument), keyed on the primary samples, never from a per-chunk stream.
@@ -221,6 +233,8 @@ class Bounce:
     ``normal`` (h, 2) the hits re-attached to θ (rows of ``hit`` only, geometric normal),
     ``dirs`` (n, 2) the ray directions and ``cosine`` (n,) the cosine $d · n(θ)$ at the
     shading point (a Dual when the normal moves; its value is the density's $2 p_\mathrm{cos}$).
+    ``throughput`` (n,), shading with a :class:`~flatland.glossy.Lobe` only: the BSDF sample's weight
+    $w(φ) / p_\mathrm{bsdf}(φ)$ with w Dual and the density θ-free (0 where the density is 0).
     """
 
     hit: np.ndarray
@@ -229,6 +243,7 @@ class Bounce:
     normal: Any
     dirs: Any
     cosine: Any
+    throughput: Any = None
 
 
 def shade(
@@ -239,6 +254,7 @@ def shade(
     u: np.ndarray,
     draws: Draws,
     bounce: bool = False,
+    lobe: Lobe | None = None,
 ) -> Any:
     r"""MIS estimate of $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$
     at shading points ``x`` (n, 2).
@@ -248,12 +264,20 @@ def shade(
     ``draws`` the keys of the n rows for anything the transforms draw. With ``bounce``,
     returns ``(E, Bounce)``: the cosine sample's ray, which a path continues along
     (:func:`trace_paths`; one evaluation point per sample, the identity transforms).
+
+    With a ``lobe`` (:mod:`flatland.glossy`, scenes with glossy shapes) the estimate is of the
+    reflected radiance $L_r = ∫ L_i(x, φ) w(φ)\, dφ$ instead, the BSDF sample taking the place of
+    the cosine sample in the same balance heuristic: $w / (p_\mathrm{bsdf} + p_\mathrm{light})$ per
+    sample, w evaluated where the transforms put the sample (theory/bsdf).
     """
     n = ignore.size
     x0, n0 = detach(x), detach(normal)
     phi_n0 = np.arctan2(n0[:, 1], n0[:, 0])
     # cosine sampling: φ - φn = arcsin(2u - 1)   (theory/radiometry)
-    phis = [phi_n0 + np.arcsin(2.0 * u[:, 0] - 1.0)]
+    if lobe is None:
+        phis = [phi_n0 + np.arcsin(2.0 * u[:, 0] - 1.0)]
+    else:  # the BSDF sample: cosine on diffuse rows, visible GGX normals on glossy ones
+        phis = [glossy.sample(lobe, u[:, 0], phi_n0)]
     keep = [np.ones(n, dtype=bool)]
     if not ctx.lights.empty:
         phi_l, chosen = ctx.lights.sample(u[:, 1], u[:, 2], x0)
@@ -265,7 +289,12 @@ def shade(
     x0r, ign = x0[idx], ignore[idx]
     cos0 = np.cos(phi - phi_n0[idx])
     # balance heuristic with one sample per technique: w_s f / p_s = f / (p_cos + p_light)
-    denom = np.maximum(cos0, 0.0) * 0.5
+    if lobe is None:
+        denom = np.maximum(cos0, 0.0) * 0.5
+    else:
+        lobes = lobe.take(idx)
+        p_bsdf = glossy.pdf(lobes, phi, phi_n0[idx])
+        denom = p_bsdf
     if not ctx.lights.empty:
         denom = denom + ctx.lights.pdf(phi, x0r)
     keep_all = np.concatenate(keep) & (denom > 0.0)
@@ -279,9 +308,13 @@ def shade(
     li, att = incident(ctx.geom, xr[rep], d, hits)
     nr = normal[idx][rep]
     cos = d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1]
-    f = li * np.where(detach(cos) > 0.0, cos, 0.0)
+    if lobe is None:
+        f = li * np.where(detach(cos) > 0.0, cos, 0.0)
+    else:  # the lobe where the transforms put the sample: w(T φ) with φ_i, n, α, F as Duals
+        w = glossy.weight(lobes.take(rep), flat, glossy.angle_of_vector(nr), cos)
+        f = li * w
     total = members.reduce(f * inv[rep]).reshape(techniques, n).sum(axis=0)
-    extra = ctx.transforms.shading_extra(ctx, x, normal, ignore)
+    extra = ctx.transforms.shading_extra(ctx, x, normal, ignore, *(() if lobe is None else (lobe,)))
     if extra is not None:
         total = total + Dual(np.zeros(n), extra, ctx.geom.k)
     if not bounce:
@@ -292,7 +325,11 @@ def shade(
     h = int(np.count_nonzero(hit))
     point = att.point[:h] if h else None
     nrm = att.normal[:h] if h else None
-    return total, Bounce(hit, hits.prim[:n], point, nrm, d[:n], cos[:n])
+    throughput = None
+    if lobe is not None:  # w / p_bsdf on the BSDF sample's rows (the first n)
+        p0 = p_bsdf[:n]
+        throughput = np.where(p0 > 0.0, w[:n] / np.where(p0 > 0.0, p0, 1.0), 0.0)
+    return total, Bounce(hit, hits.prim[:n], point, nrm, d[:n], cos[:n], throughput)
 
 
 # ------------------------------------------------------------------ paths
@@ -329,10 +366,14 @@ def trace_paths(
     early end), on a miss, or at an albedo of 0 that no parameter moves.
     """
     geom = ctx.geom
+    glossy_scene = bool(np.any(geom.glossy))
     while depth <= ctx.max_depth:
         prim = bounce.prim[bounce.hit]
         rho = geom.albedo[prim]
-        sel = np.flatnonzero(_live(rho))  # among the hits
+        live = _live(rho)
+        if glossy_scene:  # a glossy sample below the surface has throughput 0: that path ends here
+            live &= _live(beta[np.flatnonzero(bounce.hit)])
+        sel = np.flatnonzero(live)  # among the hits
         keep = np.flatnonzero(bounce.hit)[sel]  # among the current rows
         if not keep.size:
             break
@@ -343,12 +384,13 @@ def trace_paths(
         rows, beta, draws, rho = rows[keep], beta[keep], draws.take(keep), rho[sel]
         last = depth == ctx.max_depth
         u = draws.uniforms(f"bounce.{depth}", 3)  # keyed on (sample, depth): chunking changes nothing
-        out = shade(ctx, bounce.point[sel], n_shade, prim[sel], u, draws, not last)
+        lobe = glossy.lobe_at(geom, prim[sel], d)
+        out = shade(ctx, bounce.point[sel], n_shade, prim[sel], u, draws, not last, lobe)
         e, bounce = (out, None) if last else out
-        total[rows] = total[rows] + beta * 0.5 * rho * e
+        total[rows] = total[rows] + (beta * 0.5 * rho * e if lobe is None else beta * e)
         if last:
             break
-        beta = beta * rho * cosine_ratio(bounce.cosine)
+        beta = beta * rho * cosine_ratio(bounce.cosine) if lobe is None else beta * bounce.throughput
         depth += 1
     return total
 
@@ -375,11 +417,12 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
     facing = np.sum(detach(n_geo) * detach(d)[rows[sub]], axis=1) < 0.0
     n_shade = n_geo * np.where(facing, 1.0, -1.0)[:, None]
     paths = ctx.max_depth > 1
-    out = shade(ctx, att.point[sub], n_shade, prim[sub], u[rows[sub]], draws.take(rows[sub]), paths)
+    lobe = glossy.lobe_at(geom, prim[sub], d[rows[sub]])
+    out = shade(ctx, att.point[sub], n_shade, prim[sub], u[rows[sub]], draws.take(rows[sub]), paths, lobe)
     e, bounce = out if paths else (out, None)
-    radiance[rows[sub]] = radiance[rows[sub]] + 0.5 * rho[sub] * e
+    radiance[rows[sub]] = radiance[rows[sub]] + (0.5 * rho[sub] * e if lobe is None else e)
     if paths:  # a diffuse vertex's cosine sample weight: f cos / p = (ρ/2) cos_θ / (cos_θ0 / 2)
-        beta = rho[sub] * cosine_ratio(bounce.cosine)
+        beta = rho[sub] * cosine_ratio(bounce.cosine) if lobe is None else bounce.throughput
         radiance = trace_paths(ctx, radiance, rows[sub], beta, bounce, draws.take(rows[sub]), 2)
     return radiance
 

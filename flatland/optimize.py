@@ -8,7 +8,8 @@ and a view is a :class:`~flatland.scene.Camera` put in place of the scene's. :fu
 renders the targets of a known θ, :func:`silhouette_iou` compares a shape's silhouettes.
 
 A parameter's default bounds keep the scene valid: an albedo offset keeps the albedo in [0, 1], an
-emission offset keeps the emission >= 0, a scale offset keeps the factor $1 + θ >= 0.05$; the others
+emission offset keeps the emission >= 0, a scale offset keeps the factor $1 + θ >= 0.05$, a roughness
+offset keeps α in [0.01, 1]; the others
 are unbounded unless ``bounds`` says otherwise.
 """
 
@@ -41,6 +42,8 @@ __all__ = ["film_interval", "optimize", "render_targets", "silhouette_iou"]
 
 MIN_SCALE = 0.05
 """The smallest scale factor $1 + θ$ a scale parameter's default bounds allow."""
+MIN_ROUGHNESS = 0.01
+"""Smallest roughness α the default bounds allow (α = 0 is a perfect mirror, refused by the scene)."""
 
 
 def _cameras(scene: Scene, views: Any) -> tuple[Camera, ...]:
@@ -76,6 +79,8 @@ def _bounds(scene: Scene, params: tuple[Any, ...], bounds: Any) -> tuple[np.ndar
             lower[i], upper[i] = -shape.albedo, 1.0 - shape.albedo
         elif p.kind == "emission":
             lower[i] = -shape.emission
+        elif p.kind == "roughness":  # α stays in [MIN_ROUGHNESS, 1]: 0 would be a mirror
+            lower[i], upper[i] = MIN_ROUGHNESS - shape.roughness, 1.0 - shape.roughness
         elif p.kind == "scale":
             lower[i] = MIN_SCALE - 1.0
     return narrow_bounds(bounds, names, lower, upper)

@@ -30,7 +30,7 @@ Standard errors come from ``batches`` independent batches of ``spp / batches``
 samples per pixel (default: the largest divisor of ``spp`` up to 16,
 :func:`flatland.core.image.resolve_batches`).
 
-Every entry point takes ``max_depth``, the diffuse vertices per path (1, the default: direct
+Every entry point takes ``max_depth``, the vertices per path (1, the default: direct
 illumination; :func:`flatland.integrator.trace_paths`); ``reparam`` and ``boundary`` refuse more than 1.
 
 Every entry point takes ``progress``: a tqdm bar on standard error, advanced per chunk of
@@ -122,7 +122,7 @@ def render(
     r"""Render the scene's pixels: $I_j = ∫ k_j(t) L(t) dt$ with ``spp`` samples per pixel.
 
     ``progress``: a progress bar per chunk (None: when stderr is a terminal; see the module docstring).
-    ``max_depth``: diffuse vertices per path, an integer >= 1; 1 is direct illumination, d gives
+    ``max_depth``: vertices per path (diffuse or glossy), an integer >= 1; 1 is direct illumination, d gives
     $L = Σ_{i=0}^{d} \mathcal{T}^i L_e$ (:func:`flatland.integrator.trace_paths`).
 
     Raises
@@ -233,7 +233,7 @@ def irradiance(
     estimated (derivative 0). Given a list of k parameters, a dict from each name to its
     Estimate (all with the same value), the k derivatives from one pass as in
     :func:`render_gradient`. ``progress``: a progress bar per chunk, as in :func:`render`.
-    ``max_depth`` d: $L_i$ carries paths of up to d - 1 further diffuse vertices (1: emission only).
+    ``max_depth`` d: $L_i$ carries paths of up to d - 1 further vertices (1: emission only).
     """
     point, normal = check_point("point", point), check_direction("normal", normal)
     task = _task(scene, param, n, seed, batches, max_depth, point=point, normal=normal)

@@ -15,7 +15,10 @@ A scene is a plain dict (or a JSON file of the same shape), validated on load::
 
 Shapes are made of line segments (``segment``: 2 points, ``polyline``: >= 2 points,
 ``polygon``: >= 3 points, closed) or are circles. Each has a diffuse ``albedo`` in
-[0, 1] (BRDF albedo/2, theory/radiometry) and an ``emission`` radiance >= 0. Emission is
+[0, 1] (BRDF albedo/2, theory/radiometry) and an ``emission`` radiance >= 0. A shape with a
+``roughness`` α in (0, 1] is glossy instead: the GGX microfacet BSDF of :mod:`flatland.bsdf`, its
+``albedo`` the constant Fresnel reflectance F scaling the lobe (α = 0, a perfect mirror, is
+refused: a delta BSDF has no integral to reparameterize; theory/bsdf). Emission is
 two-sided unless ``one_sided`` is true; a one-sided segment emits toward the right of
 its direction a → b (outward for a counter-clockwise polygon), a circle outward. A
 ``segment`` emitter may ``fade`` linearly to zero over that fraction (<= 0.5) of its
@@ -38,6 +41,7 @@ scene as loaded, and gradients are taken at θ = 0:
 ``NAME.vertex.K.x`` / ``.y``     add θ to point K of a segment, polyline or polygon
 ``NAME.emission``                add θ to the shape's emitted radiance
 ``NAME.albedo``                  add θ to the shape's albedo
+``NAME.roughness``               add θ to a glossy shape's roughness α
 ``camera.translate.x`` / ``.y``  move the camera
 ``camera.rotate``                turn the camera by θ radians (counter-clockwise)
 ``NAME.shape.K``                 a polygon's radial Fourier coefficient K: add
@@ -74,6 +78,7 @@ from typing import Any
 
 import numpy as np
 
+from flatland.core.microfacet import check_alpha
 from flatland.core.validate import (
     ValidationError,
     check_bool,
@@ -104,7 +109,7 @@ _TOP_KEYS = ("name", "description", "camera", "sky", "shapes", "parameters", "of
 MAX_SHAPE_ORDER = 4
 """Highest Fourier order of a polygon's shape coefficients (``NAME.shape.K``): at most 2 · 4 + 1 = 9."""
 _CAMERA_KEYS = ("position", "direction", "fov", "pixels", "filter")
-_COMMON_SHAPE_KEYS = ("name", "type", "albedo", "emission", "one_sided")
+_COMMON_SHAPE_KEYS = ("name", "type", "albedo", "emission", "one_sided", "roughness")
 _SHAPE_KEYS = {
     "segment": (*_COMMON_SHAPE_KEYS, "points", "fade"),
     "polyline": (*_COMMON_SHAPE_KEYS, "points"),
@@ -153,6 +158,12 @@ class Shape:
     emission: float = 0.0
     one_sided: bool = False
     fade: float = 0.0
+    roughness: float = 0.0
+
+    @property
+    def glossy(self) -> bool:
+        """True for a glossy shape (a ``roughness`` > 0, :mod:`flatland.bsdf`); False for a diffuse one."""
+        return self.roughness > 0.0
 
     def segments(self) -> list[tuple[int, int]]:
         """Index pairs (i, j) of the points joined by segments (a polygon closes)."""
@@ -200,6 +211,8 @@ class Scene:
             d.update(albedo=s.albedo, emission=s.emission, one_sided=s.one_sided)
             if s.type == "segment":
                 d["fade"] = s.fade
+            if s.glossy:
+                d["roughness"] = s.roughness
             shapes.append(d)
         return {
             "name": self.name,
@@ -287,6 +300,17 @@ def _check_camera(d: Any) -> Camera:
     return Camera(position, direction, fov, pixels, filt)
 
 
+def _check_roughness(path: str, d: Mapping) -> float:
+    """A glossy shape's GGX roughness α in (0, 1]; 0.0 (diffuse) when the key is absent.
+
+    α = 0, a perfect mirror, is refused by :func:`~flatland.core.microfacet.check_alpha` with its
+    reason: a delta BSDF has no integral to reparameterize.
+    """
+    if "roughness" not in d:
+        return 0.0
+    return float(check_alpha(check_finite(path, d["roughness"]), path))
+
+
 def _check_shape(i: int, d: Any) -> Shape:
     path = f"shapes[{i}]"
     if not isinstance(d, Mapping):
@@ -306,12 +330,13 @@ def _check_shape(i: int, d: Any) -> Shape:
     if emission < 0.0:
         raise ValidationError(f"{path}.emission", f"must be >= 0, got {d['emission']!r}")
     one_sided = check_bool(f"{path}.one_sided", d.get("one_sided", False))
+    roughness = _check_roughness(f"{path}.roughness", d)
     if kind == "circle":
         center = check_point(f"{path}.center", d["center"])
         radius = check_finite(f"{path}.radius", d["radius"])
         if radius <= 0.0:
             raise ValidationError(f"{path}.radius", f"must be > 0, got {d['radius']!r}")
-        return Shape(name, kind, (), center, radius, albedo, emission, one_sided)
+        return Shape(name, kind, (), center, radius, albedo, emission, one_sided, roughness=roughness)
     raw = d["points"]
     if isinstance(raw, str | bytes | Mapping) or not hasattr(raw, "__len__"):
         raise ValidationError(f"{path}.points", f"must be a list of points [x, y], got {raw!r}")
@@ -323,7 +348,7 @@ def _check_shape(i: int, d: Any) -> Shape:
         )
     points = tuple(check_point(f"{path}.points[{k}]", p) for k, p in enumerate(raw))
     fade = _check_range(f"{path}.fade", d.get("fade", 0.0), 0.0, 0.5)
-    shape = Shape(name, kind, points, None, None, albedo, emission, one_sided, fade)
+    shape = Shape(name, kind, points, None, None, albedo, emission, one_sided, fade, roughness)
     scale = max(1.0, float(np.max(np.abs(np.array(points)))))
     for a, b in shape.segments():
         if math.dist(points[a], points[b]) <= 1e-9 * scale:
@@ -407,7 +432,7 @@ def parameter_names(scene: Scene) -> tuple[str, ...]:
 
     The camera's three, then per shape ``translate.x|y``, ``rotate`` (not circles),
     ``scale``, ``vertex.K.x|y`` for each point, ``shape.K`` (polygons: :meth:`Shape.shape_terms`),
-    ``emission`` and ``albedo``.
+    ``emission``, ``albedo`` and, for a glossy shape, ``roughness``.
     ``scene.parameters`` holds only the ones the scene file declares.
     """
     names = ["camera.translate.x", "camera.translate.y", "camera.rotate"]
@@ -418,4 +443,5 @@ def parameter_names(scene: Scene) -> tuple[str, ...]:
         names += [f"{shape.name}.vertex.{k}.{axis}" for k in range(len(shape.points)) for axis in "xy"]
         names += [f"{shape.name}.shape.{k}" for k in range(shape.shape_terms())]
         names += [f"{shape.name}.emission", f"{shape.name}.albedo"]
+        names += [f"{shape.name}.roughness"] if shape.glossy else []
     return tuple(names)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, k_of
+from flatland.core.microfacet import ALPHA_MAX
 from flatland.core.validate import ValidationError, check_finite
 from flatland.scene import Camera, Scene, Shape
 
@@ -47,7 +48,7 @@ class Parameter:
 
     name: str
     target: str  # shape name or "camera"
-    kind: str  # translate, rotate, scale, vertex, shape, emission, albedo
+    kind: str  # translate, rotate, scale, vertex, shape, emission, albedo, roughness
     axis: int = -1  # 0 for x, 1 for y (translate, vertex)
     index: int = -1  # vertex index, or shape coefficient index
 
@@ -77,6 +78,10 @@ def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
         return Parameter(name, target, "translate", axis=axes[rest[1]])
     if rest in (["scale"], ["emission"], ["albedo"]):
         return Parameter(name, target, rest[0])
+    if rest == ["roughness"]:
+        if not shape.glossy:
+            raise bad(f"shape {target!r} is diffuse: only a shape with a 'roughness' (glossy) has one")
+        return Parameter(name, target, "roughness")
     if rest == ["rotate"]:
         if shape.type == "circle":
             raise bad("a circle does not change when rotated about its centre")
@@ -92,7 +97,7 @@ def parse_parameter(scene: Scene, name: Any, field: str = "param") -> Parameter:
             has = f"shape.0 to shape.{terms - 1}" if terms else "no shape coefficients (polygons have them)"
             raise bad(f"shape {target!r} ({shape.type}, {len(shape.points)} points) has {has}")
         return Parameter(name, target, "shape", index=k)
-    raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, shape.K, emission or albedo")
+    raise bad("use translate.x|y, rotate, scale, vertex.K.x|y, shape.K, emission, albedo or roughness")
 
 
 def parse_parameters(scene: Scene, names: Any, field: str = "param") -> tuple[Parameter, ...]:
@@ -123,6 +128,7 @@ class SceneState:
     prim_shape: np.ndarray  # (S + C,) int
     emission: Any  # (S + C,)
     albedo: Any  # (S + C,)
+    roughness: Any  # (S + C,) GGX α of glossy primitives, 0.0 for diffuse ones
     one_sided: np.ndarray  # (S + C,) bool
     fade: np.ndarray  # (S + C,) float
     vertices: Any  # (V, 2)
@@ -153,6 +159,11 @@ class SceneState:
     def detached(self) -> SceneState:
         """The same geometry with every derivative dropped (for tracing and jump values)."""
         return replace(self, **{f.name: detach(getattr(self, f.name)) for f in fields(self)})
+
+    @property
+    def glossy(self) -> np.ndarray:
+        """Which primitives are glossy (roughness > 0), shape (S + C,) bool."""
+        return detach(self.roughness) > 0.0
 
     def emitters(self) -> np.ndarray:
         """Indices of primitives with emission > 0 (at this parameter value)."""
@@ -240,7 +251,7 @@ def _moves(scene: Scene, param: Any, theta: Any) -> tuple[tuple[Parameter, Any],
 def check_offsets(scene: Scene, offsets: Any, field: str = "offsets") -> tuple[tuple[str, float], ...]:
     """A mapping (or pairs) from parameter names to finite offsets, checked against ``scene``: one
     ValidationError naming ``field`` when a name is unknown or the offsets leave an albedo outside
-    [0, 1], an emission below 0 or a scale factor $1 + θ$ at or below 0."""
+    [0, 1], an emission below 0, a roughness outside (0, 1] or a scale factor $1 + θ$ at or below 0."""
     pairs = list(offsets.items()) if isinstance(offsets, dict) else offsets
     if not isinstance(pairs, list | tuple):
         raise ValidationError(field, f"must map parameter names to offsets, got {offsets!r}")
@@ -257,6 +268,13 @@ def check_offsets(scene: Scene, offsets: Any, field: str = "offsets") -> tuple[t
         if p.kind == "emission" and base.emission + theta < 0.0:
             raise ValidationError(
                 field, f"{p.name} = {theta!r} leaves the emission {base.emission + theta!r} < 0"
+            )
+        if p.kind == "roughness" and not 0.0 < base.roughness + theta <= ALPHA_MAX:
+            raise ValidationError(
+                field,
+                f"{p.name} = {theta!r} leaves the roughness {base.roughness + theta!r}, "
+                f"not in (0, {ALPHA_MAX:g}] (0 is a perfect mirror, a delta BSDF: "
+                "no integral to reparameterize)",
             )
         if p.kind == "scale" and not 1.0 + theta > 0.0:
             raise ValidationError(field, f"{p.name} = {theta!r} makes the scale factor 1 + θ <= 0")
@@ -316,13 +334,16 @@ def build_state(
     prim_shape = np.array(seg_shape + circ_shape, dtype=np.int64)
     emission: Any = np.array([scene.shapes[k].emission for k in prim_shape])
     albedo: Any = np.array([scene.shapes[k].albedo for k in prim_shape])
+    roughness: Any = np.array([scene.shapes[k].roughness for k in prim_shape], dtype=np.float64)
     for p, theta in moves:
-        if p.kind in ("emission", "albedo"):
+        if p.kind in ("emission", "albedo", "roughness"):
             mask = np.array([scene.shapes[k].name == p.target for k in prim_shape], dtype=np.float64)
             if p.kind == "emission":
                 emission = emission + theta * mask
-            else:
+            elif p.kind == "albedo":
                 albedo = albedo + theta * mask
+            else:  # a diffuse primitive's 0.0 stays 0.0: θ times a mask of 0 (parse_parameter: glossy only)
+                roughness = roughness + theta * mask
     cam = scene.camera
     o: Any = np.array(cam.position, dtype=np.float64)
     f: Any = np.array(cam.direction, dtype=np.float64)
@@ -341,6 +362,7 @@ def build_state(
         prim_shape=prim_shape,
         emission=emission,
         albedo=albedo,
+        roughness=roughness,
         one_sided=np.array(seg_one + circ_one, dtype=bool),
         fade=np.array(seg_fade + [0.0] * len(circ_shape), dtype=np.float64),
         vertices=np.concatenate(vertices) if vertices else empty2,

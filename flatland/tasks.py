@@ -59,7 +59,7 @@ class Tally:
 @dataclass(frozen=True)
 class ImageTask:
     """Every pixel of the scene's camera: ``spp`` samples per pixel in ``batches`` batches of
-    ``spp // batches``, which give the standard errors; paths of up to ``max_depth`` diffuse vertices
+    ``spp // batches``, which give the standard errors; paths of up to ``max_depth`` vertices
     (1: direct illumination, :func:`~flatland.integrator.trace_paths`)."""
 
     scene: Scene
@@ -114,7 +114,7 @@ class ImageTask:
 class PointTask:
     r"""The irradiance $E(x) = ∫ L_i(x, φ) \max(0, \cos(φ - φ_n))\, dφ$
     at a fixed ``point`` with unit ``normal``: ``n`` samples in ``batches`` batches (one "pixel"). With
-    ``max_depth`` d > 1, $L_i$ is the radiance of paths of up to d - 1 further diffuse vertices."""
+    ``max_depth`` d > 1, $L_i$ is the radiance of paths of up to d - 1 further vertices."""
 
     scene: Scene
     param: Parameter | tuple[Parameter, ...] | None

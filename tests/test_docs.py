@@ -426,7 +426,7 @@ SCENE_ERRORS = [
     (
         lambda d: d["shapes"][2].update(colour="red"),
         "shapes[2].colour: unknown key (value 'red'); allowed keys: name, type, albedo, emission, "
-        "one_sided, points",
+        "one_sided, roughness, points",
     ),
     (
         lambda d: d["shapes"][0].update(points=[[-3.0, 0.0], [-3.0, 0.0]]),

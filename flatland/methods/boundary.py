@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from flatland import glossy
 from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
+from flatland.glossy import Lobe
 from flatland.integrator import Context, Identity, incident, radiance_along_film
 from flatland.lights import Lights
 from flatland.methods._common import GRADIENT_METHODS, direct_only
@@ -45,14 +47,18 @@ EPS_FILM = 1e-7
 class BoundaryTransforms(Identity):
     """Identity transforms plus the jump terms at the shading points and at the pixels."""
 
-    def shading_extra(self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray) -> np.ndarray:
+    def shading_extra(
+        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None
+    ) -> np.ndarray:
         r"""$Σ_c [f(c^-) - f(c^+)] φ_c'(θ)$ of the integrand $f = L_i \cos$ of E at each shading point.
 
         Candidates c are the angles of all vertices and circle tangent points seen from
         x(θ) (Duals: they move with the geometry and with x); only those in front of the
         surface (cos > 0) can matter, since f vanishes behind it. The jump is found by
         tracing at $c ∓ ε$ on the detached geometry. For k parameters the term has a leading
-        axis of k: the same jumps times each parameter's $φ_c'$.
+        axis of k: the same jumps times each parameter's $φ_c'$. With a ``lobe`` (glossy scenes) the
+        integrand is $L_i w$ of the reflected radiance (:mod:`flatland.glossy`): the lobe w is continuous
+        in φ, so the jump is $w(c) [L_i(c^-) - L_i(c^+)]$, w evaluated at the jump direction.
         """
         n, k = ignore.size, ctx.geom.k
         out = np.zeros(n if k is None else (k, n))
@@ -60,17 +66,21 @@ class BoundaryTransforms(Identity):
         step = max(1, MAX_CANDIDATES // max(m, 1))
         for lo in range(0, n, step):  # blocks of shading points: (points x candidates) stays bounded
             sl = slice(lo, min(n, lo + step))
-            out[..., sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl])
+            part = None if lobe is None else lobe.take(np.arange(sl.start, sl.stop))
+            out[..., sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl], part)
         return out
 
     @staticmethod
-    def _jumps(ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray) -> np.ndarray | float:
+    def _jumps(
+        ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray, lobe: Lobe | None
+    ) -> np.ndarray | float:
         n = ignore.size
         phi_c, exists = silhouette_angles(ctx.geom, x)
         if phi_c.shape[1] == 0:
             return 0.0
         phi0 = detach(phi_c)
-        cos_c = np.cos(phi0 - np.arctan2(n0[:, 1], n0[:, 0])[:, None])
+        phi_n0 = np.arctan2(n0[:, 1], n0[:, 0])
+        cos_c = np.cos(phi0 - phi_n0[:, None])
         rows, cols = np.nonzero(exists & (cos_c > 1e-12))
         if not rows.size:
             return 0.0
@@ -81,8 +91,10 @@ class BoundaryTransforms(Identity):
             d = direction(phi + sign * EPS_ANGLE)
             hits = cast(ctx.geom0, origins, d, ignore[rows])
             sides.append(incident(ctx.geom0, origins, d, hits)[0])
+        # the integrand's smooth factor at c: the cosine of E, or the lobe w(c) of L_r
+        w = cos_c[rows, cols] if lobe is None else glossy.weight_plain(lobe.take(rows), phi, phi_n0[rows])
         # discontinuity term: (f(c-) - f(c+)) * dc/dtheta   (Leibniz rule, theory/leibniz)
-        term = (sides[0] - sides[1]) * cos_c[rows, cols] * tangent(phi_c[rows, cols])
+        term = (sides[0] - sides[1]) * w * tangent(phi_c[rows, cols])
         if term.ndim == 1:
             return np.bincount(rows, weights=term, minlength=n)
         return np.stack([np.bincount(rows, weights=slot, minlength=n) for slot in term])  # k parameters

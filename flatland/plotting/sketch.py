@@ -9,7 +9,7 @@ in scene coordinates with equal aspect:
   segment (its right, looking from its first point to its second);
 * the pinhole camera, its frustum (the field of view, film coordinates
   t in $[-\tan(\mathrm{fov}/2), \tan(\mathrm{fov}/2)]$) and its film, with the end of pixel 0 marked;
-* with a parameter: the part θ moves (or whose emission or albedo θ changes) under a
+* with a parameter: the part θ moves (or whose emission, albedo or roughness θ changes) under a
   translucent halo, arrows of its points' velocity $dp/dθ$ scaled by a small step dθ,
   and the part at $θ + dθ$ dashed, to first order $p + dθ · dp/dθ$ (the arrows end on it).
 
@@ -78,6 +78,7 @@ def _parts(scene: Any, state: Any) -> list[dict[str, Any]]:
     r, r_dot = _pairs(state.circ_r)
     emission, emission_dot = _pairs(state.emission)
     _, albedo_dot = _pairs(state.albedo)
+    _, roughness_dot = _pairs(state.roughness)
     n_seg = a.shape[0]
     parts = []
     for k in dict.fromkeys(state.prim_shape.tolist()):  # shapes in scene order
@@ -87,7 +88,11 @@ def _parts(scene: Any, state: Any) -> list[dict[str, Any]]:
             "name": scene.shapes[k].name if scene is not None else f"shape {k}",
             "emitter": bool(np.any(emission[prims] > 0.0)),
             "one_sided": bool(np.any(state.one_sided[prims])),
-            "changes": bool(np.any(emission_dot[prims] != 0.0) or np.any(albedo_dot[prims] != 0.0)),
+            "changes": bool(
+                np.any(emission_dot[prims] != 0.0)
+                or np.any(albedo_dot[prims] != 0.0)
+                or np.any(roughness_dot[prims] != 0.0)
+            ),
         }
         if circs.size:  # a circle shape is one primitive
             i = int(circs[0])

@@ -115,6 +115,28 @@ DEGENERATE = {
         ],
         ["edge.translate.y", "facing.translate.x", "occ.translate.x", "edge.rotate"],
     ),
+    "glossy_extremes": (  # roughness at both ends, a glossy emitter, circle, polygon, a floor seen at grazing
+        [
+            _seg("floor", [-3.0, 0.0], [3.0, 0.0], albedo=1.0, roughness=1e-3),
+            _seg("light", [-1.0, 2.0], [1.0, 2.0], emission=3.0, albedo=0.9, roughness=1.0),
+            {
+                "name": "ball",
+                "type": "circle",
+                "center": [-0.3, 0.8],
+                "radius": 0.3,
+                "albedo": 0.7,
+                "roughness": 0.05,
+            },
+            {
+                "name": "tri",
+                "type": "polygon",
+                "points": [[0.5, 0.5], [1.0, 0.5], [0.7, 1.0]],
+                "albedo": 0.0,
+                "roughness": 0.5,
+            },
+        ],
+        ["ball.translate.x", "floor.roughness", "light.roughness", "tri.albedo", "camera.translate.y"],
+    ),
 }
 
 

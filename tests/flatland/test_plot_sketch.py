@@ -116,7 +116,7 @@ def test04_every_builtin_scene_and_every_parameter_marks_exactly_its_part(name):
             assert camera_edge == SKETCH_COLOURS["moving"], param
             continue
         assert marked == {p.target} and camera_edge == SKETCH_COLOURS["camera"], param
-        geometric = p.kind not in ("emission", "albedo")
+        geometric = p.kind not in ("emission", "albedo", "roughness")
         assert moved == ({p.target} if geometric else set()), param
         assert ax.get_title() == f"{name}: {param}"
 

@@ -13,7 +13,16 @@ from flatland.core.validate import ValidationError
 from flatland.scene import Scene, list_scenes, load_scene
 from flatland.state import build_state, parse_parameter
 
-BUILTINS = ("penumbra", "polygon", "shadow", "silhouette", "two_occluders")
+BUILTINS = (
+    "furnace",
+    "glossy_reflection",
+    "interreflection",
+    "penumbra",
+    "polygon",
+    "shadow",
+    "silhouette",
+    "two_occluders",
+)
 
 
 def _base() -> dict:

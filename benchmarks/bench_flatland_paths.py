@@ -1,0 +1,49 @@
+"""flatland's paths and glossy surfaces: what ``max_depth`` and each gradient method cost.
+
+The two built-in scenes made for them, ``glossy_reflection`` (a glossy floor, GGX roughness 0.2,
+an occluder, its reflection and its shadow on a diffuse wall) and ``interreflection`` (a closed
+diffuse box lit through its ceiling), at 128 pixels and 64 samples per pixel: the primal render at
+depths 1, 2 and 4 (the goal: depth 4 at most 3x depth 1), and the derivative image of
+``occluder.translate.x`` by each method at the depths it takes (``reparam`` and ``boundary``: depth 1
+only), as multiples of the depth-1 primal. Wall times are the best of seven calls, on whatever else
+the machine was running.
+"""
+
+from __future__ import annotations
+
+from benchmarks import Row, best_seconds
+from flatland.render import render, render_gradient
+from flatland.scene import load_scene
+
+PIXELS, SPP = 128, 64
+REPEATS = 7  # calls of tens of milliseconds: the best of seven is the least disturbed by other load
+SCENES = ("glossy_reflection", "interreflection")
+GRADIENTS = (("naive", 1), ("naive", 4), ("finite_difference", 4), ("boundary", 1), ("reparam", 1))
+
+
+def run() -> list[Row]:
+    """Seconds per primal render by depth, and each gradient's cost relative to the depth-1 primal."""
+    rows = []
+    for name in SCENES:
+        scene = load_scene(name).with_camera(pixels=PIXELS)
+        primal = {}
+        for depth in (1, 2, 4):
+            primal[depth] = best_seconds(
+                lambda d=depth, s=scene: render(s, spp=SPP, seed=1, max_depth=d, progress=False), REPEATS
+            )
+            rows.append(
+                Row(f"{name} primal", f"max_depth {depth}, {PIXELS} px x {SPP} spp", primal[depth], "s")
+            )
+        rows.append(Row(f"{name} primal", "depth 4 / depth 1", primal[4] / primal[1], "x", "goal <= 3"))
+        for method, depth in GRADIENTS:
+            seconds = best_seconds(
+                lambda m=method, d=depth, s=scene: render_gradient(
+                    s, "occluder.translate.x", m, spp=SPP, seed=1, max_depth=d, progress=False
+                ),
+                REPEATS,
+            )
+            rows.append(
+                Row(f"{name} gradient", f"{method}, max_depth {depth}", seconds / primal[1], "x primal d1",
+                    f"{seconds:.3f} s")
+            )  # fmt: skip
+    return rows
