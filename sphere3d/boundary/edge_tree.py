@@ -392,6 +392,7 @@ def _compiled() -> Callable:
 
 
 _TREES: dict[int, tuple[weakref.ref, dict[bytes, EdgeTree]]] = {}
+_BUILDING: dict[tuple[int, bytes], threading.Event] = {}
 _LOCK = threading.Lock()
 
 
@@ -400,22 +401,36 @@ def edge_tree(edges: Edges, first: np.ndarray, restrict: bool = False) -> EdgeTr
     built once per ``edges`` object and kept while ``edges`` lives, and with ``restrict``, walking only
     ``first``'s edges (:meth:`EdgeTree.restrict`): every slice of shading points of a render, and
     both groups of points (fixed ones testing the moving edges, moving ones all), share one build.
-    Read-only."""
-    key = first.tobytes()
-    with _LOCK:
-        entry = _TREES.get(id(edges))
-        if entry is not None and entry[0]() is edges and (key, restrict) in entry[1]:
-            return entry[1][key, restrict]
-        whole = entry[1].get((key, False)) if entry is not None and entry[0]() is edges else None
-    if whole is None:
-        whole = EdgeTree.build(edges, np.arange(len(edges)), first)
-    tree = whole.restrict(first) if restrict else whole
-    with _LOCK:
-        key_edges = id(edges)
-        entry = _TREES.get(key_edges)
-        if entry is None or entry[0]() is not edges:
-            ref = weakref.ref(edges, lambda _: _TREES.pop(key_edges, None))
-            entry = _TREES[key_edges] = (ref, {})
-        entry[1][key, False] = whole
-        entry[1][key, restrict] = tree
-    return tree
+    One thread builds it; threads asking meanwhile wait for it (the render's chunks ask at once:
+    each building its own cost the build's time and memory once per thread). Read-only."""
+    key, key_edges = first.tobytes(), id(edges)
+    mine = None  # the event this thread sets once it has built the whole tree
+    while True:
+        with _LOCK:
+            entry = _TREES.get(key_edges)
+            if entry is not None and entry[0]() is edges and (key, restrict) in entry[1]:
+                return entry[1][key, restrict]
+            whole = entry[1].get((key, False)) if entry is not None and entry[0]() is edges else None
+            event = _BUILDING.get((key_edges, key))
+            if whole is not None or event is None:  # this thread builds (or only restricts) it
+                if whole is None:
+                    mine = _BUILDING[key_edges, key] = threading.Event()
+                break
+        event.wait()  # another thread builds the whole tree; then read it (or build it, had that failed)
+    try:
+        if whole is None:
+            whole = EdgeTree.build(edges, np.arange(len(edges)), first)
+        tree = whole.restrict(first) if restrict else whole
+        with _LOCK:
+            entry = _TREES.get(key_edges)
+            if entry is None or entry[0]() is not edges:
+                ref = weakref.ref(edges, lambda _: _TREES.pop(key_edges, None))
+                entry = _TREES[key_edges] = (ref, {})
+            entry[1][key, False] = whole
+            entry[1][key, restrict] = tree
+        return tree
+    finally:
+        if mine is not None:
+            with _LOCK:
+                del _BUILDING[key_edges, key]
+            mine.set()

@@ -58,7 +58,13 @@ from sphere3d.state import per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 
-__all__ = ["EPS_ANGLE", "MAX_EMITTER_TRIANGLES", "clip_arcs", "shading_edge_term"]
+__all__ = [
+    "EPS_ANGLE",
+    "MAX_EMITTER_TRIANGLES",
+    "clip_arcs",
+    "moving_edges",
+    "shading_edge_term",
+]
 
 EPS_ANGLE = 1e-6
 """Angle δ (radians) between the sampled edge direction and the nearer rays traced beside it (the others
@@ -274,6 +280,12 @@ def _choose(edges, o, n0, u, moving, point_moves, bounds, unclipped) -> tuple[np
     return live, cols[p], s0[p], s1[p], lo[p, sub[j]], angle[j], lo[p], hi[p], total[row[live]]
 
 
+def moving_edges(state, edges: Edges) -> np.ndarray:
+    """Per edge: whether an end of it moves under any parameter (the edges the tree puts first)."""
+    vertex_moves = _moving_vertices(state)
+    return vertex_moves[edges.face, edges.ia] | vertex_moves[edges.face, edges.ib]
+
+
 def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.ndarray:
     r"""One estimate per shading point of the boundary term of E (see the module docstring).
 
@@ -305,8 +317,7 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.n
         return out
     o = shading.origin
     n0 = np.asarray(detach(shading.n), dtype=np.float64)
-    vertex_moves = _moving_vertices(state)
-    moving = vertex_moves[edges.face, edges.ia] | vertex_moves[edges.face, edges.ib]
+    moving = moving_edges(state, edges)
     point_moves = np.any(moves(shading.x), axis=-1)
     unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
     per_point = u.shape[2]
