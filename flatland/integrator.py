@@ -45,7 +45,7 @@ samples and batches is :meth:`flatland.tasks.ImageTask.evaluate` (and
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -76,6 +76,7 @@ __all__ = [
     "incident",
     "pixel_samples",
     "radiance_along_film",
+    "radiance_along_rays",
     "shade",
     "trace_paths",
 ]
@@ -143,11 +144,13 @@ class Transforms(Protocol):
         ...
 
     def shading_extra(
-        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None
-    ) -> np.ndarray | None:
+        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None,
+        draws: Draws | None = None,
+    ) -> np.ndarray | None:  # fmt: skip
         """2D only: a derivative-only term added to E at each shading point, shape (n,), or (k, n) for
         k parameters (``ctx.geom.k``) (None: nothing). With a ``lobe`` (glossy scenes), a term of the
-        reflected radiance $∫ L_i w$ instead (:mod:`flatland.glossy`)."""
+        reflected radiance $∫ L_i w$ instead (:mod:`flatland.glossy`). ``draws`` keys the n rows (for
+        the paths the term may trace; ``ctx.vertex`` is the points' vertex on their paths)."""
         ...
 
     def pixel_extra(
@@ -168,8 +171,9 @@ class Identity:
         return Members(phi[:, None])
 
     def shading_extra(
-        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None
-    ) -> np.ndarray | None:
+        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None,
+        draws: Draws | None = None,
+    ) -> np.ndarray | None:  # fmt: skip
         return None
 
     def pixel_extra(
@@ -181,7 +185,8 @@ class Identity:
 @dataclass(frozen=True)
 class Context:
     """What the transforms may use: the scene state (θ-dependent and detached) and the emitters;
-    and how many vertices a path has, ``max_depth`` (1: direct illumination).
+    how many vertices a path has, ``max_depth`` (1: direct illumination), and which of them is being
+    shaded, ``vertex`` (1: the camera's hit or a :class:`~flatland.tasks.PointTask`'s point).
 
     Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
     argument), keyed on the primary samples, never from a per-chunk stream.
@@ -192,6 +197,7 @@ class Context:
     lights: Lights
     transforms: Transforms
     max_depth: int = 1
+    vertex: int = 1
 
 
 # ------------------------------------------------------------------ radiance
@@ -235,6 +241,8 @@ class Bounce:
     shading point (a Dual when the normal moves; its value is the density's $2 p_\mathrm{cos}$).
     ``throughput`` (n,), shading with a :class:`~flatland.glossy.Lobe` only: the BSDF sample's weight
     $w(φ) / p_\mathrm{bsdf}(φ)$ with w Dual and the density θ-free (0 where the density is 0).
+    ``weight`` (n,): the transforms' kernel weight of the BSDF sample (value 1; None for the identity),
+    which multiplies everything the path gathers beyond this vertex (the authors' path reparameterization).
     """
 
     hit: np.ndarray
@@ -244,6 +252,7 @@ class Bounce:
     dirs: Any
     cosine: Any
     throughput: Any = None
+    weight: Any = None
 
 
 def shade(
@@ -314,7 +323,7 @@ def shade(
         w = glossy.weight(lobes.take(rep), flat, glossy.angle_of_vector(nr), cos)
         f = li * w
     total = members.reduce(f * inv[rep]).reshape(techniques, n).sum(axis=0)
-    extra = ctx.transforms.shading_extra(ctx, x, normal, ignore, *(() if lobe is None else (lobe,)))
+    extra = ctx.transforms.shading_extra(ctx, x, normal, ignore, lobe, draws=draws)
     if extra is not None:
         total = total + Dual(np.zeros(n), extra, ctx.geom.k)
     if not bounce:
@@ -329,7 +338,9 @@ def shade(
     if lobe is not None:  # w / p_bsdf on the BSDF sample's rows (the first n)
         p0 = p_bsdf[:n]
         throughput = np.where(p0 > 0.0, w[:n] / np.where(p0 > 0.0, p0, 1.0), 0.0)
-    return total, Bounce(hit, hits.prim[:n], point, nrm, d[:n], cos[:n], throughput)
+    # a path goes on along the sample where the transforms put it, carrying its kernel weight
+    weight = None if members.weights is None else members.weights[:n, 0]
+    return total, Bounce(hit, hits.prim[:n], point, nrm, d[:n], cos[:n], throughput, weight)
 
 
 # ------------------------------------------------------------------ paths
@@ -385,12 +396,15 @@ def trace_paths(
         last = depth == ctx.max_depth
         u = draws.uniforms(f"bounce.{depth}", 3)  # keyed on (sample, depth): chunking changes nothing
         lobe = glossy.lobe_at(geom, prim[sel], d)
-        out = shade(ctx, bounce.point[sel], n_shade, prim[sel], u, draws, not last, lobe)
+        out = shade(
+            replace(ctx, vertex=depth), bounce.point[sel], n_shade, prim[sel], u, draws, not last, lobe
+        )
         e, bounce = (out, None) if last else out
         total[rows] = total[rows] + (beta * 0.5 * rho * e if lobe is None else beta * e)
         if last:
             break
         beta = beta * rho * cosine_ratio(bounce.cosine) if lobe is None else beta * bounce.throughput
+        beta = beta if bounce.weight is None else beta * bounce.weight
         depth += 1
     return total
 
@@ -400,9 +414,19 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
     """$L(t)$ for film evaluation points ``t_eval`` (n,): emission at the hit + $(ρ/2) E$ there, and
     with ``ctx.max_depth`` > 1 the further vertices of its path (:func:`trace_paths`)."""
     geom = ctx.geom
-    d = film_direction(geom, t_eval)
-    hits = cast(ctx.geom0, detach(geom.cam_o), detach(d))
-    radiance, att = incident(geom, geom.cam_o, d, hits)
+    return radiance_along_rays(ctx, geom.cam_o, film_direction(geom, t_eval), None, u, draws)
+
+
+def radiance_along_rays(
+    ctx: Context, origins: Any, d: Any, ignore: np.ndarray | None, u: np.ndarray, draws: Draws
+) -> Any:
+    r"""Radiance arriving at ``origins`` ((2,) or (n, 2)) along directions ``d`` (n, 2): the emission $L_e$
+    the ray meets plus the radiance its hit reflects along paths of up to ``ctx.max_depth`` vertices,
+    the hit being vertex 1 (uniforms ``u`` (n, 3) for its shading, ``draws`` keying the rest).
+    ``ignore`` (n,): the primitive each origin lies on (None: none)."""
+    geom = ctx.geom
+    hits = cast(ctx.geom0, detach(origins), detach(d), ignore)
+    radiance, att = incident(geom, origins, d, hits)
     rows = np.flatnonzero(hits.hit)
     if not rows.size:
         return radiance
@@ -423,6 +447,7 @@ def radiance_along_film(ctx: Context, t_eval: Any, u: np.ndarray, draws: Draws) 
     radiance[rows[sub]] = radiance[rows[sub]] + (0.5 * rho[sub] * e if lobe is None else e)
     if paths:  # a diffuse vertex's cosine sample weight: f cos / p = (ρ/2) cos_θ / (cos_θ0 / 2)
         beta = rho[sub] * cosine_ratio(bounce.cosine) if lobe is None else bounce.throughput
+        beta = beta if bounce.weight is None else beta * bounce.weight
         radiance = trace_paths(ctx, radiance, rows[sub], beta, bounce, draws.take(rows[sub]), 2)
     return radiance
 

@@ -159,7 +159,9 @@ class PointTask:
                 return shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws)
             e, bounce = shade(ctx, x, normal, np.full(n, -1), u[:, 1:], draws, True)
             # the indirect part of E by the cosine sample: L_i cos / p_cos = 2 L_i cos_θ / cos_θ0
-            return trace_paths(ctx, e, np.arange(n), 2.0 * cosine_ratio(bounce.cosine), bounce, draws, 2)
+            beta = 2.0 * cosine_ratio(bounce.cosine)
+            beta = beta if bounce.weight is None else beta * bounce.weight  # the transforms' kernel weight
+            return trace_paths(ctx, e, np.arange(n), beta, bounce, draws, 2)
 
         value, deriv = _sums(self, self.state(theta), transforms, estimate)
         return Tally(value, deriv)

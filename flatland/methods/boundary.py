@@ -24,9 +24,9 @@ from flatland import glossy
 from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
 from flatland.glossy import Lobe
-from flatland.integrator import Context, Identity, incident, radiance_along_film
+from flatland.integrator import Context, Identity, incident, radiance_along_film, radiance_along_rays
 from flatland.lights import Lights
-from flatland.methods._common import GRADIENT_METHODS, direct_only
+from flatland.methods._common import GRADIENT_METHODS
 from flatland.sampling import filter_value
 from flatland.state import SceneState
 from flatland.tasks import ImageTask, PointTask, Tally
@@ -40,6 +40,10 @@ EPS_ANGLE = 1e-7
 MAX_CANDIDATES = 1 << 18
 """Shading points × candidate discontinuities handled together (bounds memory in vertex-rich scenes)."""
 
+SIDE_PATHS = 1 << 48
+"""Offset of the key words (:class:`~flatland.core.rng.Draws` ``path``) of the paths traced from a jump's
+two sides, above every word of the primary paths: their random numbers are their own."""
+
 EPS_FILM = 1e-7
 """Film-coordinate offset (relative to $1 + |t|$) of the two camera rays beside a candidate."""
 
@@ -48,8 +52,9 @@ class BoundaryTransforms(Identity):
     """Identity transforms plus the jump terms at the shading points and at the pixels."""
 
     def shading_extra(
-        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None
-    ) -> np.ndarray:
+        self, ctx: Context, x: Any, normal: Any, ignore: np.ndarray, lobe: Lobe | None = None,
+        draws: Draws | None = None,
+    ) -> np.ndarray:  # fmt: skip
         r"""$Σ_c [f(c^-) - f(c^+)] φ_c'(θ)$ of the integrand $f = L_i \cos$ of E at each shading point.
 
         Candidates c are the angles of all vertices and circle tangent points seen from
@@ -59,6 +64,17 @@ class BoundaryTransforms(Identity):
         axis of k: the same jumps times each parameter's $φ_c'$. With a ``lobe`` (glossy scenes) the
         integrand is $L_i w$ of the reflected radiance (:mod:`flatland.glossy`): the lobe w is continuous
         in φ, so the jump is $w(c) [L_i(c^-) - L_i(c^+)]$, w evaluated at the jump direction.
+
+        On paths (the points are vertex v = ``ctx.vertex`` of paths of up to d = ``ctx.max_depth``
+        vertices, v < d), $L_i(c^\pm)$ is the emission the side ray meets plus what its hit reflects
+        along paths of up to d - v further vertices: each side is estimated by one path
+        (:func:`~flatland.integrator.radiance_along_rays` on the detached scene, identity transforms),
+        both sides from the same random numbers (keyed on the row, the vertex and the candidate, apart
+        from the primary paths' by :data:`SIDE_PATHS`). Each side's estimate is unbiased for its
+        $L_i$, so the jump term is unbiased given the vertex; its variance adds the two paths' (less
+        their covariance, large where both sides see the same surface). The caller's path multiplies
+        the term by the throughput's value into the vertex; the throughput's own derivative (the
+        vertices moving) is the naive interior term's, and the side paths carry no tangent.
         """
         n, k = ignore.size, ctx.geom.k
         out = np.zeros(n if k is None else (k, n))
@@ -67,12 +83,13 @@ class BoundaryTransforms(Identity):
         for lo in range(0, n, step):  # blocks of shading points: (points x candidates) stays bounded
             sl = slice(lo, min(n, lo + step))
             part = None if lobe is None else lobe.take(np.arange(sl.start, sl.stop))
-            out[..., sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl], part)
+            rows = None if draws is None else draws.take(np.arange(sl.start, sl.stop))
+            out[..., sl] = self._jumps(ctx, x[sl], detach(normal)[sl], ignore[sl], part, rows)
         return out
 
     @staticmethod
     def _jumps(
-        ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray, lobe: Lobe | None
+        ctx: Context, x: Any, n0: np.ndarray, ignore: np.ndarray, lobe: Lobe | None, draws: Draws | None
     ) -> np.ndarray | float:
         n = ignore.size
         phi_c, exists = silhouette_angles(ctx.geom, x)
@@ -87,8 +104,19 @@ class BoundaryTransforms(Identity):
         phi = phi0[rows, cols]
         origins = detach(x)[rows]
         sides = []
+        further = ctx.max_depth - ctx.vertex  # vertices the side paths may have beyond this one
+        if further > 0:  # one side path per row and candidate, the same numbers on both sides
+            key = SIDE_PATHS + (draws.path[rows] * 64 + ctx.vertex) * phi_c.shape[1] + cols
+            side = Draws(draws.seed, draws.sample[rows], key)
+            u, side_ctx = (
+                side.uniforms("boundary.side", 3),
+                Context(ctx.geom0, ctx.geom0, ctx.lights, Identity(), further),
+            )
         for sign in (-1.0, 1.0):  # c⁻ then c⁺
             d = direction(phi + sign * EPS_ANGLE)
+            if further > 0:  # L_i(c±) = L_e + the radiance reflected along the rest of the path
+                sides.append(radiance_along_rays(side_ctx, origins, d, ignore[rows], u, side))
+                continue
             hits = cast(ctx.geom0, origins, d, ignore[rows])
             sides.append(incident(ctx.geom0, origins, d, hits)[0])
         # the integrand's smooth factor at c: the cosine of E, or the lobe w(c) of L_r
@@ -132,11 +160,13 @@ class BoundaryTransforms(Identity):
         eps = EPS_FILM * (1.0 + np.abs(t0))
         t_eval = np.concatenate([np.repeat(t0 - eps, n_s), np.repeat(t0 + eps, n_s)])
         lights = Lights.of(geom0)
-        ctx = Context(geom0, geom0, lights, Identity())
+        ctx = Context(geom0, geom0, lights, Identity(), task.max_depth)
         for b in range(task.batches):
             u = stream(task.seed, "boundary", b).random((m * n_s, 3))
-            # identity transforms draw nothing; the rows are keyed on the edge sample, the same on both sides
-            draws = Draws.of(task.seed, np.arange(m * n_s)).tile(2)
+            # paths beyond vertex 1 draw keyed on (batch, edge sample), the same on both sides and apart
+            # from the primary paths (SIDE_PATHS); identity transforms draw nothing at depth 1
+            index = np.tile(b * m * n_s + np.arange(m * n_s), 2)
+            draws = Draws(task.seed, index, np.full(index.size, SIDE_PATHS - 1, dtype=np.int64))
             radiance = radiance_along_film(
                 ctx, t_eval, np.concatenate([u, u]), draws
             )  # same samples both sides
@@ -167,11 +197,20 @@ def boundary(task: ImageTask | PointTask) -> Tally:
     position. The pixel filter is static in t, so it adds no term, whatever its shape
     (box included).
 
-    Unbiased whenever the enumeration is complete, which it is for direct
-    illumination of these scenes; the camera-side jumps are themselves Monte Carlo
-    estimates (unbiased). Cost: two rays per candidate per shading point. Its
-    failure modes: two discontinuities within ``EPS_ANGLE`` of each other, and
-    candidates seen exactly edge-on, both of measure zero.
+    Paths (``max_depth`` d > 1): every vertex's shading integral gets its jump terms, added inside
+    :func:`~flatland.integrator.shade` and so multiplied by the value of the path throughput into
+    the vertex; the radiance on each side of a jump is the emission there plus one path of the
+    remaining depth traced from the side ray (:meth:`BoundaryTransforms.shading_extra`), and the
+    camera's jumps see paths of d vertices. The throughput's own derivative (vertices sliding on
+    moving shapes, cosines, the glossy lobe at moved directions) is the naive interior term's forward
+    tangents; the side paths are traced on the detached scene and carry none, so no term is counted
+    twice: this is the Leibniz rule applied to each nested integral in turn.
+
+    Unbiased whenever the enumeration is complete, which it is for these scenes (every visibility
+    jump, at every vertex, is toward a segment end or a circle's tangent point); the camera-side
+    jumps and the jumps' sides on paths are themselves Monte Carlo estimates (unbiased). Cost: two
+    rays per candidate per shading point, on paths two paths of the remaining depth. Its failure
+    modes: two discontinuities within ``EPS_ANGLE`` of each other, and candidates seen exactly
+    edge-on, both of measure zero.
     """
-    direct_only(task, "boundary", "jump terms")
     return task.evaluate(task.dual_offset(), BoundaryTransforms())

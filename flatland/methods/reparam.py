@@ -23,8 +23,8 @@ from functools import partial
 
 from flatland.core.contract import Option
 from flatland.core.translation import check_continuous_filter
-from flatland.core.validate import check_bool, check_int, check_positive
-from flatland.methods._common import GRADIENT_METHODS, direct_only
+from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
+from flatland.methods._common import GRADIENT_METHODS
 from flatland.reparam.default import ReparamTransforms, default_kappa_film
 from flatland.tasks import ImageTask, PointTask, Tally
 
@@ -97,6 +97,16 @@ def reparam(
     (:func:`~flatland.reparam.probes.film_shape_end`,
     :func:`~flatland.reparam.probes.angle_shape_end`): exact whatever the shape's motion.
 
+    Paths (``max_depth`` > 1): every vertex's integral gets the same change of variables (its cosine
+    or BSDF sample and its emitter sample, each with its own kernel and probes from that vertex), and
+    the path goes on along the BSDF sample where the transform put it: the next vertex is the hit of
+    the warped direction re-attached to the θ-dependent scene, and the sample's kernel weight (value 1)
+    multiplies the throughput, so everything gathered beyond the vertex carries its derivative, as in
+    the authors' path reparameterization. ``paired`` is refused on paths (a path goes on along one
+    evaluation point per sample). The weights' derivatives multiply along the path, so the variance
+    grows with depth (tests/flatland/test_path_gradients.py measures it); the bias is that of each
+    vertex's heuristic, as at depth 1.
+
     Emitter samples: the authors used one transform per shading point, from the mean of the
     occluded shadow rays' hits, and emitters faded at their ends. Here each emitter sample
     gets its own kernel and probes like a cosine sample; fading still matters where the
@@ -116,7 +126,12 @@ def reparam(
     $1 / \mathrm{distance}$ near its support's end (a mildly heavy tail); the Gaussian
     filter's does not. Sizes: the measurement pages.
     """
-    direct_only(task, "reparam", "change of variables of the shading integral")
+    if paired and task.max_depth > 1:
+        raise ValidationError(
+            "paired",
+            f"must be False with max_depth > 1 (a path goes on along one evaluation point per sample, a "
+            f"pair has two), got {paired!r} with max_depth {task.max_depth!r}",
+        )
     if isinstance(task, ImageTask):
         check_continuous_filter(task.scene.camera.filter)
     if kappa_film is None:
