@@ -423,7 +423,10 @@ def test10_boundary_and_reparam_on_a_glossy_floor_by_region():
             assert abs(r - f) <= q * np.hypot(sr, sf), (name, r, f)
 
 
-@pytest.mark.parametrize(("method", "depth"), [("naive", 1), ("boundary", 1), ("reparam", 1), ("naive", 3)])
+@pytest.mark.parametrize(
+    ("method", "depth"),
+    [("naive", 1), ("boundary", 1), ("reparam", 1), ("naive", 3), ("boundary", 3), ("reparam", 3)],
+)
 def test11_every_parameter_of_a_glossy_scene_in_one_pass_is_its_single_call_bit_for_bit(method, depth):
     """k tangents through the lobe (roughness, albedo, emission and the occluder's translations of
     glossy_reflection at once): each slot is the single-parameter call's derivative, bit for bit."""
