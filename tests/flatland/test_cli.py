@@ -357,7 +357,7 @@ def test18_optimize_writes_images_loss_and_history_and_refuses_bad_targets(tmp_p
 def test19_max_depth_renders_longer_paths_and_a_bad_one_is_one_line(tmp_path, scene_file, capsys):
     """``--max-depth`` reaches render and gradient: depth 3 adds light (never removes it; in this scene
     the first extra light is the floor's, bounced off the occluder's underside back to the floor: three
-    vertices), naive takes it, reparam refuses it and 0 is refused, one line each."""
+    vertices), naive and reparam take it, paired reparam refuses it and 0 is refused, one line each."""
     base = ["render", str(scene_file), "--spp", "4", "--quiet"]
     assert main([*base, "--out", str(tmp_path / "d1")]) == 0
     assert main([*base, "--max-depth", "3", "--out", str(tmp_path / "d2")]) == 0
@@ -365,10 +365,14 @@ def test19_max_depth_renders_longer_paths_and_a_bad_one_is_one_line(tmp_path, sc
     assert np.all(two >= one - 1e-12) and np.any(two > one)
     grad = ["gradient", str(scene_file), "--param", "occluder.albedo", "--spp", "4", "--quiet"]
     assert main([*grad, "--method", "naive", "--max-depth", "2", "--out", str(tmp_path)]) == 0
+    assert main([*grad, "--method", "reparam", "--max-depth", "2", "--out", str(tmp_path)]) == 0
     capsys.readouterr()
     for argv, message in (
         ([*base, "--max-depth", "0", "--out", str(tmp_path)], "error: max_depth: "),
-        ([*grad, "--method", "reparam", "--max-depth", "2", "--out", str(tmp_path)], "error: max_depth: "),
+        (
+            [*grad, "--method", "reparam", "--paired", "--max-depth", "2", "--out", str(tmp_path)],
+            "error: paired: ",
+        ),
     ):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
