@@ -190,3 +190,19 @@ def test07_reparam_on_paths_carries_its_first_vertex_bias_and_adds_none():
     # depth 2 adds a derivative beyond the noise: the comparison of what it adds has something to compare
     s = np.hypot(bd1.derivative_stderr, bd2.derivative_stderr)
     assert np.max(np.abs(bd2.derivative - bd1.derivative) / np.where(s > 0.0, s, np.inf)) > q
+
+
+def test08_boundary_at_a_point_sees_the_indirect_shadow_move():
+    """``irradiance`` at a floor point of interreflection (0, 0.05), facing up, at depth 2: the point is
+    vertex 1, its jump terms see paths of one further vertex. boundary (2^15 samples) against finite
+    differences (h = 0.05, 2^18): Student t over 16 batches. Measured at seed 5: 0.0343 ± 0.0014
+    against 0.0359 ± 0.0008 (h = 0.02: 0.0316 ± 0.0013)."""
+    scene = load_scene("interreflection")
+    args = {"seed": 5, "max_depth": 2, "batches": BATCHES}
+    point, normal = (0.0, 0.05), (0.0, 1.0)
+    fd = irradiance(scene, point, normal, PARAM, "finite_difference", n=1 << 18, h=0.05, **args)
+    bd = irradiance(scene, point, normal, PARAM, "boundary", n=1 << 15, **args)
+    q = family_quantile(1, 1.0 - ALPHA, dof=BATCHES - 1)
+    s = np.hypot(float(fd.derivative_stderr), float(bd.derivative_stderr))
+    assert abs(float(bd.derivative) - float(fd.derivative)) <= q * s, (bd.derivative, fd.derivative, s)
+    assert abs(float(fd.derivative)) > 10.0 * s  # the derivative is resolved
