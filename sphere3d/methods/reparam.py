@@ -148,7 +148,10 @@ def reparam(
     each extension removes and what remains in the theory page *extensions*, the measured
     biases in the generated measurement pages.
     """
-    direct_only(task, "reparam", "changes of variables of the shading integrals")
+    if task.max_depth > 1 and (variant == "paper" or paired):
+        # paired kernel members are traced along their own directions: no single one for a path to go on
+        what = "variant 'paper' (it pairs kernel samples)" if variant == "paper" else "paired=True"
+        direct_only(task, f"reparam with {what}", "paired kernel samples")
     if paired and any(shape.roughness is not None for shape in task.scene.shapes):
         raise ValidationError("paired", "is not supported on glossy shapes (roughness), got True")
     if isinstance(task, ImageTask):
