@@ -159,5 +159,7 @@ def test05_the_carried_radiances_control_variate_lowers_the_noise_on_interreflec
 def test06_more_samples_and_depth_three_agree_with_finite_differences_by_region(name, spp, depth):
     """test03 at 4 times the samples: there a path going on along μ instead of Rμ (its next vertex not
     re-attached along the rotated sample) is about 5 standard errors off on the right wall, and one
-    without the kernel weight in its throughput about 5 in the shadow's leading half, beyond q ≈ 5."""
-    _agree(name, spp, depth, seen=name == "interreflection")
+    without the kernel weight in its throughput about 5 in the shadow's leading half, beyond q ≈ 5.
+    At depth 3 the agreement only: rare samples carry derivatives 10³ times the typical one there
+    (docs/theory/radiometry.md), so the standard errors are wide and the addition is not seen."""
+    _agree(name, spp, depth, seen=depth == 2)
