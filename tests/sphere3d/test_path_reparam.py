@@ -18,6 +18,9 @@ integral under the method's change of variables, the path going on along the rot
    F distribution's 1 - ALPHA quantile (standard errors at least 4 times apart, at that level).
 4. Slow: the same as 2 with 4 times the samples (which sees a path that does not go on along the
    rotated sample), and at depth 3 (depth 3 minus depth 1).
+5. k parameters at once equal the single-parameter runs bit for bit on paths; the irradiance at a
+   fixed point in the box with one further vertex against finite differences (the normal quantile
+   of 2^15 samples).
 
 Tolerances: $|a - b| <= q \sqrt{se_a^2 + se_b^2}$, q the Student-t quantile of 16 batches (15 degrees of
 freedom) Šidák-corrected over each test's comparisons at ALPHA = 1e-3; fixed seeds, the two methods on
@@ -163,3 +166,26 @@ def test06_more_samples_and_depth_three_agree_with_finite_differences_by_region(
     At depth 3 the agreement only: rare samples carry derivatives 10³ times the typical one there
     (docs/theory/radiometry.md), so the standard errors are wide and the addition is not seen."""
     _agree(name, spp, depth, seen=depth == 2)
+
+
+def test07_k_parameters_at_once_are_the_single_parameter_runs_bit_for_bit():
+    names = ["occluder.translate.x", "occluder.translate.z"]
+    for name in ("interreflection", "glossy_reflection"):
+        scene = _scene(name, 8)
+        both = render_gradient(scene, names, "reparam", spp=4, seed=2, max_depth=2, progress=False)
+        for param in names:
+            one = render_gradient(scene, param, "reparam", spp=4, seed=2, max_depth=2, progress=False)
+            assert np.array_equal(both[param].derivative, one.derivative)
+            assert np.abs(one.derivative).max() > 0.0
+
+
+def test08_the_irradiance_at_a_point_in_the_box_against_finite_differences():
+    """A floor point of ``interreflection`` next to the occluder's shadow, with one further vertex: the
+    point is fixed, the paths' first weight $π \\cos / \\cos_0$ (:func:`~sphere3d.paths.irradiance_paths`)."""
+    scene = _scene("interreflection", 8)
+    point = dict(point=(0.5, 0.3, 0.01), normal=(0.0, 0.0, 1.0), param=PARAM, n=2**15, max_depth=2)
+    rep = irradiance(scene, method="reparam", seed=1, **point)
+    fd = irradiance(scene, method="finite_difference", seed=2, **point)
+    q = stats.norm.ppf(1.0 - ALPHA / 2)
+    assert abs(fd.derivative) > q * fd.derivative_stderr  # the point sees the occluder move
+    assert abs(rep.derivative - fd.derivative) <= q * np.hypot(rep.derivative_stderr, fd.derivative_stderr)
