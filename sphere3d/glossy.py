@@ -20,9 +20,10 @@ so they sum to 1 at every θ; each estimate divides by its θ-free sampling dens
 forward-mode derivative is the naive one (Loubet et al. 2019, Sec. 3.1): the integrand differentiated
 at fixed samples. The BSDF sample is also the direction a path goes on along (:mod:`sphere3d.paths`),
 with throughput $f (n·w_o) / p_f$ (:func:`~sphere3d.bsdf.weight_ggx`'s value). A method that changes
-variables (``reparam``, at depth 1) turns the emitter sample by its rotation and evaluates the BSDF
-sample at its members (:class:`~sphere3d.integrator.Members`); ``boundary``'s edge terms come through
-the ``shading_extra`` hook, weighted by the BSDF at θ0 (:class:`Lobe`); both refuse glossy paths of
+variables (``reparam``) turns the emitter sample by its rotation and evaluates the BSDF sample at its
+members (:class:`~sphere3d.integrator.Members`), at every vertex of a path, the path going on along
+the rotated sample (:mod:`sphere3d.path_changes`); ``boundary``'s edge terms come through the
+``shading_extra`` hook, weighted by the BSDF at θ0 (:class:`Lobe`), and it refuses glossy paths of
 more than one vertex (:func:`sphere3d.methods._common.direct_only`). Vectorized over points.
 """
 
@@ -202,9 +203,9 @@ def glossy_samples(
     alpha, albedo : Dual or ndarray, shape (m,)
         GGX roughness and Fresnel reflectance F per point.
     transforms : Transforms, optional
-        The method's: its ``shading_extra`` hook, given the BSDF at θ0 as the weight of its
-        directions, adds its derivative-only term (``boundary``'s edges, theory/bsdf); its rotations
-        are not used (the identity's: methods that change variables refuse glossy shapes).
+        The method's: its ``emitter`` rotation turns the emitter sample, its ``bsdf`` members
+        evaluate the BSDF sample (``reparam``); its ``shading_extra`` hook, given the BSDF at θ0 as
+        the weight of its directions, adds its derivative-only term (``boundary``'s edges, theory/bsdf).
     """
     state = shading.state
     n0, wi0, alpha0 = detach(shading.n), detach(wi), detach(alpha)

@@ -107,7 +107,7 @@ class Shading:
 
     def take(self, index: np.ndarray) -> Shading:
         x, n, origin = self.x[index], self.n[index], take_rows(self.origin, index)
-        return Shading(self.state, x, n, origin, self.draws.take(index))
+        return type(self)(self.state, x, n, origin, self.draws.take(index))
 
     def trace(self, mu: np.ndarray) -> Hits:
         """First hits along directions ``mu`` from the shading points (detached)."""
@@ -115,7 +115,8 @@ class Shading:
 
     def contributes(self, mu: np.ndarray, hits: Hits) -> np.ndarray:
         """Where the cosine-strategy integrand can be non-zero near θ0: above the surface, and the
-        ray escapes to a non-zero sky or reaches the front of an emitter.
+        ray escapes to a non-zero sky or reaches the front of an emitter (on paths, also where the
+        path goes on: :class:`~sphere3d.path_changes.Onward`).
 
         Elsewhere the integrand :meth:`evaluate_bsdf` computes is 0 with zero derivative,
         whatever the rotation, so a method may skip those samples.
@@ -227,6 +228,9 @@ class Members:
         With one member and ``weights``: a radiance $c$ per sample, known before θ moves and
         depending on the kernel's centre ω only (not on μ). Its control variate (theory/kernels)
         is subtracted: $c\, (q - \mathrm{detach}(q)) / p(μ)$ with $q = p(Rμ)\, w$, value 0.
+    centre : ndarray, shape (r, 3), optional
+        With ``weights``: the kernels' centres ω (plain, unit), for a control variate of the radiance
+        a path carries on along the samples (:mod:`sphere3d.path_changes`).
     """
 
     rotated: Any
@@ -236,6 +240,7 @@ class Members:
     scale: Any = None
     paired: bool = False
     baseline: np.ndarray | None = None
+    centre: np.ndarray | None = None
 
 
 class Transforms(Protocol):
@@ -374,9 +379,7 @@ def _bsdf_term(shading: Shading, mu: np.ndarray, pdf: np.ndarray, transforms: Tr
         # each weight's derivative has zero mean given the kernel centre and is independent of the other
         # member: a control variate scaled by the other member's estimate   (paired samples, theory/kernels)
         est = paired_combine(*e, *members.weights) if members.paired else e[0]
-    if rows is None:
-        return est
-    return scatter(len(mu), rows, est, shading.state.dual)
+    return est if rows is None else scatter(len(mu), rows, est, shading.state.dual)
 
 
 def irradiance_samples(shading: Shading, u: np.ndarray, transforms: Transforms, bounce: bool = False) -> Any:

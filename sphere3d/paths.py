@@ -14,8 +14,9 @@ derivative of the moving normal's cosine over the θ-free density, :func:`cosine
 Vectorized over all paths; a loop over depth only. Vertex k's uniforms are the stream ``"bounce.k"``
 keyed on the primary sample (:class:`~flatland.core.rng.Draws`), so images do not depend on chunking
 or threads. No Russian roulette (no bias, no early end): a path ends at d, on a miss, or at an albedo
-of 0 that no parameter moves. Only the identity transforms (``naive``, ``finite_difference``) continue
-paths; ``reparam`` and ``boundary`` refuse d > 1 (:func:`sphere3d.methods._common.direct_only`).
+of 0 that no parameter moves. Under a method that changes the BSDF strategy's variables (``reparam``)
+the path goes on along the rotated sample, the throughput carrying the kernel weight
+(:mod:`sphere3d.path_changes`); ``boundary`` refuses d > 1 (:func:`sphere3d.methods._common.direct_only`).
 
 A scene with glossy shapes (``roughness``, :mod:`sphere3d.glossy`) takes :class:`MixedPaths` at every d,
 1 included: each vertex reflects by its own material (a glossy one by
@@ -34,8 +35,9 @@ import numpy as np
 from flatland.core.dual import detach
 from sphere3d.glossy import glossy_samples
 from sphere3d.integrator import INV_PI, Shading, Transforms, irradiance_samples
+from sphere3d.path_changes import Onward, Recorder, Steer, glossy_throughput, path_baseline, recorder, steer
 from sphere3d.tracing import Hits, intersect_triangles
-from sphere3d.vector import dot, normalize, scatter
+from sphere3d.vector import dot, normalize, scatter, zeros
 
 __all__ = ["MixedPaths", "Paths", "cosine_ratio", "irradiance_paths", "vertex"]
 
@@ -50,6 +52,33 @@ def cosine_ratio(cosine: Any) -> Any:
     c0 = detach(cosine)
     ok = c0 > 0.0
     return np.where(ok, cosine / np.where(ok, c0, 1.0), 0.0)
+
+
+def _onward(shading: Shading, transforms: Any, go_on: bool) -> tuple[Shading, Any, Recorder | None]:
+    """The vertex's shading points, transforms and recorder: under a method that changes the BSDF
+    strategy's variables, a :class:`~sphere3d.path_changes.Recorder` (kept from the previous vertex), and
+    points as :class:`~sphere3d.path_changes.Onward` where the path goes on from them (``go_on``)."""
+    rec = transforms if isinstance(transforms, Recorder) else recorder(transforms, shading.state)
+    if rec is None:
+        return shading, transforms, None
+    return (Onward.of(shading) if go_on else shading), rec, rec
+
+
+def _steered(rec: Recorder | None, mu: np.ndarray, k: int | None) -> Steer:
+    """Where the samples ``mu`` go on: along the recorded members' rotations (:func:`steer`), else μ."""
+    return steer(None if rec is None else rec.take(), mu, k)
+
+
+def _baseline(total: Any, shading: Shading, go: Steer, mu: np.ndarray, scale: Any, depth: int) -> Any:
+    """``total`` with the control variate of the radiance carried on from vertex ``depth - 1`` subtracted
+    (:func:`~sphere3d.path_changes.path_baseline`, derivative only; the value unchanged)."""
+    term = path_baseline(shading, go, mu, scale, f"bounce.{depth}")
+    return total if term is None else total + term
+
+
+def _weighted(beta: Any, go: Steer) -> Any:
+    """``beta`` times the kernel weights (value 1) of a steered continuation; ``beta`` without one."""
+    return beta if go.weight is None else beta * go.weight
 
 
 def _continue(
@@ -71,14 +100,15 @@ def _continue(
         keep = np.flatnonzero(hits.hit & ((detach(albedo) > 0.0) | state.albedo_varies[shape]))
         if not keep.size:
             break
-        tri, d = hits.triangle[keep], mu[keep]
+        tri, d = hits.triangle[keep], mu[keep]  # d: μ, or Rμ (value μ) under a change of variables
         it = intersect_triangles(shading.x[keep], d, state.triangles[tri])
         # shade the side the ray arrives on: flip the geometric normal where it meets the back
-        side = np.where((dot(detach(it.normal), d) < 0.0)[:, None], 1.0, -1.0)
+        side = np.where((dot(detach(it.normal), detach(d)) < 0.0)[:, None], 1.0, -1.0)
         normal = state.shading_normals(tri, it.b1, it.b2, it.normal)
         geometric = it.normal * side
         shade_n = geometric if normal is it.normal else normal * side
         shading = Shading.at(state, it.point, shade_n, shading.draws.take(keep), geometric)
+        shading, transforms, rec = _onward(shading, transforms, depth < last)
         rows, beta, albedo = rows[keep], beta[keep], albedo[keep]
         u = shading.draws.uniforms(f"bounce.{depth}", 5)  # keyed on (sample, depth): chunking changes nothing
         if depth == last:
@@ -86,8 +116,13 @@ def _continue(
         else:
             e, mu, hits = irradiance_samples(shading, u, transforms, True)
         total[rows] = total[rows] + beta * (albedo * INV_PI * e)
-        if depth < last:  # a diffuse vertex's cosine sample: f cos / p = ρ cos_θ / cos_θ0
-            beta = beta * albedo * cosine_ratio(dot(shading.n, mu))
+        if depth < last:  # a diffuse vertex's cosine sample: f cos / p = ρ cos_θ / cos_θ0 (at Rμ, times w)
+            go = _steered(rec, mu, state.k)
+            cv = path_baseline(shading, go, mu, detach(beta) * detach(albedo), f"bounce.{depth + 1}")
+            if cv is not None:
+                total[rows] = total[rows] + cv
+            beta = _weighted(beta * albedo * cosine_ratio(dot(shading.n, go.direction)), go)
+            mu = go.direction
         depth += 1
     return total
 
@@ -102,19 +137,23 @@ class Paths:
     def __call__(
         self, shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms, shape: Any = None
     ) -> Any:
+        shading, transforms, rec = _onward(shading, transforms, True)
         e, mu, hits = irradiance_samples(shading, u, transforms, True)
-        beta = albedo * cosine_ratio(dot(shading.n, mu))  # (ρ/π) cos_θ / (cos_θ0 / π)
-        indirect = _continue(shading, mu, hits, beta, transforms, 2, self.max_depth)
-        return albedo * INV_PI * e + indirect
+        go = _steered(rec, mu, shading.state.k)  # μ, or Rμ with its kernel weight
+        beta = _weighted(
+            albedo * cosine_ratio(dot(shading.n, go.direction)), go
+        )  # (ρ/π) cos_θ / (cos_θ0 / π)
+        indirect = _continue(shading, go.direction, hits, beta, transforms, 2, self.max_depth)
+        return _baseline(albedo * INV_PI * e + indirect, shading, go, mu, albedo, 2)
 
 
 def _arrive(shading: Shading, mu: np.ndarray, hits: Hits, keep: np.ndarray) -> Shading:
     """The next vertices: the hits of rows ``keep`` re-attached to θ (the ray from the moving point to the
     hit triangle), shaded on the side the ray arrives on (as in :func:`_continue`)."""
     state = shading.state
-    tri, d = hits.triangle[keep], mu[keep]
+    tri, d = hits.triangle[keep], mu[keep]  # μ, or Rμ (value μ) under a change of variables
     it = intersect_triangles(shading.x[keep], d, state.triangles[tri])
-    side = np.where((dot(detach(it.normal), d) < 0.0)[:, None], 1.0, -1.0)
+    side = np.where((dot(detach(it.normal), detach(d)) < 0.0)[:, None], 1.0, -1.0)
     normal = state.shading_normals(tri, it.b1, it.b2, it.normal)
     geometric = it.normal * side
     shade_n = geometric if normal is it.normal else normal * side
@@ -122,19 +161,28 @@ def _arrive(shading: Shading, mu: np.ndarray, hits: Hits, keep: np.ndarray) -> S
 
 
 def _reflect(
-    shading: Shading, wi: Any, u: np.ndarray, shape: np.ndarray, albedo: Any, transforms: Transforms
+    shading: Shading,
+    wi: Any,
+    u: np.ndarray,
+    shape: np.ndarray,
+    albedo: Any,
+    transforms: Transforms,
+    depth: int,
 ):
     r"""Per vertex of either material: (its MIS estimate of the light it reflects towards ``wi``, the
     continuation directions, their hits, the throughput $f \cos / p$, where the path may go on).
 
     Diffuse rows: $(ρ/π) \hat E$ and the cosine sample (:func:`irradiance_samples`, throughput
     $ρ \cos_θ / \cos_{θ_0}$); glossy rows: :func:`~sphere3d.glossy.glossy_samples` (throughput
-    $f \cos / p_f$). Both read the same 5 uniforms per row."""
+    $f \cos / p_f$). Both read the same 5 uniforms per row (``depth``: the vertex's). Under a
+    :class:`Recorder` (a change of variables, :class:`~sphere3d.path_changes.Onward` points) the directions
+    are $Rμ$ and the throughputs carry the kernel weights (:mod:`sphere3d.path_changes`)."""
     state = shading.state
     m = len(shading)
+    rec = transforms if isinstance(transforms, Recorder) and isinstance(shading, Onward) else None
     radiance = scatter(m, np.arange(0), 0.0, state.dual, k=state.k)
     throughput = scatter(m, np.arange(0), 0.0, state.dual, k=state.k)
-    mu, above = np.zeros((m, 3)), np.ones(m, dtype=bool)
+    mu, above = zeros((m, 3), rec is not None, state.k), np.ones(m, dtype=bool)
     parts = []
     glossy = state.glossy[shape]
     for rows in (np.flatnonzero(~glossy), np.flatnonzero(glossy)):  # the two materials, not the samples
@@ -142,14 +190,20 @@ def _reflect(
             continue
         sub = shading.take(rows)
         if glossy[rows[0]]:
-            g = glossy_samples(sub, wi[rows], u[rows], state.roughness[shape[rows]], albedo[rows], transforms)
+            alpha = state.roughness[shape[rows]]
+            g = glossy_samples(sub, wi[rows], u[rows], alpha, albedo[rows], transforms)
             radiance[rows], throughput[rows], mu[rows], above[rows] = g.radiance, g.throughput, g.mu, g.above
+            if rec is not None:  # f(w_i, Rμ) (n·Rμ) w / p_f(μ), the path going on along Rμ
+                go = _steered(rec, g.mu, state.k)
+                t = glossy_throughput(sub, wi[rows], g.mu, go.direction, alpha, albedo[rows], g.above)
+                throughput[rows], mu[rows] = _weighted(t, go), go.direction
             parts.append((rows, g.hits))
         else:
             e, mu_d, hits_d = irradiance_samples(sub, u[rows], transforms, True)
-            radiance[rows] = albedo[rows] * INV_PI * e
-            throughput[rows] = albedo[rows] * cosine_ratio(dot(sub.n, mu_d))
-            mu[rows] = mu_d
+            go = _steered(rec, mu_d, state.k)
+            radiance[rows] = _baseline(albedo[rows] * INV_PI * e, sub, go, mu_d, albedo[rows], depth + 1)
+            throughput[rows] = _weighted(albedo[rows] * cosine_ratio(dot(sub.n, go.direction)), go)
+            mu[rows] = go.direction
             parts.append((rows, hits_d))
     fields = {}
     for name in ("shape", "triangle", "t", "u", "v"):
@@ -175,11 +229,13 @@ def _continue_mixed(
         keep = np.flatnonzero(hits.hit & ((detach(albedo) > 0.0) | state.albedo_varies[shape]))
         if not keep.size:
             break
-        wi = -mu[keep]  # towards the previous vertex: the fixed direction of the sample
-        shading = _arrive(shading, mu, hits, keep)
+        wi = -mu[keep]  # towards the previous vertex: the sample's direction (Rμ under a change of variables)
+        shading, transforms, _ = _onward(_arrive(shading, mu, hits, keep), transforms, depth < last)
         rows, beta = rows[keep], beta[keep]
         u = shading.draws.uniforms(f"bounce.{depth}", 5)  # keyed on (sample, depth): chunking changes nothing
-        radiance, mu, hits, factor, above = _reflect(shading, wi, u, shape[keep], albedo[keep], transforms)
+        radiance, mu, hits, factor, above = _reflect(
+            shading, wi, u, shape[keep], albedo[keep], transforms, depth
+        )
         total[rows] = total[rows] + beta * radiance
         beta = beta * factor
         hits = Hits(np.where(above, hits.shape, -1), hits.triangle, hits.t, hits.u, hits.v)
@@ -199,7 +255,9 @@ class MixedPaths:
         self, shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms, shape: Any
     ) -> Any:
         wi = normalize(shading.state.camera.origin - shading.x)
-        radiance, mu, hits, beta, above = _reflect(shading, wi, u, shape, albedo, transforms)
+        if self.max_depth > 1:
+            shading, transforms, _ = _onward(shading, transforms, True)
+        radiance, mu, hits, beta, above = _reflect(shading, wi, u, shape, albedo, transforms, 1)
         if self.max_depth == 1:
             return radiance
         hits = Hits(np.where(above, hits.shape, -1), hits.triangle, hits.t, hits.u, hits.v)
@@ -221,7 +279,11 @@ def irradiance_paths(shading: Shading, u: np.ndarray, transforms: Transforms, ma
     $\cos / p = π \cos_θ / \cos_{θ_0}$ (the point's normal does not move: value π)."""
     if max_depth == 1:
         return irradiance_samples(shading, u, transforms)
+    shading, transforms, rec = _onward(shading, transforms, True)
     e, mu, hits = irradiance_samples(shading, u, transforms, True)
-    beta = np.pi * cosine_ratio(dot(shading.n, mu))
+    go = _steered(rec, mu, shading.state.k)
+    beta = _weighted(np.pi * cosine_ratio(dot(shading.n, go.direction)), go)
     walk = _continue_mixed if shading.state.glossy.any() else _continue
-    return e + walk(shading, mu, hits, beta, transforms, 2, max_depth)
+    return _baseline(
+        e + walk(shading, go.direction, hits, beta, transforms, 2, max_depth), shading, go, mu, np.pi, 2
+    )

@@ -182,9 +182,11 @@ def render_gradient(
         values stay equal). With ``scheduler`` every render a method makes (finite differences:
         three) runs on the cluster, its per-image term (boundary's edges on the film) as one more task.
     max_depth : int
-        Vertices per path, >= 1, as in :func:`render`. ``naive`` and ``finite_difference`` take
-        any depth; ``reparam`` and ``boundary`` only 1 for now (their changes of variables and boundary
-        terms at the further vertices are not implemented: refused with a ValidationError).
+        Vertices per path, >= 1, as in :func:`render`. ``naive``, ``finite_difference`` and ``reparam``
+        take any depth (``reparam``'s paired kernel samples and its paper variant only 1; on paths it
+        changes variables at every vertex, :mod:`sphere3d.path_changes`); ``boundary`` only 1 for now
+        (its boundary terms at the further vertices are not implemented: refused with a
+        ValidationError).
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,

@@ -185,7 +185,7 @@ LAYERS = {
             ),
         ),
         ("scene at θ", ("scene", "materials", "offsets", "state", "world")),
-        ("integrals", ("integrator", "glossy", "paths", "execution", "tasks")),
+        ("integrals", ("integrator", "glossy", "paths", "path_changes", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),
         ("entry points", ("render", "optimize", "plot", "__main__", "")),

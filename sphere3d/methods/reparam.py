@@ -143,12 +143,19 @@ def reparam(
 
     Assumes a continuous pixel filter (``tent``, ``gaussian``): with ``box`` the footprint's
     edge moves under the rotation and biases the gradient (theory/pixel_filters), so it is
-    refused. Biased where one rotation cannot follow every discontinuity inside a kernel, or
-    the probes miss one: the paper variant's cases are in :mod:`sphere3d.reparam.paper`, what
-    each extension removes and what remains in the theory page *extensions*, the measured
-    biases in the generated measurement pages.
+    refused. On paths (``max_depth`` > 1) every vertex's shading integral gets the same changes of
+    variables at the vertex's points and the path goes on along the rotated sample, its throughput
+    carrying the kernel weight, with a control variate of the radiance it carries
+    (:mod:`sphere3d.path_changes`; ``baseline=False`` drops it); paired kernel samples (``paired``,
+    the paper variant) are refused there. Biased where one rotation cannot follow every discontinuity
+    inside a kernel, or the probes miss one: the paper variant's cases are in
+    :mod:`sphere3d.reparam.paper`, what each extension removes and what remains in the theory page
+    *extensions*, the measured biases in the generated measurement pages (on paths: theory/radiometry).
     """
-    direct_only(task, "reparam", "changes of variables of the shading integrals")
+    if task.max_depth > 1 and (variant == "paper" or paired):
+        # paired kernel members are traced along their own directions: no single one for a path to go on
+        what = "variant 'paper' (it pairs kernel samples)" if variant == "paper" else "paired=True"
+        direct_only(task, f"reparam with {what}", "paired kernel samples")
     if paired and any(shape.roughness is not None for shape in task.scene.shapes):
         raise ValidationError("paired", "is not supported on glossy shapes (roughness), got True")
     if isinstance(task, ImageTask):

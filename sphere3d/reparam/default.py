@@ -235,7 +235,7 @@ class ReparamTransforms(Identity):
             return Members(rotated, live, weights=weights)
         # the radiance the kernel's centre sees (the sky, or 0): the control variate's c(ω), π L(ω)
         baseline = np.where(sky, np.pi * float(detach(sub.state.sky)), 0.0)
-        return Members(rotated, live, weights=weights, baseline=baseline)
+        return Members(rotated, live, weights=weights, baseline=baseline, centre=centre)
 
     def _paired(self, shading: Shading, mu: np.ndarray) -> Members:
         r"""The paper's order: outer $ω = μ \sim p$, two kernel samples share one rotation

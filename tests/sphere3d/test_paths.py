@@ -188,13 +188,19 @@ def test07_naive_and_finite_differences_agree_where_the_image_is_affine_in_the_p
     np.testing.assert_allclose(naive.derivative, fd.derivative, rtol=0.0, atol=1e-9 * max(1.0, scale))
 
 
-@pytest.mark.parametrize("method", ["reparam", "boundary"])
-def test08_reparam_and_boundary_refuse_paths_and_say_why(method):
+@pytest.mark.parametrize(
+    ("method", "options"),
+    [("boundary", {}), ("reparam", {"variant": "paper"}), ("reparam", {"paired": True})],
+)
+def test08_boundary_and_reparams_paired_samples_refuse_paths_and_say_why(method, options):
+    """``reparam`` goes on along its rotated samples (tests/sphere3d/test_path_reparam.py), but its paired
+    kernel samples (the paper variant always pairs) have no single direction to go on along."""
     with pytest.raises(ValidationError) as err:
-        render_gradient(_open(8), "occluder.translate.x", method, spp=4, max_depth=2)
+        render_gradient(_open(8), "occluder.translate.x", method, spp=4, max_depth=2, **options)
     assert err.value.field == "max_depth"
     assert "not yet supported on paths" in str(err.value) and "2" in str(err.value)
     with pytest.raises(ValidationError, match="not yet supported on paths"):
         irradiance(
-            _open(8), (0.0, 0.0, 0.01), (0.0, 0.0, 1.0), "occluder.translate.x", method, n=4, max_depth=3
-        )
+            _open(8), (0.0, 0.0, 0.01), (0.0, 0.0, 1.0), "occluder.translate.x", method, n=4, max_depth=3,
+            **options,
+        )  # fmt: skip
