@@ -39,9 +39,9 @@ from flatland.core.validate import ValidationError
 from sphere3d.bsdf import eval_ggx, pdf_ggx, sample_ggx
 from sphere3d.integrator import Identity, Shading, add_tangent
 from sphere3d.live import take_rows
-from sphere3d.sampling import sample_mesh, solid_angle_pdf
-from sphere3d.tracing import Hits, face_normals, intersect_triangles
-from sphere3d.vector import dot, norm, scatter
+from sphere3d.sampling import emitter_directions, solid_angle_pdf
+from sphere3d.tracing import Hits, intersect_triangles
+from sphere3d.vector import dot, scatter
 
 __all__ = ["GlossySamples", "Lobe", "glossy_samples"]
 
@@ -100,17 +100,13 @@ def _emitter_term(
     method's rotation R the integrand at $R w$ (value w), plus the method's derivative-only ``extra``."""
     state = shading.state
     m = len(shading)
-    emitters = np.asarray(detach(state.triangles))[state.emitters]
-    y, k = sample_mesh(u, emitters)
-    tri = state.emitters[k]
-    to = y - detach(shading.x)
-    dist = norm(to)
-    w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
-    cos_y = -dot(face_normals(emitters)[k], w)
-    cos_x = dot(detach(shading.n), w)
+    e = emitter_directions(
+        u, np.asarray(detach(state.triangles))[state.emitters], detach(shading.x), detach(shading.n)
+    )
+    tri, w, dist, cos_y = state.emitters[e.index], e.w, e.dist, e.cos_y
     valid = (
         (cos_y > 1e-9)
-        & (cos_x > 0.0)
+        & (e.cos_x > 0.0)
         & (dist > 4.0 * state.epsilon)
         & (dot(detach(wi), detach(shading.n)) > 0)
     )

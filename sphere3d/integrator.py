@@ -48,18 +48,18 @@ from sphere3d.film import FilmTransform
 from sphere3d.live import emitters_change, moves, moving_rows, on_rows, take_rows, triangles_change
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import (
+    emitter_directions,
     filter_value,
     log_filter_value,
     pdf_cosine_hemisphere,
     pdf_filter,
     sample_cosine_hemisphere,
     sample_filter,
-    sample_mesh,
     solid_angle_pdf,
 )
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits, face_normals, intersect_triangles
-from sphere3d.vector import dot, norm, scatter
+from sphere3d.vector import dot, scatter
 
 __all__ = [
     "PRIMARY_UNIFORMS",
@@ -301,15 +301,11 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     """Emitter-sampling estimate of E, MIS-weighted, per shading point."""
     state = shading.state
     m = len(shading)
-    emitters = np.asarray(detach(state.triangles))[state.emitters]
-    y, k = sample_mesh(u, emitters)
-    tri = state.emitters[k]
-    to = y - detach(shading.x)
-    dist = norm(to)
-    w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
-    cos_y = -dot(face_normals(emitters)[k], w)
-    cos_x = dot(detach(shading.n), w)
-    valid = (cos_y > 1e-9) & (cos_x > 0.0) & (dist > 4.0 * state.epsilon)
+    e = emitter_directions(
+        u, np.asarray(detach(state.triangles))[state.emitters], detach(shading.x), detach(shading.n)
+    )
+    tri, w, dist, cos_y = state.emitters[e.index], e.w, e.dist, e.cos_y
+    valid = (cos_y > 1e-9) & (e.cos_x > 0.0) & (dist > 4.0 * state.epsilon)
     idx = np.flatnonzero(valid)
     origin, direction = take_rows(shading.origin, idx), take_rows(w, idx)
     blocked = state.tracer.occluded(origin, direction, dist[idx] - 2.0 * state.epsilon)

@@ -81,6 +81,14 @@ def _weighted(beta: Any, go: Steer) -> Any:
     return beta if go.weight is None else beta * go.weight
 
 
+def _reflecting(state: Any, hits: Hits) -> tuple[np.ndarray, Any, np.ndarray]:
+    """The shapes the rays ``hits`` met, their albedos, and the rows where a path goes on: a hit whose
+    albedo is positive or moves with θ (a path ends on a miss or at an albedo of 0 no parameter moves)."""
+    shape = state.shape_of[np.where(hits.hit, hits.triangle, 0)]
+    albedo = state.albedo[shape]
+    return shape, albedo, np.flatnonzero(hits.hit & ((detach(albedo) > 0.0) | state.albedo_varies[shape]))
+
+
 def _continue(
     shading: Shading, mu: np.ndarray, hits: Hits, beta: Any, transforms: Transforms, depth: int, last: int
 ) -> Any:
@@ -95,9 +103,7 @@ def _continue(
     total = scatter(len(shading), np.arange(0), 0.0, state.dual, k=state.k)
     rows = np.arange(len(shading))
     while depth <= last:
-        shape = state.shape_of[np.where(hits.hit, hits.triangle, 0)]
-        albedo = state.albedo[shape]
-        keep = np.flatnonzero(hits.hit & ((detach(albedo) > 0.0) | state.albedo_varies[shape]))
+        _, albedo, keep = _reflecting(state, hits)
         if not keep.size:
             break
         tri, d = hits.triangle[keep], mu[keep]  # d: μ, or Rμ (value μ) under a change of variables
@@ -224,9 +230,7 @@ def _continue_mixed(
     total = scatter(len(shading), np.arange(0), 0.0, state.dual, k=state.k)
     rows = np.arange(len(shading))
     while depth <= last:
-        shape = state.shape_of[np.where(hits.hit, hits.triangle, 0)]
-        albedo = state.albedo[shape]
-        keep = np.flatnonzero(hits.hit & ((detach(albedo) > 0.0) | state.albedo_varies[shape]))
+        shape, albedo, keep = _reflecting(state, hits)
         if not keep.size:
             break
         wi = -mu[keep]  # towards the previous vertex: the sample's direction (Rμ under a change of variables)

@@ -14,17 +14,20 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy import special
 
 from flatland.core.validate import check_choice, check_positive
-from sphere3d.vector import cross, dot, frame, norm
+from sphere3d.vector import cross, dot, frame, norm, normalize
 
 __all__ = [
     "FILTERS",
     "FILTER_STD",
+    "EmitterDirections",
+    "emitter_directions",
     "filter_radius",
     "filter_value",
     "filter_value_1d",
@@ -222,6 +225,35 @@ def sample_mesh(u: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nd
     index = np.minimum(np.searchsorted(cdf, u[..., 0] * cdf[-1], side="right"), len(areas) - 1)
     b1, b2 = triangle_barycentrics(u[..., 1:3])
     return _barycentric_point(b1, b2, lambda i, j: np.take(triangles[:, i, j], index)), index
+
+
+@dataclass(frozen=True)
+class EmitterDirections:
+    """Points drawn on the emitters (:func:`sample_mesh`) as seen from shading points: the triangle of
+    each (``index``, into the emitter triangles), the unit direction ``w`` and distance ``dist`` to it,
+    the cosine ``cos_y`` at the emitter (its front faces w's origin where > 0) and ``cos_x`` at the point."""
+
+    index: np.ndarray
+    w: np.ndarray
+    dist: np.ndarray
+    cos_y: np.ndarray
+    cos_x: np.ndarray
+
+
+def emitter_directions(
+    u: np.ndarray, emitters: np.ndarray, x: np.ndarray, n: np.ndarray
+) -> EmitterDirections:
+    """One point uniform on the emitter triangles ``emitters`` (T, 3, 3) per shading point ``x`` (m, 3)
+    with normal ``n`` (uniforms ``u`` (m, 3)), and the geometry of the emitter sample from there: the
+    first step of the emitter strategy of every shading integral (diffuse and glossy)."""
+    y, index = sample_mesh(u, emitters)
+    to = y - x
+    dist = norm(to)
+    w = to / np.where(dist > 0.0, dist, 1.0)[:, None]
+    normals = normalize(
+        cross(emitters[..., 1, :] - emitters[..., 0, :], emitters[..., 2, :] - emitters[..., 0, :])
+    )
+    return EmitterDirections(index, w, dist, -dot(normals[index], w), dot(n, w))
 
 
 def pdf_mesh(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:

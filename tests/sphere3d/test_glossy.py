@@ -294,18 +294,24 @@ def test08_boundary_refuses_glossy_paths_and_reparam_paired_samples(method):
         assert err.value.field == "paired" and "glossy" in str(err.value)
 
 
+def _glossy_floor_regions(width: int) -> tuple:
+    """``glossy_reflection`` on a ``width``-pixel film and its regions (:func:`regions_of`), each of at
+    least 8 pixels."""
+    d = load_scene("glossy_reflection").to_dict()
+    d["camera"].update(width=width, height=width)
+    scene = load_scene(d)
+    regions = regions_of(scene, width)
+    assert all(r.sum() >= 8 for r in regions.values())
+    return scene, regions
+
+
 def test09_boundary_against_finite_differences_by_region_on_the_glossy_floor():
     """``glossy_reflection`` at depth 1, the occluder's x-translation: the boundary method (its edge terms
     at glossy points weighted by the BSDF at the edge direction, the film's edges shaded by their
     material) and finite differences agree, region by region (the shadow's trailing and leading
     halves, the occluder's reflection, the occluder itself), within the noise of both; naive misses
     the shadow (0 there)."""
-    width = 32
-    d = load_scene("glossy_reflection").to_dict()
-    d["camera"].update(width=width, height=width)
-    scene = load_scene(d)
-    regions = regions_of(scene, width)
-    assert all(r.sum() >= 8 for r in regions.values())
+    scene, regions = _glossy_floor_regions(32)
     sums = {}
     for method, seed in (("boundary", 1), ("finite_difference", 2), ("naive", 3)):
         task = ImageTask(scene, "occluder.translate.x", 128, seed, BATCHES, film="pixel")
@@ -329,12 +335,7 @@ def test10_reparam_against_finite_differences_and_boundary_by_region_on_the_glos
     reparam's emitter-rotation bias, which the diffuse ``hard_shadow`` shows alike (about 5 % and 4 % of
     the region's sum; docs/measurements/glossy.md): tested as a bias of at most 10 % of the region's
     gradient, beyond the noise."""
-    width = 32
-    d = load_scene("glossy_reflection").to_dict()
-    d["camera"].update(width=width, height=width)
-    scene = load_scene(d)
-    regions = regions_of(scene, width)
-    assert all(r.sum() >= 8 for r in regions.values())
+    scene, regions = _glossy_floor_regions(32)
     sums = {}
     for method, seed in (("reparam", 1), ("boundary", 4), ("finite_difference", 5)):
         g = GRADIENT_METHODS.run(
