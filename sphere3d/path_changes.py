@@ -44,6 +44,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.bsdf import eval_ggx, pdf_ggx
 from sphere3d.integrator import Identity, Members, Shading, irradiance_samples
+from sphere3d.state import SceneState
 from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import dot
 
@@ -100,7 +101,7 @@ class Recorder:
         return members
 
 
-def recorder(transforms: Any, state: Any) -> Recorder | None:
+def recorder(transforms: Any, state: SceneState) -> Recorder | None:
     """A :class:`Recorder` around ``transforms`` if it changes the BSDF strategy's variables and the state
     carries tangents; None otherwise (paths then go on along μ, as the naive estimator's)."""
     changes = getattr(type(transforms), "bsdf", None) is not Identity.bsdf
