@@ -51,11 +51,12 @@ from sphere3d.vector import dot
 __all__ = ["Onward", "Recorder", "Steer", "glossy_throughput", "path_baseline", "recorder", "steer"]
 
 
-@dataclass(frozen=True)
 class Onward(Shading):
     """Shading points whose cosine (or BSDF) samples' paths go on: their integrand is also the radiance
     any reflecting surface they hit sends back, so :meth:`contributes` adds the samples that hit a
-    surface of albedo > 0 (or varying), which the path goes on from."""
+    surface of albedo > 0 (or varying), which the path goes on from. A subclass of the frozen
+    dataclass :class:`~sphere3d.integrator.Shading` with its fields and constructor (no field of
+    its own)."""
 
     @staticmethod
     def of(shading: Shading) -> Onward:
