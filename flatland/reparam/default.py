@@ -23,12 +23,13 @@ from flatland.reparam.probes import (
     Choice,
     ShapeImage,
     angle_gap_probe,
-    angle_inner_shape,
-    angle_shape_end,
+    angle_images,
+    angle_sight,
     film_gap_probe,
-    film_inner_shape,
-    film_shape_end,
+    film_images,
+    inner_shape,
     select_points,
+    shape_end,
 )
 from flatland.sampling import filter_blurred, sample_von_mises
 from flatland.tracing import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction, zeros
@@ -183,14 +184,15 @@ class ReparamTransforms(Identity):
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
         # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
-        end = film_shape_end(ctx.geom0, probes, np.where(ok, choice.followed_prim, -1))
+        images = film_images(ctx.geom0, n)  # the shapes' film images, for the shape's end and a shape inside
+        end = shape_end(images, probes, ctx.geom0, np.where(ok, choice.followed_prim, -1))
         rows = np.flatnonzero(end >= 0)
         if rows.size:
             t_p[rows] = _end_coordinate(geom, end[rows])
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (Loubet et al. 2019, Sec. 3.2)
         points = mu + translation_offset(t_p, ok)[:, None]
         # a visible shape whose whole image lies inside the probes' span: follow both its ends
-        inner = film_inner_shape(ctx.geom0, probes)
+        inner = inner_shape(images, probes)
         points, log_jacobian = _stretch(
             inner, mu, points, trace, ctx.geom0, lambda rows, i: _end_coordinate(geom, i)
         )
@@ -216,9 +218,11 @@ class ReparamTransforms(Identity):
         probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
         dirs0 = direction(center)
         choice = self._choose(ctx, x0, dirs0, probes, trace)
+        # every segment endpoint's angle from x, once for the gap probe and the shapes' images
+        sight = angle_sight(ctx.geom0, x0, ignore, probes)
         # nothing chosen, but a primitive's whole image lies between two probes: probe it too, choose again
         gap = np.flatnonzero(~choice.ok)
-        extra = angle_gap_probe(ctx.geom0, x0[gap], ignore[gap], probes[gap])
+        extra = angle_gap_probe(ctx.geom0, x0[gap], ignore[gap], probes[gap], sight.take(gap))
         choice = self._again(ctx, choice, gap, extra, x0, dirs0, probes, trace)
         offset = choice.point - x
         # a chosen point on the shading point itself (coincident geometry) defines no direction: the
@@ -230,14 +234,15 @@ class ReparamTransforms(Identity):
             return angle_of(_endpoint(ctx.geom, i) - x[rows])
 
         # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
-        end = angle_shape_end(ctx.geom0, x0, ignore, probes, np.where(ok, choice.followed_prim, -1))
+        images = angle_images(ctx.geom0, sight)
+        end = shape_end(images, probes, ctx.geom0, np.where(ok, choice.followed_prim, -1))
         rows = np.flatnonzero(end >= 0)
         if rows.size:
             angle[rows] = end_angle(rows, end[rows])
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (Sec. 4.1)
         points = mu + translation_offset(angle, ok)[:, None]
         # a visible shape whose whole image lies inside the probes' span: follow both its ends
-        inner = angle_inner_shape(ctx.geom0, x0, ignore, probes)
+        inner = inner_shape(images, probes)
         points, log_jacobian = _stretch(inner, mu, points, trace, ctx.geom0, end_angle)
         c = np.cos(points - center[:, None])
         # von Mises weight times |det J_T|, log k = κ cos(T y - ω) + const   (Loubet et al. 2019, Sec. 4.2)
