@@ -15,6 +15,7 @@ film: :func:`filter_value` ($k_j$, Dual-aware), :func:`sample_filter` /
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,25 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(phi: np.ndarray) -> np.ndarray:
-    """Angle(s) wrapped to [-π, π)."""
+    r"""Angle(s) wrapped to [-π, π): $\mathrm{remainder}(φ + π, 2π) - π$, numpy's remainder bit for bit.
+
+    Plain arrays with $y = φ + π$ in $[-4π, 6π)$ (every angle difference the renderer wraps) take
+    a faster road to the same numbers: numpy's remainder is the exact fmod, plus 2π where that is
+    negative. Above 0, fmod is $y - 2π$ or $y - 4π$, exact float subtractions (Sterbenz); below 0 it
+    is y, or the exact $y + 2π$ below $-2π$, and the one rounded step adds 2π. Anything else (Duals,
+    NaN, inf, larger angles) goes through ``np.remainder``.
+    """
+    if isinstance(phi, np.ndarray) and phi.dtype == np.float64 and phi.ndim and phi.size:
+        y = phi + np.pi
+        if y.min() >= -2.0 * TWO_PI and y.max() < 3.0 * TWO_PI:  # NaN fails both tests
+            # every mask from y as it came: a rounded y + 2π may equal 2π, and stays so (as in remainder)
+            below, far_below, above, far_above = y < 0.0, y < -TWO_PI, y >= TWO_PI, y >= 2.0 * TWO_PI
+            np.add(y, TWO_PI, out=y, where=far_below)  # exact: y in [-2π, 0) now
+            np.add(y, TWO_PI, out=y, where=below)  # remainder's one rounded step
+            np.subtract(y, TWO_PI, out=y, where=above & ~far_above)
+            np.subtract(y, 2.0 * TWO_PI, out=y, where=far_above)
+            y -= np.pi
+            return y
     return np.remainder(phi + np.pi, TWO_PI) - np.pi
 
 
@@ -175,6 +194,15 @@ def pdf_von_mises(phi: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.n
     return np.exp(log_pdf_von_mises(np.asarray(phi, dtype=np.float64), mu, kappa))
 
 
+@functools.lru_cache(maxsize=8)
+def _von_mises(kappa: float) -> Any:
+    """scipy's frozen von Mises distribution of concentration ``kappa``, made once per κ (freezing one
+    costs milliseconds, as much as a CDF evaluation over thousands of angles)."""
+    from scipy.stats import vonmises  # here, not at module level: scipy.stats is slow to import
+
+    return vonmises(kappa)
+
+
 def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
     """Von Mises samples by numerical inversion of the CDF (safeguarded Newton).
 
@@ -188,9 +216,7 @@ def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.
     if not np.all(np.isfinite(mu)):
         raise ValidationError("mu", f"must be finite, got {mu!r}")
     u = np.asarray(u, dtype=np.float64)
-    from scipy.stats import vonmises  # here, not at module level: scipy.stats is slow to import
-
-    dist = vonmises(kappa)
+    dist = _von_mises(kappa)
     # start from the Gaussian approximation (exact as κ → ∞), clipped into the bracket
     phi = np.clip(special.ndtri(u) / np.sqrt(kappa), -np.pi, np.pi)
     lo = np.full(u.shape, -np.pi)

@@ -490,12 +490,12 @@ def angle_sight(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.
     shape images (:func:`angle_gap_probe`, :func:`angle_images`)."""
     centre = 0.5 * (probes[:, :1] + probes[:, -1:])
     ends = np.concatenate([np.asarray(detach(geom.seg_a)), np.asarray(detach(geom.seg_b))])
-    v = ends[None] - x[:, None]
-    rel = wrap_angle(np.arctan2(v[..., 1], v[..., 0]) - centre)
+    vx, vy = ends[None, :, 0] - x[:, 0:1], ends[None, :, 1] - x[:, 1:2]  # (n, 2S) each: long inner loops
+    rel = wrap_angle(np.arctan2(vy, vx) - centre)
     seg_shape = geom.prim_shape[: geom.n_seg]
     end_shape = np.concatenate([seg_shape, seg_shape])
     own = np.where(ignore >= 0, geom.prim_shape[np.maximum(ignore, 0)], -1)
-    usable = (end_shape[None] != own[:, None]) & (np.hypot(v[..., 0], v[..., 1]) > 0.0)
+    usable = (end_shape[None] != own[:, None]) & ((vx != 0.0) | (vy != 0.0))  # |v| > 0
     return Sight(centre, rel, usable)
 
 
