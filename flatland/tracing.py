@@ -269,31 +269,37 @@ def attach(geom: SceneState, hits: Hits, rows: np.ndarray, origins: Any, dirs: A
     return Attached(point, normal, u_out)
 
 
-def attached_points(geom: SceneState, prim: np.ndarray, coord: np.ndarray) -> tuple[Any, Any]:
+def attached_points(
+    geom: SceneState, prim: np.ndarray, coord: np.ndarray, normals: bool = True
+) -> tuple[Any, Any]:
     r"""Points that follow the shape, and their normals, for hits ``(prim, coord)`` (all hits).
 
     Segment: $a(θ) + u (b(θ) - a(θ))$ with the barycentric u detached; circle:
     $c(θ) + r(θ) (\cos α, \sin α)$ with the world angle α detached (a rotation about its
     centre leaves a circle unchanged). These are the points whose motion the
-    reparameterization follows (Loubet et al. 2019, Sec. 4.3).
+    reparameterization follows (Loubet et al. 2019, Sec. 4.3). Without ``normals`` the
+    normal is None (not computed).
     """
     m = prim.size
     n_seg = geom.n_seg
     dual, k = geom.differentiable, geom.k
-    point, normal = zeros((m, 2), dual, k), zeros((m, 2), dual, k)
+    point = zeros((m, 2), dual, k)
+    normal = zeros((m, 2), dual, k) if normals else None
     seg = np.flatnonzero(prim < n_seg)
     if seg.size:
         k = prim[seg]
         a, b = geom.seg_a[k], geom.seg_b[k]
         e = b - a
         point[seg] = a + coord[seg, None] * e
-        normal[seg] = _segment_normal(e)
+        if normals:
+            normal[seg] = _segment_normal(e)
     circ = np.flatnonzero(prim >= n_seg)
     if circ.size:
         k = prim[circ] - n_seg
         unit = np.stack([np.cos(coord[circ]), np.sin(coord[circ])], axis=1)
         point[circ] = geom.circ_c[k] + geom.circ_r[k][:, None] * unit
-        normal[circ] = unit
+        if normals:
+            normal[circ] = unit
     return point, normal
 
 

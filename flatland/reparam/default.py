@@ -123,34 +123,39 @@ class ReparamTransforms(Identity):
     def _choose(
         self, ctx: Context, origins: np.ndarray, centre_dirs: np.ndarray, probes: np.ndarray,
         trace: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
-    ) -> Choice:  # fmt: skip
+    ) -> tuple[Choice, tuple[np.ndarray, np.ndarray]]:  # fmt: skip
+        """The choice from the ``probes`` (n, P), and their hits (primitive, coordinate), (n, P) each."""
         n, m = probes.shape
         prim, coord = trace(np.repeat(np.arange(n), m), probes.reshape(-1))
-        return select_points(
-            ctx.geom,
-            origins,
-            prim.reshape(n, m),
-            coord.reshape(n, m),
-            centre_dirs,
-            probes,
-            trace,
-            self.refine,
-        )
+        prim, coord = prim.reshape(n, m), coord.reshape(n, m)
+        choice = select_points(ctx.geom, origins, prim, coord, centre_dirs, probes, trace, self.refine)
+        return choice, (prim, coord)
 
     def _again(
         self, ctx: Context, choice: Choice, rows: np.ndarray, extra: np.ndarray, origins: np.ndarray,
-        centre_dirs: np.ndarray, probes: np.ndarray, trace: Callable[[np.ndarray, np.ndarray], Any],
+        centre_dirs: np.ndarray, probes: np.ndarray, hits: tuple[np.ndarray, np.ndarray],
+        trace: Callable[[np.ndarray, np.ndarray], Any],
     ) -> Choice:  # fmt: skip
-        """``choice`` with ``rows`` chosen again from their probes plus the probe at ``extra`` (NaN: none)."""
+        """``choice`` with ``rows`` chosen again from their probes (``hits``, as traced) plus the probe at
+        ``extra`` (NaN: none), the one traced here: a ray's hit does not depend on the rays cast with it."""
         rows, extra = rows[np.isfinite(extra)], extra[np.isfinite(extra)]
         if not rows.size:
             return choice
-        again = np.sort(np.concatenate([probes[rows], extra[:, None]], axis=1), axis=1)
+        params = np.concatenate([probes[rows], extra[:, None]], axis=1)
+        again = np.sort(params, axis=1)
+        order = np.argsort(params, axis=1, kind="stable")  # where each sorted probe's hit comes from
+        extra_prim, extra_coord = trace(rows, extra)
+        prim = np.take_along_axis(np.concatenate([hits[0][rows], extra_prim[:, None]], axis=1), order, axis=1)
+        coord = np.take_along_axis(
+            np.concatenate([hits[1][rows], extra_coord[:, None]], axis=1), order, axis=1
+        )
 
         def trace_rows(r: np.ndarray, params: np.ndarray) -> Any:  # trace's rows index the full chunk
             return trace(rows[r], params)
 
-        sub = self._choose(ctx, origins[rows], centre_dirs[rows], again, trace_rows)
+        sub = select_points(
+            ctx.geom, origins[rows], prim, coord, centre_dirs[rows], again, trace_rows, self.refine
+        )
         point, code, followed = choice.point, choice.code.copy(), choice.followed_prim.copy()
         point[rows], code[rows], followed[rows] = sub.point, sub.code, sub.followed_prim
         return Choice(point, code, followed)
@@ -175,11 +180,11 @@ class ReparamTransforms(Identity):
 
         probes = center[:, None] + sigma * self.offsets
         origins, dirs0 = np.broadcast_to(o0, (n, 2)), film_direction(ctx.geom0, center)
-        choice = self._choose(ctx, origins, dirs0, probes, trace)
+        choice, hits = self._choose(ctx, origins, dirs0, probes, trace)
         # nothing chosen, but a primitive's whole image lies between two probes: probe it too, choose again
         gap = np.flatnonzero(~choice.ok)
         extra = film_gap_probe(ctx.geom0, probes[gap])
-        choice = self._again(ctx, choice, gap, extra, origins, dirs0, probes, trace)
+        choice = self._again(ctx, choice, gap, extra, origins, dirs0, probes, hits, trace)
         v = choice.point - geom.cam_o
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
@@ -217,13 +222,13 @@ class ReparamTransforms(Identity):
 
         probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
         dirs0 = direction(center)
-        choice = self._choose(ctx, x0, dirs0, probes, trace)
+        choice, hits = self._choose(ctx, x0, dirs0, probes, trace)
         # every segment endpoint's angle from x, once for the gap probe and the shapes' images
         sight = angle_sight(ctx.geom0, x0, ignore, probes)
         # nothing chosen, but a primitive's whole image lies between two probes: probe it too, choose again
         gap = np.flatnonzero(~choice.ok)
         extra = angle_gap_probe(ctx.geom0, x0[gap], ignore[gap], probes[gap], sight.take(gap))
-        choice = self._again(ctx, choice, gap, extra, x0, dirs0, probes, trace)
+        choice = self._again(ctx, choice, gap, extra, x0, dirs0, probes, hits, trace)
         offset = choice.point - x
         # a chosen point on the shading point itself (coincident geometry) defines no direction: the
         # derivative of atan2 there is 0/0, so that sample keeps the identity transform

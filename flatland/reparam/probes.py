@@ -240,7 +240,7 @@ def select_points(
 
     point = zeros((n, 2), geom.differentiable, geom.k)
     if single.size:
-        point[single] = attached_points(geom, prim_f, coord_f)[0]
+        point[single] = attached_points(geom, prim_f, coord_f, normals=False)[0]
     corner = np.flatnonzero(code == 2)
     if corner.size:
         p0, n0 = attached_points(geom, prim0[corner], coord0[corner])
