@@ -61,18 +61,23 @@ def wrap_angle(phi: np.ndarray) -> np.ndarray:
     Plain arrays with $y = φ + π$ in $[-4π, 6π)$ (every angle difference the renderer wraps) take
     a faster road to the same numbers: numpy's remainder is the exact fmod, plus 2π where that is
     negative. Above 0, fmod is $y - 2π$ or $y - 4π$, exact float subtractions (Sterbenz); below 0 it
-    is y, or the exact $y + 2π$ below $-2π$, and the one rounded step adds 2π. Anything else (Duals,
-    NaN, inf, larger angles) goes through ``np.remainder``.
+    is y, or the exact $y + 2π$ below $-2π$, and the one rounded step adds 2π: one addition of
+    $j · 2π$, j in {-2, ..., 2}, gives each. Anything else (Duals, NaN, inf, larger angles) goes
+    through ``np.remainder``.
     """
     if isinstance(phi, np.ndarray) and phi.dtype == np.float64 and phi.ndim and phi.size:
         y = phi + np.pi
-        if y.min() >= -2.0 * TWO_PI and y.max() < 3.0 * TWO_PI:  # NaN fails both tests
-            # every mask from y as it came: a rounded y + 2π may equal 2π, and stays so (as in remainder)
-            below, far_below, above, far_above = y < 0.0, y < -TWO_PI, y >= TWO_PI, y >= 2.0 * TWO_PI
-            np.add(y, TWO_PI, out=y, where=far_below)  # exact: y in [-2π, 0) now
-            np.add(y, TWO_PI, out=y, where=below)  # remainder's one rounded step
-            np.subtract(y, TWO_PI, out=y, where=above & ~far_above)
-            np.subtract(y, 2.0 * TWO_PI, out=y, where=far_above)
+        least, most = y.min(), y.max()
+        if least >= -2.0 * TWO_PI and most < 3.0 * TWO_PI:  # NaN fails both tests
+            # turns of 2π to add, from y as it came (a rounded y + 2π may equal 2π, and stays so, as in
+            # remainder); y + 2 (2π) is the same one rounding as (y + 2π, exact) + 2π
+            turns = np.zeros(y.shape, np.int8)  # small integers (booleans viewed as int8: no casting loops)
+            for bound, sign in ((0.0, 1), (-TWO_PI, 1), (TWO_PI, -1), (2.0 * TWO_PI, -1)):
+                if sign > 0 and least < bound:
+                    turns += (y < bound).view(np.int8)
+                elif sign < 0 and most >= bound:
+                    turns -= (y >= bound).view(np.int8)
+            y += turns * TWO_PI  # y + 0.0 where no turn: y (a zero's sign is lost to the - π below)
             y -= np.pi
             return y
     return np.remainder(phi + np.pi, TWO_PI) - np.pi

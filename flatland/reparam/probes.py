@@ -410,14 +410,22 @@ def _images(geom: SceneState, coords: np.ndarray, usable: np.ndarray, widest: fl
     lo, hi = np.zeros((n, len(shapes))), np.zeros((n, len(shapes)))
     first, last = np.zeros((n, len(shapes)), np.int64), np.zeros((n, len(shapes)), np.int64)
     valid = np.zeros((n, len(shapes)), bool)
-    rows = np.arange(n)
-    for j, k in enumerate(shapes):  # a handful of shapes, each vectorized over rows and endpoints
-        idx = np.flatnonzero(end_shape == k)
-        c = np.where(usable[:, idx], coords[:, idx], 0.0)
-        i_lo, i_hi = np.argmin(c, axis=1), np.argmax(c, axis=1)
-        lo[:, j], hi[:, j] = c[rows, i_lo], c[rows, i_hi]
-        first[:, j], last[:, j] = idx[i_lo], idx[i_hi]
-        valid[:, j] = np.all(usable[:, idx], axis=1) & (hi[:, j] > lo[:, j]) & (hi[:, j] - lo[:, j] < widest)
+    for j, k in enumerate(shapes):  # a handful of shapes and endpoints, each vectorized over the rows
+        lo_j, hi_j, first_j, last_j, ok = lo[:, j], hi[:, j], first[:, j], last[:, j], valid[:, j]
+        # the extremes by a running minimum and maximum over the shape's endpoints (the first of equals,
+        # as argmin and argmax pick it); an endpoint not usable counts as 0 (the image is not valid)
+        for m, i in enumerate(np.flatnonzero(end_shape == k)):
+            c = np.where(usable[:, i], coords[:, i], 0.0)
+            if m == 0:
+                lo_j[:], hi_j[:], first_j[:], last_j[:], ok[:] = c, c, i, i, usable[:, i]
+                continue
+            below, above = c < lo_j, c > hi_j
+            np.copyto(lo_j, c, where=below)
+            np.copyto(first_j, i, where=below)
+            np.copyto(hi_j, c, where=above)
+            np.copyto(last_j, i, where=above)
+            ok &= usable[:, i]
+        ok &= (hi_j > lo_j) & (hi_j - lo_j < widest)
     return ShapeImages(np.array(shapes, dtype=np.int64), lo, hi, first, last, valid)
 
 
@@ -490,13 +498,14 @@ def angle_sight(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.
     shape images (:func:`angle_gap_probe`, :func:`angle_images`)."""
     centre = 0.5 * (probes[:, :1] + probes[:, -1:])
     ends = np.concatenate([np.asarray(detach(geom.seg_a)), np.asarray(detach(geom.seg_b))])
-    vx, vy = ends[None, :, 0] - x[:, 0:1], ends[None, :, 1] - x[:, 1:2]  # (n, 2S) each: long inner loops
-    rel = wrap_angle(np.arctan2(vy, vx) - centre)
+    # computed as (2S, n), endpoints first, so every operation runs along the rows; stored transposed
+    vx, vy = ends[:, 0:1] - x[:, 0], ends[:, 1:2] - x[:, 1]
+    rel = wrap_angle(np.arctan2(vy, vx) - centre[:, 0])
     seg_shape = geom.prim_shape[: geom.n_seg]
     end_shape = np.concatenate([seg_shape, seg_shape])
     own = np.where(ignore >= 0, geom.prim_shape[np.maximum(ignore, 0)], -1)
-    usable = (end_shape[None] != own[:, None]) & ((vx != 0.0) | (vy != 0.0))  # |v| > 0
-    return Sight(centre, rel, usable)
+    usable = (end_shape[:, None] != own[None, :]) & ((vx != 0.0) | (vy != 0.0))  # |v| > 0
+    return Sight(centre, rel.T, usable.T)
 
 
 def film_images(geom: SceneState, n: int) -> ShapeImages:
