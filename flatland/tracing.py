@@ -59,7 +59,13 @@ def cross2(a: Any, b: Any) -> Any:
 
 
 def direction(phi: Any) -> Any:
-    r"""Unit vector(s) $(\cos φ, \sin φ)$, shape ``phi.shape + (2,)``."""
+    r"""Unit vector(s) $(\cos φ, \sin φ)$, shape ``phi.shape + (2,)``.
+
+    For a plain array, the components are stored one after the other (a view with the last axis
+    slowest), which :func:`cast` reads without copying them apart.
+    """
+    if isinstance(phi, np.ndarray) and phi.ndim:
+        return np.moveaxis(np.stack([np.cos(phi), np.sin(phi)]), 0, -1)
     return np.stack([np.cos(phi), np.sin(phi)], axis=-1)
 
 

@@ -259,8 +259,10 @@ def _gap_probe(lo: np.ndarray, hi: np.ndarray, probes: np.ndarray) -> np.ndarray
         return np.full(len(probes), np.nan)
     first, last = probes[:, :1], probes[:, -1:]
     with np.errstate(invalid="ignore"):  # NaN bounds (no interval) compare False
-        seen = np.any((probes[:, :, None] >= lo[:, None]) & (probes[:, :, None] <= hi[:, None]), axis=1)
-        gap = (hi > first) & (lo < last) & ~seen
+        gap = (hi > first) & (lo < last)
+        for k in range(probes.shape[1]):  # a handful of probes, each over rows × primitives: none inside
+            p = probes[:, k : k + 1]
+            gap &= ~((p >= lo) & (p <= hi))
     mid = 0.5 * (np.maximum(lo, first) + np.minimum(hi, last))
     dist = np.where(gap, np.abs(mid - 0.5 * (first + last)), np.inf)
     rows, best = np.arange(len(probes)), np.argmin(dist, axis=1)
