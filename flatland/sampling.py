@@ -55,7 +55,7 @@ __all__ = [
 TWO_PI = 2.0 * np.pi
 
 
-def wrap_angle(phi: np.ndarray) -> np.ndarray:
+def wrap_angle(phi: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     r"""Angle(s) wrapped to [-π, π): $\mathrm{remainder}(φ + π, 2π) - π$, numpy's remainder bit for bit.
 
     Plain arrays with $y = φ + π$ in $[-4π, 6π)$ (every angle difference the renderer wraps) take
@@ -63,10 +63,11 @@ def wrap_angle(phi: np.ndarray) -> np.ndarray:
     negative. Above 0, fmod is $y - 2π$ or $y - 4π$, exact float subtractions (Sterbenz); below 0 it
     is y, or the exact $y + 2π$ below $-2π$, and the one rounded step adds 2π: one addition of
     $j · 2π$, j in {-2, ..., 2}, gives each. Anything else (Duals, NaN, inf, larger angles) goes
-    through ``np.remainder``.
+    through ``np.remainder``. ``out`` (a float array shaped like ``phi``, which may be ``phi``
+    itself) receives the result on the fast road, saving an array as large as ``phi``.
     """
     if isinstance(phi, np.ndarray) and phi.dtype == np.float64 and phi.ndim and phi.size:
-        y = phi + np.pi
+        y = np.add(phi, np.pi, out=out)
         least, most = y.min(), y.max()
         if least >= -2.0 * TWO_PI and most < 3.0 * TWO_PI:  # NaN fails both tests
             # turns of 2π to add, from y as it came (a rounded y + 2π may equal 2π, and stays so, as in
@@ -80,6 +81,9 @@ def wrap_angle(phi: np.ndarray) -> np.ndarray:
             y += turns * TWO_PI  # y + 0.0 where no turn: y (a zero's sign is lost to the - π below)
             y -= np.pi
             return y
+        y = np.remainder(y, TWO_PI, out=y)  # y is φ + π, as computed below
+        y -= np.pi
+        return y
     return np.remainder(phi + np.pi, TWO_PI) - np.pi
 
 

@@ -502,11 +502,13 @@ def angle_sight(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.
     ends = np.concatenate([np.asarray(detach(geom.seg_a)), np.asarray(detach(geom.seg_b))])
     # computed as (2S, n), endpoints first, so every operation runs along the rows; stored transposed
     vx, vy = ends[:, 0:1] - x[:, 0], ends[:, 1:2] - x[:, 1]
-    rel = wrap_angle(np.arctan2(vy, vx) - centre[:, 0])
     seg_shape = geom.prim_shape[: geom.n_seg]
     end_shape = np.concatenate([seg_shape, seg_shape])
     own = np.where(ignore >= 0, geom.prim_shape[np.maximum(ignore, 0)], -1)
     usable = (end_shape[:, None] != own[None, :]) & ((vx != 0.0) | (vy != 0.0))  # |v| > 0
+    rel = np.arctan2(vy, vx, out=vy)  # in place: arrays this size cost more to allocate than to fill
+    rel -= centre[:, 0]
+    rel = wrap_angle(rel, out=rel)
     return Sight(centre, rel.T, usable.T)
 
 

@@ -169,6 +169,11 @@ def test09_wrap_angle_is_numpys_remainder_bit_for_bit():
         got, want = s.wrap_angle(phi), reference(phi)
         assert np.array_equal(got, want, equal_nan=True)
         assert np.array_equal(np.signbit(got), np.signbit(want))
+        if isinstance(phi, np.ndarray):  # into out, which may be phi itself: the same numbers
+            inplace = phi.copy()
+            assert s.wrap_angle(inplace, out=inplace) is inplace
+            assert np.array_equal(inplace, want, equal_nan=True)
+            assert np.array_equal(np.signbit(inplace), np.signbit(want))
     # the test can fail: wrapping in sequence (add 2π below 0, then subtract 2π from what reaches 2π)
     # turns a rounded y + 2π = 2π into 0, where remainder keeps 2π
     y = tiny + np.pi
