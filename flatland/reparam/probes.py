@@ -431,9 +431,9 @@ def _images(geom: SceneState, coords: np.ndarray, usable: np.ndarray, widest: fl
     return ShapeImages(np.array(shapes, dtype=np.int64), lo, hi, first, last, valid)
 
 
-def _inner(images: ShapeImages, probes: np.ndarray) -> ShapeImage:
+def inner_shape(images: ShapeImages, probes: np.ndarray) -> ShapeImage:
     """Per row, the valid image lying strictly inside (probes[0], probes[-1]) whose middle is nearest
-    the span's centre."""
+    the span's centre (:func:`film_inner_shape`, :func:`angle_inner_shape` from the shapes' ``images``)."""
     n = len(probes)
     inside = images.valid & (images.lo > probes[:, :1]) & (images.hi < probes[:, -1:])
     centre = 0.5 * (probes[:, :1] + probes[:, -1:])
@@ -451,9 +451,10 @@ def _inner(images: ShapeImages, probes: np.ndarray) -> ShapeImage:
     )
 
 
-def _end(images: ShapeImages, probes: np.ndarray, geom: SceneState, followed: np.ndarray) -> np.ndarray:
+def shape_end(images: ShapeImages, probes: np.ndarray, geom: SceneState, followed: np.ndarray) -> np.ndarray:
     """Per row, the endpoint at the one end of the ``followed`` primitive's shape image inside the
-    probes' span, -1 where none or both are."""
+    probes' span, -1 where none or both are (:func:`film_shape_end`, :func:`angle_shape_end` from the
+    shapes' ``images``)."""
     end = np.full(len(probes), -1)
     shape = np.where(followed >= 0, geom.prim_shape[np.maximum(followed, 0)], -1)
     for j, k in enumerate(images.shape):  # a handful of shapes
@@ -522,16 +523,6 @@ def angle_images(geom: SceneState, sight: Sight) -> ShapeImages:
     """Each shape of segments' image seen from the rows' points, on the probes' branch, from their
     :func:`angle_sight` (:func:`angle_inner_shape`, :func:`angle_shape_end`)."""
     return _images(geom, sight.centre + sight.rel, sight.usable, widest=np.pi - 1e-9)
-
-
-def inner_shape(images: ShapeImages, probes: np.ndarray) -> ShapeImage:
-    """:func:`film_inner_shape` or :func:`angle_inner_shape` from the shapes' ``images``."""
-    return _inner(images, probes)
-
-
-def shape_end(images: ShapeImages, probes: np.ndarray, geom: SceneState, followed: np.ndarray) -> np.ndarray:
-    """:func:`film_shape_end` or :func:`angle_shape_end` from the shapes' ``images``."""
-    return _end(images, probes, geom, followed)
 
 
 def film_inner_shape(geom: SceneState, probes: np.ndarray) -> ShapeImage:
