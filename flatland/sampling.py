@@ -15,6 +15,7 @@ film: :func:`filter_value` ($k_j$, Dual-aware), :func:`sample_filter` /
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -54,8 +55,35 @@ __all__ = [
 TWO_PI = 2.0 * np.pi
 
 
-def wrap_angle(phi: np.ndarray) -> np.ndarray:
-    """Angle(s) wrapped to [-π, π)."""
+def wrap_angle(phi: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    r"""Angle(s) wrapped to [-π, π): $\mathrm{remainder}(φ + π, 2π) - π$, numpy's remainder bit for bit.
+
+    Plain arrays with $y = φ + π$ in $[-4π, 6π)$ (every angle difference the renderer wraps) take
+    a faster road to the same numbers: numpy's remainder is the exact fmod, plus 2π where that is
+    negative. Above 0, fmod is $y - 2π$ or $y - 4π$, exact float subtractions (Sterbenz); below 0 it
+    is y, or the exact $y + 2π$ below $-2π$, and the one rounded step adds 2π: one addition of
+    $j · 2π$, j in {-2, ..., 2}, gives each. Anything else (Duals, NaN, inf, larger angles) goes
+    through ``np.remainder``. ``out`` (a float array shaped like ``phi``, which may be ``phi``
+    itself) receives the result on the fast road, saving an array as large as ``phi``.
+    """
+    if isinstance(phi, np.ndarray) and phi.dtype == np.float64 and phi.ndim and phi.size:
+        y = np.add(phi, np.pi, out=out)
+        least, most = y.min(), y.max()
+        if least >= -2.0 * TWO_PI and most < 3.0 * TWO_PI:  # NaN fails both tests
+            # turns of 2π to add, from y as it came (a rounded y + 2π may equal 2π, and stays so, as in
+            # remainder); y + 2 (2π) is the same one rounding as (y + 2π, exact) + 2π
+            turns = np.zeros(y.shape, np.int8)  # small integers (booleans viewed as int8: no casting loops)
+            for bound, sign in ((0.0, 1), (-TWO_PI, 1), (TWO_PI, -1), (2.0 * TWO_PI, -1)):
+                if sign > 0 and least < bound:
+                    turns += (y < bound).view(np.int8)
+                elif sign < 0 and most >= bound:
+                    turns -= (y >= bound).view(np.int8)
+            y += turns * TWO_PI  # y + 0.0 where no turn: y (a zero's sign is lost to the - π below)
+            y -= np.pi
+            return y
+        y = np.remainder(y, TWO_PI, out=y)  # y is φ + π, as computed below
+        y -= np.pi
+        return y
     return np.remainder(phi + np.pi, TWO_PI) - np.pi
 
 
@@ -175,6 +203,15 @@ def pdf_von_mises(phi: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.n
     return np.exp(log_pdf_von_mises(np.asarray(phi, dtype=np.float64), mu, kappa))
 
 
+@functools.lru_cache(maxsize=8)
+def _von_mises(kappa: float) -> Any:
+    """scipy's frozen von Mises distribution of concentration ``kappa``, made once per κ (freezing one
+    costs milliseconds, as much as a CDF evaluation over thousands of angles)."""
+    from scipy.stats import vonmises  # here, not at module level: scipy.stats is slow to import
+
+    return vonmises(kappa)
+
+
 def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
     """Von Mises samples by numerical inversion of the CDF (safeguarded Newton).
 
@@ -188,9 +225,7 @@ def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.
     if not np.all(np.isfinite(mu)):
         raise ValidationError("mu", f"must be finite, got {mu!r}")
     u = np.asarray(u, dtype=np.float64)
-    from scipy.stats import vonmises  # here, not at module level: scipy.stats is slow to import
-
-    dist = vonmises(kappa)
+    dist = _von_mises(kappa)
     # start from the Gaussian approximation (exact as κ → ∞), clipped into the bracket
     phi = np.clip(special.ndtri(u) / np.sqrt(kappa), -np.pi, np.pi)
     lo = np.full(u.shape, -np.pi)

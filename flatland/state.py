@@ -19,6 +19,7 @@ scene (:func:`moved_scene`) is the derivative at those offsets, for every kind o
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -146,18 +147,23 @@ class SceneState:
     def n_circ(self) -> int:
         return int(np.shape(detach(self.circ_r))[0])
 
-    @property
+    # the state is frozen: what follows from its fields is computed once (asked for per ray batch)
+    @functools.cached_property
     def differentiable(self) -> bool:
         """True when some array is a Dual (bound with a Dual θ)."""
         return any(isinstance(getattr(self, f.name), Dual) for f in fields(self))
 
-    @property
+    @functools.cached_property
     def k(self) -> int | None:
         """How many tangents its Duals carry (:func:`~flatland.core.dual.k_of`): None for one (or none)."""
         return k_of(*(getattr(self, f.name) for f in fields(self)))
 
     def detached(self) -> SceneState:
         """The same geometry with every derivative dropped (for tracing and jump values)."""
+        return self._detached
+
+    @functools.cached_property
+    def _detached(self) -> SceneState:
         return replace(self, **{f.name: detach(getattr(self, f.name)) for f in fields(self)})
 
     @property

@@ -59,7 +59,13 @@ def cross2(a: Any, b: Any) -> Any:
 
 
 def direction(phi: Any) -> Any:
-    r"""Unit vector(s) $(\cos φ, \sin φ)$, shape ``phi.shape + (2,)``."""
+    r"""Unit vector(s) $(\cos φ, \sin φ)$, shape ``phi.shape + (2,)``.
+
+    For a plain array, the components are stored one after the other (a view with the last axis
+    slowest), which :func:`cast` reads without copying them apart.
+    """
+    if isinstance(phi, np.ndarray) and phi.ndim:
+        return np.moveaxis(np.stack([np.cos(phi), np.sin(phi)]), 0, -1)
     return np.stack([np.cos(phi), np.sin(phi)], axis=-1)
 
 
@@ -135,28 +141,35 @@ def cast(geom: SceneState, origins: np.ndarray, dirs: np.ndarray, ignore: np.nda
     if n_prim == 0 or n == 0:
         return Hits(prim, dist, coord)
     step = max(1, MAX_PAIRS // n_prim)
-    ax, ay = a[:, 0], a[:, 1]
-    ex, ey = b[:, 0] - ax, b[:, 1] - ay
-    cx, cy, r2 = cc[:, 0], cc[:, 1], rr * rr
+    # primitives along the first axis, rays along the second: every operation runs over a chunk's
+    # contiguous rays (with the primitives along the last axis its inner loops were a few elements long)
+    ax, ay = a[:, 0:1], a[:, 1:2]
+    ex, ey = b[:, 0:1] - ax, b[:, 1:2] - ay
+    cx, cy, r2 = cc[:, 0:1], cc[:, 1:2], (rr * rr)[:, None]
+    ox_all, oy_all = np.ascontiguousarray(origins[:, 0]), np.ascontiguousarray(origins[:, 1])
+    dx_all, dy_all = np.ascontiguousarray(dirs[:, 0]), np.ascontiguousarray(dirs[:, 1])
     for lo in range(0, n, step):
         sl = slice(lo, min(n, lo + step))
-        ox, oy = origins[sl, 0:1], origins[sl, 1:2]
-        dx, dy = dirs[sl, 0:1], dirs[sl, 1:2]
-        s_all = np.empty((ox.shape[0], n_prim))
+        ox, oy, dx, dy = ox_all[sl], oy_all[sl], dx_all[sl], dy_all[sl]
+        s_all = np.empty((n_prim, ox.shape[0]))
         with np.errstate(divide="ignore", invalid="ignore"):
             if n_seg:
                 # o + s d = a + u e:  s = (w x e) / (d x e),  u = (w x d) / (d x e),  w = a - o;
                 # d x e = 0 gives u = ±inf or nan, which fails the range test
-                den = dx * ey - dy * ex
+                den = dx * ey
+                den -= dy * ex
                 wx, wy = ax - ox, ay - oy
-                s = wx * ey
+                s = s_all[:n_seg]
+                np.multiply(wx, ey, out=s)
                 s -= wy * ex
                 s /= den
                 u = wx * dy
                 u -= wy * dx
                 u /= den
-                np.copyto(s, np.inf, where=~((s > EPS_DIST) & (u >= 0.0) & (u <= 1.0)))
-                s_all[:, :n_seg] = s
+                ok = u >= 0.0
+                ok &= u <= 1.0
+                ok &= s > EPS_DIST
+                np.copyto(s, np.inf, where=~ok)
             if cc.shape[0]:
                 # |o + s d - c|^2 = r^2 with |d| = 1:  s = -q -+ sqrt(q^2 - (|o - c|^2 - r^2)),  q = d.(o - c)
                 px, py = ox - cx, oy - cy
@@ -166,23 +179,30 @@ def cast(geom: SceneState, origins: np.ndarray, dirs: np.ndarray, ignore: np.nda
                 near = -q - root
                 s = np.where(near > EPS_DIST, near, root - q)
                 np.copyto(s, np.inf, where=~((disc >= 0.0) & (s > EPS_DIST)))
-                s_all[:, n_seg:] = s
+                s_all[n_seg:] = s
         if ignore is not None:
             ig = np.asarray(ignore)[sl]
             rows = np.flatnonzero(ig >= 0)
-            s_all[rows, ig[rows]] = np.inf
-        best = np.argmin(s_all, axis=1)
-        d_best = s_all[np.arange(best.size), best]
+            s_all[ig[rows], rows] = np.inf
+        # the closest primitive, the first of equals (as argmin), by a running minimum over the few primitives
+        d_best = s_all[0].copy()
+        best = np.zeros(d_best.size, dtype=np.int64)
+        for j in range(1, n_prim):
+            closer = s_all[j] < d_best
+            np.copyto(d_best, s_all[j], where=closer)
+            np.copyto(best, j, where=closer)
         prim[sl] = np.where(np.isfinite(d_best), best, -1)
         dist[sl] = d_best
     hit = prim >= 0
     on_seg = hit & (prim < n_seg)
     i = np.flatnonzero(on_seg)
     if i.size:
-        k = prim[i]
-        px = origins[i] + dist[i, None] * dirs[i] - a[k]
-        e = b[k] - a[k]
-        coord[i] = np.sum(px * e, axis=1) / np.sum(e * e, axis=1)
+        k, s_i = prim[i], dist[i]
+        # u = (p - a)·e / e·e at the hit p = o + s d, by components
+        px = ox_all[i] + s_i * dx_all[i] - a[k, 0]
+        py = oy_all[i] + s_i * dy_all[i] - a[k, 1]
+        e_x, e_y = b[k, 0] - a[k, 0], b[k, 1] - a[k, 1]
+        coord[i] = (px * e_x + py * e_y) / (e_x * e_x + e_y * e_y)
     i = np.flatnonzero(hit & ~on_seg)
     if i.size:
         k = prim[i] - n_seg
@@ -255,31 +275,37 @@ def attach(geom: SceneState, hits: Hits, rows: np.ndarray, origins: Any, dirs: A
     return Attached(point, normal, u_out)
 
 
-def attached_points(geom: SceneState, prim: np.ndarray, coord: np.ndarray) -> tuple[Any, Any]:
+def attached_points(
+    geom: SceneState, prim: np.ndarray, coord: np.ndarray, normals: bool = True
+) -> tuple[Any, Any]:
     r"""Points that follow the shape, and their normals, for hits ``(prim, coord)`` (all hits).
 
     Segment: $a(θ) + u (b(θ) - a(θ))$ with the barycentric u detached; circle:
     $c(θ) + r(θ) (\cos α, \sin α)$ with the world angle α detached (a rotation about its
     centre leaves a circle unchanged). These are the points whose motion the
-    reparameterization follows (Loubet et al. 2019, Sec. 4.3).
+    reparameterization follows (Loubet et al. 2019, Sec. 4.3). Without ``normals`` the
+    normal is None (not computed).
     """
     m = prim.size
     n_seg = geom.n_seg
     dual, k = geom.differentiable, geom.k
-    point, normal = zeros((m, 2), dual, k), zeros((m, 2), dual, k)
+    point = zeros((m, 2), dual, k)
+    normal = zeros((m, 2), dual, k) if normals else None
     seg = np.flatnonzero(prim < n_seg)
     if seg.size:
         k = prim[seg]
         a, b = geom.seg_a[k], geom.seg_b[k]
         e = b - a
         point[seg] = a + coord[seg, None] * e
-        normal[seg] = _segment_normal(e)
+        if normals:
+            normal[seg] = _segment_normal(e)
     circ = np.flatnonzero(prim >= n_seg)
     if circ.size:
         k = prim[circ] - n_seg
         unit = np.stack([np.cos(coord[circ]), np.sin(coord[circ])], axis=1)
         point[circ] = geom.circ_c[k] + geom.circ_r[k][:, None] * unit
-        normal[circ] = unit
+        if normals:
+            normal[circ] = unit
     return point, normal
 
 

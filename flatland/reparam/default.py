@@ -23,12 +23,13 @@ from flatland.reparam.probes import (
     Choice,
     ShapeImage,
     angle_gap_probe,
-    angle_inner_shape,
-    angle_shape_end,
+    angle_images,
+    angle_sight,
     film_gap_probe,
-    film_inner_shape,
-    film_shape_end,
+    film_images,
+    inner_shape,
     select_points,
+    shape_end,
 )
 from flatland.sampling import filter_blurred, sample_von_mises
 from flatland.tracing import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction, zeros
@@ -122,34 +123,39 @@ class ReparamTransforms(Identity):
     def _choose(
         self, ctx: Context, origins: np.ndarray, centre_dirs: np.ndarray, probes: np.ndarray,
         trace: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
-    ) -> Choice:  # fmt: skip
+    ) -> tuple[Choice, tuple[np.ndarray, np.ndarray]]:  # fmt: skip
+        """The choice from the ``probes`` (n, P), and their hits (primitive, coordinate), (n, P) each."""
         n, m = probes.shape
         prim, coord = trace(np.repeat(np.arange(n), m), probes.reshape(-1))
-        return select_points(
-            ctx.geom,
-            origins,
-            prim.reshape(n, m),
-            coord.reshape(n, m),
-            centre_dirs,
-            probes,
-            trace,
-            self.refine,
-        )
+        prim, coord = prim.reshape(n, m), coord.reshape(n, m)
+        choice = select_points(ctx.geom, origins, prim, coord, centre_dirs, probes, trace, self.refine)
+        return choice, (prim, coord)
 
     def _again(
         self, ctx: Context, choice: Choice, rows: np.ndarray, extra: np.ndarray, origins: np.ndarray,
-        centre_dirs: np.ndarray, probes: np.ndarray, trace: Callable[[np.ndarray, np.ndarray], Any],
+        centre_dirs: np.ndarray, probes: np.ndarray, hits: tuple[np.ndarray, np.ndarray],
+        trace: Callable[[np.ndarray, np.ndarray], Any],
     ) -> Choice:  # fmt: skip
-        """``choice`` with ``rows`` chosen again from their probes plus the probe at ``extra`` (NaN: none)."""
+        """``choice`` with ``rows`` chosen again from their probes (``hits``, as traced) plus the probe at
+        ``extra`` (NaN: none), the one traced here: a ray's hit does not depend on the rays cast with it."""
         rows, extra = rows[np.isfinite(extra)], extra[np.isfinite(extra)]
         if not rows.size:
             return choice
-        again = np.sort(np.concatenate([probes[rows], extra[:, None]], axis=1), axis=1)
+        params = np.concatenate([probes[rows], extra[:, None]], axis=1)
+        again = np.sort(params, axis=1)
+        order = np.argsort(params, axis=1, kind="stable")  # where each sorted probe's hit comes from
+        extra_prim, extra_coord = trace(rows, extra)
+        prim = np.take_along_axis(np.concatenate([hits[0][rows], extra_prim[:, None]], axis=1), order, axis=1)
+        coord = np.take_along_axis(
+            np.concatenate([hits[1][rows], extra_coord[:, None]], axis=1), order, axis=1
+        )
 
         def trace_rows(r: np.ndarray, params: np.ndarray) -> Any:  # trace's rows index the full chunk
             return trace(rows[r], params)
 
-        sub = self._choose(ctx, origins[rows], centre_dirs[rows], again, trace_rows)
+        sub = select_points(
+            ctx.geom, origins[rows], prim, coord, centre_dirs[rows], again, trace_rows, self.refine
+        )
         point, code, followed = choice.point, choice.code.copy(), choice.followed_prim.copy()
         point[rows], code[rows], followed[rows] = sub.point, sub.code, sub.followed_prim
         return Choice(point, code, followed)
@@ -174,23 +180,24 @@ class ReparamTransforms(Identity):
 
         probes = center[:, None] + sigma * self.offsets
         origins, dirs0 = np.broadcast_to(o0, (n, 2)), film_direction(ctx.geom0, center)
-        choice = self._choose(ctx, origins, dirs0, probes, trace)
+        choice, hits = self._choose(ctx, origins, dirs0, probes, trace)
         # nothing chosen, but a primitive's whole image lies between two probes: probe it too, choose again
         gap = np.flatnonzero(~choice.ok)
         extra = film_gap_probe(ctx.geom0, probes[gap])
-        choice = self._again(ctx, choice, gap, extra, origins, dirs0, probes, trace)
+        choice = self._again(ctx, choice, gap, extra, origins, dirs0, probes, hits, trace)
         v = choice.point - geom.cam_o
         ok = choice.ok & (np.sum(detach(v) * detach(geom.cam_f), axis=1) > 0.0)
         t_p = film_coordinate(geom, np.where(ok[:, None], v, detach(geom.cam_f)))
         # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
-        end = film_shape_end(ctx.geom0, probes, np.where(ok, choice.followed_prim, -1))
+        images = film_images(ctx.geom0, n)  # the shapes' film images, for the shape's end and a shape inside
+        end = shape_end(images, probes, ctx.geom0, np.where(ok, choice.followed_prim, -1))
         rows = np.flatnonzero(end >= 0)
         if rows.size:
             t_p[rows] = _end_coordinate(geom, end[rows])
         # T(t, θ) = t + t_p(θ) - t_p(θ0): value t, derivative t_p'   (Loubet et al. 2019, Sec. 3.2)
         points = mu + translation_offset(t_p, ok)[:, None]
         # a visible shape whose whole image lies inside the probes' span: follow both its ends
-        inner = film_inner_shape(ctx.geom0, probes)
+        inner = inner_shape(images, probes)
         points, log_jacobian = _stretch(
             inner, mu, points, trace, ctx.geom0, lambda rows, i: _end_coordinate(geom, i)
         )
@@ -215,11 +222,13 @@ class ReparamTransforms(Identity):
 
         probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
         dirs0 = direction(center)
-        choice = self._choose(ctx, x0, dirs0, probes, trace)
+        choice, hits = self._choose(ctx, x0, dirs0, probes, trace)
+        # every segment endpoint's angle from x, once for the gap probe and the shapes' images
+        sight = angle_sight(ctx.geom0, x0, ignore, probes)
         # nothing chosen, but a primitive's whole image lies between two probes: probe it too, choose again
         gap = np.flatnonzero(~choice.ok)
-        extra = angle_gap_probe(ctx.geom0, x0[gap], ignore[gap], probes[gap])
-        choice = self._again(ctx, choice, gap, extra, x0, dirs0, probes, trace)
+        extra = angle_gap_probe(ctx.geom0, x0[gap], ignore[gap], probes[gap], sight.take(gap))
+        choice = self._again(ctx, choice, gap, extra, x0, dirs0, probes, hits, trace)
         offset = choice.point - x
         # a chosen point on the shading point itself (coincident geometry) defines no direction: the
         # derivative of atan2 there is 0/0, so that sample keeps the identity transform
@@ -230,14 +239,15 @@ class ReparamTransforms(Identity):
             return angle_of(_endpoint(ctx.geom, i) - x[rows])
 
         # the followed shape's silhouette end inside the probes' span: follow that endpoint itself
-        end = angle_shape_end(ctx.geom0, x0, ignore, probes, np.where(ok, choice.followed_prim, -1))
+        images = angle_images(ctx.geom0, sight)
+        end = shape_end(images, probes, ctx.geom0, np.where(ok, choice.followed_prim, -1))
         rows = np.flatnonzero(end >= 0)
         if rows.size:
             angle[rows] = end_angle(rows, end[rows])
         # T(φ, θ) = φ + angle(p(θ) - x(θ)) - its value: a translation of the angle, |det J| = 1   (Sec. 4.1)
         points = mu + translation_offset(angle, ok)[:, None]
         # a visible shape whose whole image lies inside the probes' span: follow both its ends
-        inner = angle_inner_shape(ctx.geom0, x0, ignore, probes)
+        inner = inner_shape(images, probes)
         points, log_jacobian = _stretch(inner, mu, points, trace, ctx.geom0, end_angle)
         c = np.cos(points - center[:, None])
         # von Mises weight times |det J_T|, log k = κ cos(T y - ω) + const   (Loubet et al. 2019, Sec. 4.2)

@@ -85,13 +85,20 @@ __all__ = [
     "PARALLEL",
     "Choice",
     "ShapeImage",
+    "ShapeImages",
+    "Sight",
     "angle_gap_probe",
+    "angle_images",
     "angle_inner_shape",
     "angle_shape_end",
+    "angle_sight",
     "film_gap_probe",
+    "film_images",
     "film_inner_shape",
     "film_shape_end",
+    "inner_shape",
     "select_points",
+    "shape_end",
 ]
 
 PARALLEL = 0.99
@@ -233,7 +240,7 @@ def select_points(
 
     point = zeros((n, 2), geom.differentiable, geom.k)
     if single.size:
-        point[single] = attached_points(geom, prim_f, coord_f)[0]
+        point[single] = attached_points(geom, prim_f, coord_f, normals=False)[0]
     corner = np.flatnonzero(code == 2)
     if corner.size:
         p0, n0 = attached_points(geom, prim0[corner], coord0[corner])
@@ -252,8 +259,10 @@ def _gap_probe(lo: np.ndarray, hi: np.ndarray, probes: np.ndarray) -> np.ndarray
         return np.full(len(probes), np.nan)
     first, last = probes[:, :1], probes[:, -1:]
     with np.errstate(invalid="ignore"):  # NaN bounds (no interval) compare False
-        seen = np.any((probes[:, :, None] >= lo[:, None]) & (probes[:, :, None] <= hi[:, None]), axis=1)
-        gap = (hi > first) & (lo < last) & ~seen
+        gap = (hi > first) & (lo < last)
+        for k in range(probes.shape[1]):  # a handful of probes, each over rows × primitives: none inside
+            p = probes[:, k : k + 1]
+            gap &= ~((p >= lo) & (p <= hi))
     mid = 0.5 * (np.maximum(lo, first) + np.minimum(hi, last))
     dist = np.where(gap, np.abs(mid - 0.5 * (first + last)), np.inf)
     rows, best = np.arange(len(probes)), np.argmin(dist, axis=1)
@@ -313,7 +322,9 @@ def film_gap_probe(geom: SceneState, probes: np.ndarray) -> np.ndarray:
     )
 
 
-def angle_gap_probe(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray) -> np.ndarray:
+def angle_gap_probe(
+    geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray, sight: Sight | None = None
+) -> np.ndarray:
     """Per row, an angle inside a primitive's image seen from ``x`` that lies wholly between two probes.
 
     The angular form of :func:`film_gap_probe` for the shading integral: each primitive's
@@ -331,22 +342,27 @@ def angle_gap_probe(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes:
         The primitive each row's point lies on (-1: none).
     probes : ndarray, shape (n, P)
         The rows' probe angles, in increasing order.
+    sight : Sight, optional
+        :func:`angle_sight` of these rows, when already computed (the segments' angles are taken
+        from it, the same numbers).
 
     Returns
     -------
     ndarray, shape (n,)
         An angle (on the probes' branch), or NaN.
     """
-    centre = 0.5 * (probes[:, :1] + probes[:, -1:])
-    seg_a, seg_b = (np.asarray(detach(v)) for v in (geom.seg_a, geom.seg_b))
+    sight = angle_sight(geom, x, ignore, probes) if sight is None else sight
+    centre, n_seg = sight.centre, geom.n_seg
     plus, minus, outside = _circle_tangents(
         np.asarray(detach(geom.circ_c))[None] - x[:, None], np.asarray(detach(geom.circ_r))
     )
-    a = np.concatenate([seg_a[None] - x[:, None], plus], axis=1)  # (n, J, 2)
-    b = np.concatenate([seg_b[None] - x[:, None], minus], axis=1)
-    rel_a, rel_b = (wrap_angle(np.arctan2(v[..., 1], v[..., 0]) - centre) for v in (a, b))  # [-π, π)
+    # segments' ends from the sight (its rel is [ends of seg_a, ends of seg_b]), then the circles' tangents
+    rel_a, rel_b = (
+        np.concatenate([seg, wrap_angle(np.arctan2(v[..., 1], v[..., 0]) - centre)], axis=1)
+        for seg, v in ((sight.rel[:, :n_seg], plus), (sight.rel[:, n_seg:], minus))
+    )  # [-π, π)
     ok = np.abs(rel_a - rel_b) < np.pi - 1e-9
-    ok[:, geom.n_seg :] &= outside
+    ok[:, n_seg:] &= outside
     ok &= np.arange(ok.shape[1]) != ignore[:, None]
     lo = np.where(ok, np.minimum(rel_a, rel_b), np.nan)
     hi = np.where(ok, np.maximum(rel_a, rel_b), np.nan)
@@ -372,7 +388,7 @@ class ShapeImage:
 
 
 @dataclass(frozen=True)
-class _Images:
+class ShapeImages:
     """Per row and shape of segments (K of them): its image's ends' coordinates ``lo``, ``hi`` (n, K),
     their endpoints ``first``, ``last`` (n, K) and whether the image is usable (``valid``)."""
 
@@ -384,7 +400,7 @@ class _Images:
     valid: np.ndarray
 
 
-def _images(geom: SceneState, coords: np.ndarray, usable: np.ndarray, widest: float = np.inf) -> _Images:
+def _images(geom: SceneState, coords: np.ndarray, usable: np.ndarray, widest: float = np.inf) -> ShapeImages:
     """Each shape of segments' image per row from its endpoints' coordinates ``coords`` (n, 2S): the
     interval between the extremes. Shapes with a circle, with an endpoint not ``usable`` (n, 2S)
     or with an image of zero width, or not narrower than ``widest``, are not valid."""
@@ -396,20 +412,28 @@ def _images(geom: SceneState, coords: np.ndarray, usable: np.ndarray, widest: fl
     lo, hi = np.zeros((n, len(shapes))), np.zeros((n, len(shapes)))
     first, last = np.zeros((n, len(shapes)), np.int64), np.zeros((n, len(shapes)), np.int64)
     valid = np.zeros((n, len(shapes)), bool)
-    rows = np.arange(n)
-    for j, k in enumerate(shapes):  # a handful of shapes, each vectorized over rows and endpoints
-        idx = np.flatnonzero(end_shape == k)
-        c = np.where(usable[:, idx], coords[:, idx], 0.0)
-        i_lo, i_hi = np.argmin(c, axis=1), np.argmax(c, axis=1)
-        lo[:, j], hi[:, j] = c[rows, i_lo], c[rows, i_hi]
-        first[:, j], last[:, j] = idx[i_lo], idx[i_hi]
-        valid[:, j] = np.all(usable[:, idx], axis=1) & (hi[:, j] > lo[:, j]) & (hi[:, j] - lo[:, j] < widest)
-    return _Images(np.array(shapes, dtype=np.int64), lo, hi, first, last, valid)
+    for j, k in enumerate(shapes):  # a handful of shapes and endpoints, each vectorized over the rows
+        lo_j, hi_j, first_j, last_j, ok = lo[:, j], hi[:, j], first[:, j], last[:, j], valid[:, j]
+        # the extremes by a running minimum and maximum over the shape's endpoints (the first of equals,
+        # as argmin and argmax pick it); an endpoint not usable counts as 0 (the image is not valid)
+        for m, i in enumerate(np.flatnonzero(end_shape == k)):
+            c = np.where(usable[:, i], coords[:, i], 0.0)
+            if m == 0:
+                lo_j[:], hi_j[:], first_j[:], last_j[:], ok[:] = c, c, i, i, usable[:, i]
+                continue
+            below, above = c < lo_j, c > hi_j
+            np.copyto(lo_j, c, where=below)
+            np.copyto(first_j, i, where=below)
+            np.copyto(hi_j, c, where=above)
+            np.copyto(last_j, i, where=above)
+            ok &= usable[:, i]
+        ok &= (hi_j > lo_j) & (hi_j - lo_j < widest)
+    return ShapeImages(np.array(shapes, dtype=np.int64), lo, hi, first, last, valid)
 
 
-def _inner(images: _Images, probes: np.ndarray) -> ShapeImage:
+def inner_shape(images: ShapeImages, probes: np.ndarray) -> ShapeImage:
     """Per row, the valid image lying strictly inside (probes[0], probes[-1]) whose middle is nearest
-    the span's centre."""
+    the span's centre (:func:`film_inner_shape`, :func:`angle_inner_shape` from the shapes' ``images``)."""
     n = len(probes)
     inside = images.valid & (images.lo > probes[:, :1]) & (images.hi < probes[:, -1:])
     centre = 0.5 * (probes[:, :1] + probes[:, -1:])
@@ -427,9 +451,10 @@ def _inner(images: _Images, probes: np.ndarray) -> ShapeImage:
     )
 
 
-def _end(images: _Images, probes: np.ndarray, geom: SceneState, followed: np.ndarray) -> np.ndarray:
+def shape_end(images: ShapeImages, probes: np.ndarray, geom: SceneState, followed: np.ndarray) -> np.ndarray:
     """Per row, the endpoint at the one end of the ``followed`` primitive's shape image inside the
-    probes' span, -1 where none or both are."""
+    probes' span, -1 where none or both are (:func:`film_shape_end`, :func:`angle_shape_end` from the
+    shapes' ``images``)."""
     end = np.full(len(probes), -1)
     shape = np.where(followed >= 0, geom.prim_shape[np.maximum(followed, 0)], -1)
     for j, k in enumerate(images.shape):  # a handful of shapes
@@ -454,21 +479,50 @@ def _film_coordinates(geom: SceneState, n: int) -> tuple[np.ndarray, np.ndarray]
     return np.broadcast_to(t, (n, t.size)), np.broadcast_to(depth > 0.0, (n, t.size))
 
 
-def _angles(
-    geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class Sight:
+    """Every segment endpoint seen from the rows' shading points (:func:`angle_sight`): its angle
+    relative to the probes' centre ``rel`` (n, 2S) in [-π, π), that centre (n, 1), and whether the
+    endpoint is ``usable`` (n, 2S): not on the shape the row's point lies on, nor at the point."""
+
+    centre: np.ndarray
+    rel: np.ndarray
+    usable: np.ndarray
+
+    def take(self, rows: np.ndarray) -> Sight:
+        """The sight of ``rows`` only (the same numbers as computing it for them)."""
+        return Sight(self.centre[rows], self.rel[rows], self.usable[rows])
+
+
+def angle_sight(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray) -> Sight:
     """Every segment endpoint's angle seen from the rows' points ``x`` (n, 2) relative to the probes'
-    centre, in [-π, π), plus that centre (the probes' branch), (n, 2S); endpoints of the shape a
-    row's point lies on (``ignore``'s) are not usable."""
+    centre (the probes' branch), in [-π, π); endpoints of the shape a row's point lies on
+    (``ignore``'s) are not usable. Computed once per set of probes, it serves the gap probe and both
+    shape images (:func:`angle_gap_probe`, :func:`angle_images`)."""
     centre = 0.5 * (probes[:, :1] + probes[:, -1:])
     ends = np.concatenate([np.asarray(detach(geom.seg_a)), np.asarray(detach(geom.seg_b))])
-    v = ends[None] - x[:, None]
-    rel = wrap_angle(np.arctan2(v[..., 1], v[..., 0]) - centre)
+    # computed as (2S, n), endpoints first, so every operation runs along the rows; stored transposed
+    vx, vy = ends[:, 0:1] - x[:, 0], ends[:, 1:2] - x[:, 1]
     seg_shape = geom.prim_shape[: geom.n_seg]
     end_shape = np.concatenate([seg_shape, seg_shape])
     own = np.where(ignore >= 0, geom.prim_shape[np.maximum(ignore, 0)], -1)
-    usable = (end_shape[None] != own[:, None]) & (np.hypot(v[..., 0], v[..., 1]) > 0.0)
-    return centre + rel, usable
+    usable = (end_shape[:, None] != own[None, :]) & ((vx != 0.0) | (vy != 0.0))  # |v| > 0
+    rel = np.arctan2(vy, vx, out=vy)  # in place: arrays this size cost more to allocate than to fill
+    rel -= centre[:, 0]
+    rel = wrap_angle(rel, out=rel)
+    return Sight(centre, rel.T, usable.T)
+
+
+def film_images(geom: SceneState, n: int) -> ShapeImages:
+    """Each shape of segments' image on the film for ``n`` rows (the same for every row): the input of
+    :func:`inner_shape` and :func:`shape_end` (:func:`film_inner_shape`, :func:`film_shape_end`)."""
+    return _images(geom, *_film_coordinates(geom, n))
+
+
+def angle_images(geom: SceneState, sight: Sight) -> ShapeImages:
+    """Each shape of segments' image seen from the rows' points, on the probes' branch, from their
+    :func:`angle_sight` (:func:`angle_inner_shape`, :func:`angle_shape_end`)."""
+    return _images(geom, sight.centre + sight.rel, sight.usable, widest=np.pi - 1e-9)
 
 
 def film_inner_shape(geom: SceneState, probes: np.ndarray) -> ShapeImage:
@@ -492,7 +546,7 @@ def film_inner_shape(geom: SceneState, probes: np.ndarray) -> ShapeImage:
     -------
     ShapeImage
     """
-    return _inner(_images(geom, *_film_coordinates(geom, len(probes))), probes)
+    return inner_shape(film_images(geom, len(probes)), probes)
 
 
 def film_shape_end(geom: SceneState, probes: np.ndarray, followed: np.ndarray) -> np.ndarray:
@@ -517,18 +571,18 @@ def film_shape_end(geom: SceneState, probes: np.ndarray, followed: np.ndarray) -
     -------
     ndarray of int, shape (n,)
     """
-    return _end(_images(geom, *_film_coordinates(geom, len(probes))), probes, geom, followed)
+    return shape_end(film_images(geom, len(probes)), probes, geom, followed)
 
 
 def angle_inner_shape(geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray) -> ShapeImage:
     """:func:`film_inner_shape` for the shading integral: images are the intervals between a shape's
     endpoints' extreme angles seen from the rows' points ``x`` (n, 2), on the probes' branch; the
     shape a row's point lies on (``ignore`` (n,), its primitive) is skipped."""
-    return _inner(_images(geom, *_angles(geom, x, ignore, probes), widest=np.pi - 1e-9), probes)
+    return inner_shape(angle_images(geom, angle_sight(geom, x, ignore, probes)), probes)
 
 
 def angle_shape_end(
     geom: SceneState, x: np.ndarray, ignore: np.ndarray, probes: np.ndarray, followed: np.ndarray
 ) -> np.ndarray:
     """:func:`film_shape_end` for the shading integral, angles seen from the rows' points ``x``."""
-    return _end(_images(geom, *_angles(geom, x, ignore, probes), widest=np.pi - 1e-9), probes, geom, followed)
+    return shape_end(angle_images(geom, angle_sight(geom, x, ignore, probes)), probes, geom, followed)

@@ -151,3 +151,31 @@ def test08_film_filter_is_its_own_sampling_density(kind):
         x, lambda y: s.pdf_filter(kind, y, 0.1, wide), BINS, (0.1 - 2.0 * wide, 0.1 + 2.0 * wide)
     )
     assert result.p_value < 1e-10
+
+
+def test09_wrap_angle_is_numpys_remainder_bit_for_bit():
+    """wrap_angle's fast road (plain arrays within [-5π, 5π)) gives remainder(φ + π, 2π) - π exactly, signs
+    of zero included: at and next to every multiple of π, where a rounded y + 2π reaches 2π, at random;
+    and the other inputs (scalars, NaN, wider angles) go the slow road to the same numbers."""
+
+    def reference(phi):
+        return np.remainder(phi + np.pi, s.TWO_PI) - np.pi
+
+    near = [k * np.pi + np.arange(-200, 201) * np.spacing(max(abs(k) * np.pi, 1.0)) for k in range(-6, 7)]
+    below_pi = [np.nextafter(-np.pi, -4.0), np.nextafter(np.nextafter(-np.pi, -4.0), -4.0)]
+    tiny = np.array([*below_pi, -np.pi - 1e-300, np.nextafter(5 * np.pi, 0.0), -5 * np.pi])
+    uniform = stream(7, "wrap_angle").uniform(-5.5 * np.pi, 5.5 * np.pi, (400, 7))
+    for phi in (np.concatenate([*near, tiny]), uniform, uniform[:, :3] / 5.0, np.array([np.nan, 1.0]), 3.0):
+        got, want = s.wrap_angle(phi), reference(phi)
+        assert np.array_equal(got, want, equal_nan=True)
+        assert np.array_equal(np.signbit(got), np.signbit(want))
+        if isinstance(phi, np.ndarray):  # into out, which may be phi itself: the same numbers
+            inplace = phi.copy()
+            assert s.wrap_angle(inplace, out=inplace) is inplace
+            assert np.array_equal(inplace, want, equal_nan=True)
+            assert np.array_equal(np.signbit(inplace), np.signbit(want))
+    # the test can fail: wrapping in sequence (add 2π below 0, then subtract 2π from what reaches 2π)
+    # turns a rounded y + 2π = 2π into 0, where remainder keeps 2π
+    y = tiny + np.pi
+    y = np.where(y < 0.0, y + s.TWO_PI, y)
+    assert not np.array_equal(np.where(y >= s.TWO_PI, y - s.TWO_PI, y) - np.pi, reference(tiny))
