@@ -293,11 +293,13 @@ def moving_edges(state, edges: Edges) -> np.ndarray:
 
 @dataclass(frozen=True)
 class EdgeDraws:
-    r"""Edge samples of shading points (:func:`edge_draws`): per draw its point's row ``live``, the
+    r"""Edge samples of shading points (:func:`edge_draws`): per draw its flat index ``draw`` (i k + c for
+    column c of point i's k), its point's row ``live``, the
     direction ``w`` on the drawn arc (plain, unit), the arc's normal ``normal`` on S², the normal
     velocities ``speeds`` $m·\dot ω$ (one array per parameter), ``scale`` = Γ / c (the inverse density per
     radian) and ``cos`` = $\max(0, n·w)$ at θ0."""
 
+    draw: np.ndarray
     live: np.ndarray
     w: np.ndarray
     normal: np.ndarray
@@ -347,7 +349,7 @@ def edge_draws(shading, edges: Edges, u: np.ndarray, bounds, unclipped: np.ndarr
     omega = seen / norm(seen)[..., None]
     speeds = [dot(t, normal) for t in _slots(omega)]  # m·ω̇: the arc's normal velocity
     cos = np.maximum(dot(n0[live], w), 0.0)
-    return EdgeDraws(live, w, normal, speeds, total / overlap, cos)
+    return EdgeDraws(draw, live, w, normal, speeds, total / overlap, cos)
 
 
 def reynolds(draws: EdgeDraws, jump: np.ndarray, cos: np.ndarray, m: int, per_point: int, k) -> np.ndarray:
