@@ -16,7 +16,8 @@ keyed on the primary sample (:class:`~flatland.core.rng.Draws`), so images do no
 or threads. No Russian roulette (no bias, no early end): a path ends at d, on a miss, or at an albedo
 of 0 that no parameter moves. Under a method that changes the BSDF strategy's variables (``reparam``)
 the path goes on along the rotated sample, the throughput carrying the kernel weight
-(:mod:`sphere3d.path_changes`); ``boundary`` refuses d > 1 (:func:`sphere3d.methods._common.direct_only`).
+(:mod:`sphere3d.path_changes`). Under ``boundary`` each vertex's hooks are told its number (``at_vertex``):
+its edge terms' side paths carry the d - v vertices after vertex v (:mod:`sphere3d.boundary.indirect`).
 
 A scene with glossy shapes (``roughness``, :mod:`sphere3d.glossy`) takes :class:`MixedPaths` at every d,
 1 included: each vertex reflects by its own material (a glossy one by

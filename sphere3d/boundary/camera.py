@@ -34,7 +34,8 @@ At each point:
   2ε before it, makes the point contribute 0;
 - $L(x ∓ δn)$ by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
   with the same shading uniforms on both sides (common random numbers), δ =
-  :data:`EPS_FILM` pixels;
+  :data:`EPS_FILM` pixels; on paths of ``max_depth`` d the full radiance of paths of d vertices
+  (:mod:`sphere3d.paths`), the further vertices' numbers keyed alike on both sides;
 - the contribution $Λ_e/N_e\, [L^- - L^+] (v · n)$ goes to every pixel whose filter
   support covers the point, weighted by $k(x - p)$.
 

@@ -63,7 +63,11 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int, indirect:
     - **shading integrals** (:mod:`sphere3d.boundary.shading`): at every shading point
       ``secondary`` draws among the moving silhouette edges seen from it (occluders'
       outlines, emitters' borders), each a part of an edge's arc inside an emitter's image
-      (under a black sky) drawn ∝ its angle, and one point on it.
+      (under a black sky) drawn ∝ its angle, and one point on it;
+    - on paths of ``max_depth`` d > 1 (:mod:`sphere3d.paths`): those terms at every vertex, and at
+      each vertex v < d ``indirect`` more draws among the arcs of its silhouettes and flat creases for
+      the jump of the radiance the surfaces behind them reflect, each side by a path of d - v vertices
+      (:mod:`sphere3d.boundary.indirect`); the film term's sides are paths of d vertices.
 
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
     only discontinuities (see :mod:`sphere3d.boundary.edges` for what is not handled: partly
@@ -71,7 +75,8 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int, indirect:
     traced beside the edges ($O(δ)$ on the film, $O(δ^2)$ at shading points, extrapolated).
     Cost: two rays per edge point on the film, and per shading point ``4 secondary`` rays (both
     sides of the arc at two offsets) plus the silhouette test against the edges the edge tree
-    finds (:mod:`sphere3d.boundary.edge_tree`).
+    finds (:mod:`sphere3d.boundary.edge_tree`); on paths, per vertex v < d, ``2 indirect`` side paths
+    of d - v vertices, and each film edge point's sides are paths of d vertices.
     """
     plain = plain_state(task.scene, task.param, task.tracer)
     edges = state_edges(plain)
