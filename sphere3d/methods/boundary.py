@@ -45,7 +45,7 @@ each costs two side paths of the remaining depth, far more than an emission-jump
     Option("secondary", SECONDARY, check_int),
     Option("indirect", INDIRECT, check_int),
 )
-def boundary(task: ImageTask | PointTask, rate: float, secondary: int, indirect: int) -> Tally:
+def boundary(task: ImageTask | PointTask, rate: float, secondary: int, indirect: int = INDIRECT) -> Tally:
     r"""Naive interior term plus the boundary terms of the pixel and shading integrals (edge sampling).
 
     Every integral the renderer differentiates has the form $∫ f(θ, y) dy$ with f
