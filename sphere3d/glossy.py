@@ -23,8 +23,8 @@ with throughput $f (n·w_o) / p_f$ (:func:`~sphere3d.bsdf.weight_ggx`'s value). 
 variables (``reparam``) turns the emitter sample by its rotation and evaluates the BSDF sample at its
 members (:class:`~sphere3d.integrator.Members`), at every vertex of a path, the path going on along
 the rotated sample (:mod:`sphere3d.path_changes`); ``boundary``'s edge terms come through the
-``shading_extra`` hook, weighted by the BSDF at θ0 (:class:`Lobe`), and it refuses glossy paths of
-more than one vertex (:func:`sphere3d.methods._common.direct_only`). Vectorized over points.
+``shading_extra`` hook, weighted by the BSDF at θ0 (:class:`Lobe`), at every vertex of a path (the jump
+of the reflected radiance too, :mod:`sphere3d.boundary.indirect`). Vectorized over points.
 """
 
 from __future__ import annotations

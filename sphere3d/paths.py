@@ -16,7 +16,8 @@ keyed on the primary sample (:class:`~flatland.core.rng.Draws`), so images do no
 or threads. No Russian roulette (no bias, no early end): a path ends at d, on a miss, or at an albedo
 of 0 that no parameter moves. Under a method that changes the BSDF strategy's variables (``reparam``)
 the path goes on along the rotated sample, the throughput carrying the kernel weight
-(:mod:`sphere3d.path_changes`); ``boundary`` refuses d > 1 (:func:`sphere3d.methods._common.direct_only`).
+(:mod:`sphere3d.path_changes`). Under ``boundary`` each vertex's hooks are told its number (``at_vertex``):
+its edge terms' side paths carry the d - v vertices after vertex v (:mod:`sphere3d.boundary.indirect`).
 
 A scene with glossy shapes (``roughness``, :mod:`sphere3d.glossy`) takes :class:`MixedPaths` at every d,
 1 included: each vertex reflects by its own material (a glossy one by
@@ -39,7 +40,7 @@ from sphere3d.path_changes import Onward, Recorder, Steer, glossy_throughput, pa
 from sphere3d.tracing import Hits, intersect_triangles
 from sphere3d.vector import dot, normalize, scatter, zeros
 
-__all__ = ["MixedPaths", "Paths", "cosine_ratio", "irradiance_paths", "vertex"]
+__all__ = ["MixedPaths", "Paths", "cosine_ratio", "irradiance_paths", "reflected", "vertex"]
 
 PATH_RAYS = 3
 """Rays per vertex the memory budget counts: the camera's or previous vertex's ray, the emitter
@@ -62,6 +63,13 @@ def _onward(shading: Shading, transforms: Any, go_on: bool) -> tuple[Shading, An
     if rec is None:
         return shading, transforms, None
     return (Onward.of(shading) if go_on else shading), rec, rec
+
+
+def _at(transforms: Any, depth: int) -> Any:
+    """``transforms`` told that its hooks run at path vertex ``depth`` (its ``at_vertex``: ``boundary``'s,
+    whose edge terms carry the radiance of the vertices after it), else ``transforms`` itself."""
+    at = getattr(transforms, "at_vertex", None)
+    return transforms if at is None else at(depth)
 
 
 def _steered(rec: Recorder | None, mu: np.ndarray, k: int | None) -> Steer:
@@ -118,9 +126,9 @@ def _continue(
         rows, beta, albedo = rows[keep], beta[keep], albedo[keep]
         u = shading.draws.uniforms(f"bounce.{depth}", 5)  # keyed on (sample, depth): chunking changes nothing
         if depth == last:
-            e = irradiance_samples(shading, u, transforms)
+            e = irradiance_samples(shading, u, _at(transforms, depth))
         else:
-            e, mu, hits = irradiance_samples(shading, u, transforms, True)
+            e, mu, hits = irradiance_samples(shading, u, _at(transforms, depth), True)
         total[rows] = total[rows] + beta * (albedo * INV_PI * e)
         if depth < last:  # a diffuse vertex's cosine sample: f cos / p = ρ cos_θ / cos_θ0 (at Rμ, times w)
             go = _steered(rec, mu, state.k)
@@ -186,6 +194,7 @@ def _reflect(
     state = shading.state
     m = len(shading)
     rec = transforms if isinstance(transforms, Recorder) and isinstance(shading, Onward) else None
+    transforms = _at(transforms, depth)
     radiance = scatter(m, np.arange(0), 0.0, state.dual, k=state.k)
     throughput = scatter(m, np.arange(0), 0.0, state.dual, k=state.k)
     mu, above = zeros((m, 3), rec is not None, state.k), np.ones(m, dtype=bool)
@@ -259,13 +268,22 @@ class MixedPaths:
         self, shading: Shading, u: np.ndarray, albedo: Any, transforms: Transforms, shape: Any
     ) -> Any:
         wi = normalize(shading.state.camera.origin - shading.x)
-        if self.max_depth > 1:
-            shading, transforms, _ = _onward(shading, transforms, True)
-        radiance, mu, hits, beta, above = _reflect(shading, wi, u, shape, albedo, transforms, 1)
-        if self.max_depth == 1:
-            return radiance
-        hits = Hits(np.where(above, hits.shape, -1), hits.triangle, hits.t, hits.u, hits.v)
-        return radiance + _continue_mixed(shading, mu, hits, beta, transforms, 2, self.max_depth)
+        return reflected(shading, wi, u, shape, albedo, transforms, self.max_depth)
+
+
+def reflected(
+    shading: Shading, wi: Any, u: np.ndarray, shape: Any, albedo: Any, transforms: Transforms, max_depth: int
+) -> Any:
+    r"""The radiance points of either material (``shape``, ``albedo``) reflect towards the unit directions
+    ``wi`` along paths of up to ``max_depth`` vertices, the points the first (:class:`MixedPaths`, whose
+    $w_i$ points to the camera; ``boundary``'s side paths, :mod:`sphere3d.boundary.indirect`)."""
+    if max_depth > 1:
+        shading, transforms, _ = _onward(shading, transforms, True)
+    radiance, mu, hits, beta, above = _reflect(shading, wi, u, shape, albedo, transforms, 1)
+    if max_depth == 1:
+        return radiance
+    hits = Hits(np.where(above, hits.shape, -1), hits.triangle, hits.t, hits.u, hits.v)
+    return radiance + _continue_mixed(shading, mu, hits, beta, transforms, 2, max_depth)
 
 
 def vertex(max_depth: int, state: Any = None) -> Paths | MixedPaths | None:

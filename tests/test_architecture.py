@@ -289,15 +289,16 @@ SHARED_OPTIONS = {
 ONLY_2D_OPTIONS: dict[str, tuple[str, ...]] = {}
 """Options flatland's methods have beyond the shared ones (none: both have the film kernel ``kappa_film``)."""
 ONLY_3D_OPTIONS = {
-    "boundary": ("rate", "secondary"),
+    "boundary": ("rate", "secondary", "indirect"),
     "reparam": ("variant", "emitter_probes", "baseline"),
 }
 """Options sphere3d's methods have beyond the shared ones (flatland's boundary terms are exact
 sums over endpoints and tangent points; sphere3d's are sampled along edges at a ``rate`` on the
-film and ``secondary`` times per shading point; sphere3d's reparam has the published estimator
-as a ``variant`` and shadow probes on the emitters' area, where flatland gives every emitter
-sample its own kernel and probes, and a control variate of the cosine kernels' weights, ``baseline``,
-scaled by the sky seen at the kernel's centre)."""
+film and ``secondary`` times per shading point, and on paths ``indirect`` times per vertex for the
+reflected radiance's jump, where flatland enumerates every jump point; sphere3d's reparam has the
+published estimator as a ``variant`` and shadow probes on the emitters' area, where flatland gives
+every emitter sample its own kernel and probes, and a control variate of the cosine kernels' weights,
+``baseline``, scaled by the sky seen at the kernel's centre)."""
 FD_STEP = {"flatland": 1e-3, "sphere3d": 1e-2}
 """Default finite-difference steps h (the reason: docs/theory/naive.md, and each method's docstring)."""
 

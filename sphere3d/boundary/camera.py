@@ -34,7 +34,8 @@ At each point:
   2ε before it, makes the point contribute 0;
 - $L(x ∓ δn)$ by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
   with the same shading uniforms on both sides (common random numbers), δ =
-  :data:`EPS_FILM` pixels;
+  :data:`EPS_FILM` pixels; on paths of ``max_depth`` d the full radiance of paths of d vertices
+  (:mod:`sphere3d.paths`), the further vertices' numbers keyed alike on both sides;
 - the contribution $Λ_e/N_e\, [L^- - L^+] (v · n)$ goes to every pixel whose filter
   support covers the point, weighted by $k(x - p)$.
 
@@ -57,7 +58,7 @@ from flatland.core.dual import detach, tangent
 from flatland.core.rng import Draws, stream
 from sphere3d.boundary.edges import Edges
 from sphere3d.integrator import Identity, camera_radiance
-from sphere3d.paths import vertex
+from sphere3d.paths import PATH_RAYS, vertex
 from sphere3d.sampling import filter_radius, filter_value
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
@@ -72,6 +73,7 @@ __all__ = [
     "film_edges",
     "point_bytes",
     "point_count",
+    "point_rays",
 ]
 
 EPS_FILM = 1e-3
@@ -84,7 +86,15 @@ POINT_BYTES = 4096
 """Bytes per edge point of a chunk at most: its film and 3D positions (Duals), two side rays with their
 hits and shading, the shadow ray and the splat's temporaries."""
 POINT_RAYS = 7
-"""Rays per edge point: the shadow ray to it, the two side rays, and each side's two shading rays."""
+"""Rays per edge point with direct light: the shadow ray to it, the two side rays, and each side's two
+shading rays."""
+
+
+def point_rays(max_depth: int) -> int:
+    """Rays per edge point with paths of ``max_depth`` vertices on each side: the shadow ray, and per
+    side its ray and :data:`~sphere3d.paths.PATH_RAYS` a vertex less the first vertex's incoming ray
+    (:data:`POINT_RAYS` at 1)."""
+    return POINT_RAYS + 2 * PATH_RAYS * (max_depth - 1)
 
 
 def _liang_barsky(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -232,6 +242,7 @@ def camera_edge_term(
     batch: int,
     points_per_pixel: float,
     segments: FilmEdges | None = None,
+    max_depth: int = 1,
 ) -> np.ndarray:
     """One batch's boundary term of every pixel, shape (height, width) (see the module docstring).
 
@@ -249,6 +260,9 @@ def camera_edge_term(
         Expected edge points per pixel of projected edge length.
     segments : optional
         ``film_edges(state, plain, edges)`` if the caller has it (the same for every batch).
+    max_depth : int
+        The radiance on each side is a path of up to this many vertices (:mod:`sphere3d.paths`), the
+        same random numbers on both sides.
 
     The points are processed :data:`POINT_CHUNK` at a time (:func:`point_bytes`), each chunk with
     its own part of the batch's stream: the same numbers as all at once, the splat's sums in chunk order.
@@ -259,7 +273,8 @@ def camera_edge_term(
     count = point_count(points_per_pixel, seg.length)
     n = int(count.sum())
     for lo in range(0, n, POINT_CHUNK):
-        _splat_points(out, state, plain, seg, (seed, batch), count, range(lo, min(n, lo + POINT_CHUNK)))
+        points = range(lo, min(n, lo + POINT_CHUNK))
+        _splat_points(out, state, plain, seg, (seed, batch), count, points, max_depth)
     return out.reshape(*out.shape[:-1], cam.height, cam.width)
 
 
@@ -271,6 +286,7 @@ def _splat_points(
     key: tuple[int, int],
     per_edge: np.ndarray,
     points: range,
+    max_depth: int = 1,
 ) -> None:
     """Add the contributions of the batch's edge points ``points`` (of n) to ``out`` (module docstring)."""
     cam = state.camera
@@ -310,10 +326,13 @@ def _splat_points(
     side = np.concatenate([x - EPS_FILM * normal, x + EPS_FILM * normal])
     d = cam.directions(side[:, 0], side[:, 1])
     u = _uniforms(*key, n + SHADING_UNIFORMS * points.start, (count, SHADING_UNIFORMS))
-    # keyed per batch, apart from the primary samples' keys (below 2^62): no draw shared between batches
-    draws = Draws.of(key[0], (1 << 62) + key[1] * (1 << 40) + i).tile(2)
+    # keyed per batch, apart from the primary samples' keys (below 2^62): no draw shared between batches;
+    # the same keys on both sides, so the paths beyond the first vertex share their numbers too
+    draws = Draws.of(key[0], np.tile((1 << 62) + key[1] * (1 << 40) + i, 2))
     hits = _side_hits(plain, edges.take(k), d)
-    shade = vertex(1, plain)  # direct light, glossy shapes by their BSDF (sphere3d.paths)
+    shade = vertex(
+        max_depth, plain
+    )  # paths of max_depth vertices, glossy shapes by their BSDF (sphere3d.paths)
     radiance = np.asarray(
         camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits, shade)
     )

@@ -47,6 +47,8 @@ edges), not with all of them.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
@@ -61,8 +63,11 @@ from sphere3d.vector import cross, dot, norm
 __all__ = [
     "EPS_ANGLE",
     "MAX_EMITTER_TRIANGLES",
+    "EdgeDraws",
     "clip_arcs",
+    "edge_draws",
     "moving_edges",
+    "reynolds",
     "shading_edge_term",
 ]
 
@@ -286,47 +291,40 @@ def moving_edges(state, edges: Edges) -> np.ndarray:
     return vertex_moves[edges.face, edges.ia] | vertex_moves[edges.face, edges.ib]
 
 
-def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.ndarray:
-    r"""One estimate per shading point of the boundary term of E (see the module docstring).
+@dataclass(frozen=True)
+class EdgeDraws:
+    r"""Edge samples of shading points (:func:`edge_draws`): per draw its flat index ``draw`` (i k + c for
+    column c of point i's k), its point's row ``live``, the
+    direction ``w`` on the drawn arc (plain, unit), the arc's normal ``normal`` on S², the normal
+    velocities ``speeds`` $m·\dot ω$ (one array per parameter), ``scale`` = Γ / c (the inverse density per
+    radian) and ``cos`` = $\max(0, n·w)$ at θ0."""
 
-    With ``weight(rows, ω)``, plain values per draw (its shading point's row, its direction), the
-    boundary term of $∫ L_i(ω)\, weight(ω) \max(0, n·ω)\, dω$ instead: a glossy point's BSDF
-    $f(w_i, ω)$ at θ0 (:mod:`sphere3d.glossy`), continuous across every arc, so the jump is
-    $[L_i(ω^-) - L_i(ω^+)]\, f(w_i, ω) \cos θ$.
+    draw: np.ndarray
+    live: np.ndarray
+    w: np.ndarray
+    normal: np.ndarray
+    speeds: list
+    scale: np.ndarray
+    cos: np.ndarray
 
-    Parameters
-    ----------
-    shading : sphere3d.integrator.Shading
-        Shading points of a state with θ as a Dual.
-    edges : Edges
-        The scene's edges at θ0.
-    u : ndarray, shape (m, 2, k)
-        Uniforms of k edge samples per point: the sub-arc, the point on it.
 
-    Returns
-    -------
-    ndarray, shape (m,), or (p, m) for p parameters
-        The tangent to add to the points' irradiance estimates: the mean of the k samples'. For p
-        parameters the same draws, among the edges that move under any of them, times each one's
-        normal velocity (a parameter that does not move an edge gives it 0: unbiased for each).
-    """
+def edge_draws(shading, edges: Edges, u: np.ndarray, bounds, unclipped: np.ndarray) -> EdgeDraws | None:
+    r"""The k = ``u.shape[2]`` edge samples per shading point of the module docstring (None if none):
+    sub-arcs drawn ∝ angle among the silhouette arcs above the horizon of the edges that move or are
+    seen from a moving point, clipped to the emitters' images given ``bounds``
+    (:func:`_emitter_bounds`; None: the whole arcs), a point uniform in angle on each, and the 3D point
+    behind it on the edge, whose direction's tangent gives the normal velocity."""
     state = shading.state
-    m = len(shading)
-    out = np.zeros(m if state.k is None else (state.k, m))
-    if m == 0 or len(edges) == 0:
-        return out
     o = shading.origin
     n0 = np.asarray(detach(shading.n), dtype=np.float64)
     moving = moving_edges(state, edges)
     point_moves = np.any(moves(shading.x), axis=-1)
-    unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
-    per_point = u.shape[2]
     draw, k, s0, s1, start, angle, lo, hi, total = _choose(
-        edges, o, n0, u[:, 0], moving, point_moves, _emitter_bounds(state), unclipped
+        edges, o, n0, u[:, 0], moving, point_moves, bounds, unclipped
     )
     if draw.size == 0:
-        return out
-    live = draw // per_point  # the draws' shading points
+        return None
+    live = draw // u.shape[2]  # the draws' shading points
     # the drawn arcs' ends above the horizon, relative to o: a + s (b - a) - o at s0 and s1
     qa_all, e = edges.a[k] - o[live], (edges.b - edges.a)[k]
     qa, qb = qa_all + s0[:, None] * e, qa_all + s1[:, None] * e
@@ -350,6 +348,57 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.n
     seen = point - (x + Dual(o[live] - detach(x), None, state.k) if isinstance(x, Dual) else o[live])
     omega = seen / norm(seen)[..., None]
     speeds = [dot(t, normal) for t in _slots(omega)]  # m·ω̇: the arc's normal velocity
+    cos = np.maximum(dot(n0[live], w), 0.0)
+    return EdgeDraws(draw, live, w, normal, speeds, total / overlap, cos)
+
+
+def reynolds(draws: EdgeDraws, jump: np.ndarray, cos: np.ndarray, m: int, per_point: int, k) -> np.ndarray:
+    r"""The mean over each point's ``per_point`` draws of $(Γ/c)\, \mathrm{jump} \cos\, (m·\dot ω)$,
+    shape (m,) or (k, m): Reynolds on S², the side ω⁻ growing into ω⁺ at $m·\dot ω$, density c/Γ per
+    radian."""
+    terms = [
+        np.bincount(draws.live, weights=draws.scale * jump * cos * s, minlength=m) / per_point
+        for s in draws.speeds
+    ]
+    return terms[0] if k is None else np.stack(terms)
+
+
+def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.ndarray:
+    r"""One estimate per shading point of the boundary term of E (see the module docstring).
+
+    With ``weight(rows, ω)``, plain values per draw (its shading point's row, its direction), the
+    boundary term of $∫ L_i(ω)\, weight(ω) \max(0, n·ω)\, dω$ instead: a glossy point's BSDF
+    $f(w_i, ω)$ at θ0 (:mod:`sphere3d.glossy`), continuous across every arc, so the jump is
+    $[L_i(ω^-) - L_i(ω^+)]\, f(w_i, ω) \cos θ$. $L_i$ here is the emission (and sky) the side rays meet:
+    on paths the radiance the surfaces they meet reflect has its own term
+    (:mod:`sphere3d.boundary.indirect`).
+
+    Parameters
+    ----------
+    shading : sphere3d.integrator.Shading
+        Shading points of a state with θ as a Dual.
+    edges : Edges
+        The scene's edges at θ0.
+    u : ndarray, shape (m, 2, k)
+        Uniforms of k edge samples per point: the sub-arc, the point on it.
+
+    Returns
+    -------
+    ndarray, shape (m,), or (p, m) for p parameters
+        The tangent to add to the points' irradiance estimates: the mean of the k samples'. For p
+        parameters the same draws, among the edges that move under any of them, times each one's
+        normal velocity (a parameter that does not move an edge gives it 0: unbiased for each).
+    """
+    state = shading.state
+    m = len(shading)
+    out = np.zeros(m if state.k is None else (state.k, m))
+    if m == 0 or len(edges) == 0:
+        return out
+    unclipped = np.isin(edges.face, state.emitters) | np.isin(edges.other, state.emitters) | (edges.count > 2)
+    draws = edge_draws(shading, edges, u, _emitter_bounds(state), unclipped)
+    if draws is None:
+        return out
+    live, w, normal, o = draws.live, draws.w, draws.normal, shading.origin
     # the jump f(ω⁻) - f(ω⁺) from rays at δ and 2δ beside the arc, extrapolated to δ → 0 (Richardson):
     # an offset ray crosses another edge near a corner on a length ∝ δ, so J(δ) = J + aδ + O(δ²)
     # and 2 J(δ) - J(2δ) = J + O(δ²)
@@ -358,14 +407,11 @@ def shading_edge_term(shading, edges: Edges, u: np.ndarray, weight=None) -> np.n
     side = side / norm(side)[:, None]
     f = _incident(state, np.tile(o[live], (4, 1)), side).reshape(4, live.size)
     jump = 2.0 * (f[0] - f[1]) - (f[2] - f[3])
-    cos = np.maximum(dot(n0[live], w), 0.0)
+    cos = draws.cos
     if weight is not None:  # a glossy point: its BSDF at the edge direction, the same on both sides
         cos = cos * weight(live, w)
     # Reynolds on S²: the side ω⁻ grows into ω⁺ at m·ω̇, density overlap/Γ per radian of arc
-    terms = [
-        np.bincount(live, weights=total / overlap * jump * cos * s, minlength=m) / per_point for s in speeds
-    ]
-    return terms[0] if state.k is None else np.stack(terms)
+    return reynolds(draws, jump, cos, m, u.shape[2], state.k)
 
 
 def _slots(x) -> list[np.ndarray]:

@@ -9,6 +9,7 @@ the identity's, so the value and the interior term are ``naive``'s.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,6 +18,7 @@ import numpy as np
 from sphere3d import execution
 from sphere3d.boundary.camera import camera_edge_term, film_edges
 from sphere3d.boundary.edges import Edges
+from sphere3d.boundary.indirect import indirect_edge_term
 from sphere3d.boundary.shading import shading_edge_term
 from sphere3d.integrator import Identity, Shading
 from sphere3d.state import SceneState, plain_state
@@ -60,17 +62,37 @@ class BoundaryTransforms(Identity):
         Edge samples per shading point (the method's ``secondary`` option).
     rate : float
         Film edge points per pixel of projected edge length and sample (the method's ``rate``).
+    max_depth : int
+        The task's path length d; the film term's side radiance is a path of d vertices.
+    vertex : int
+        The path vertex v whose shading integrals the hooks serve (:meth:`at_vertex`).
+    side : Edges, optional
+        :func:`~sphere3d.boundary.indirect.side_edges` of ``edges``, for the jump of the reflected
+        radiance at vertices v < d (required when d > 1).
+    indirect : int
+        Edge samples per shading point of that jump (the method's ``indirect`` option).
     """
 
     edges: Edges
     per_point: int = 1
     rate: float = 2.0
+    max_depth: int = 1
+    vertex: int = 1
+    side: Edges | None = None
+    indirect: int = 1
+
+    def at_vertex(self, vertex: int) -> BoundaryTransforms:
+        """These transforms at path vertex ``vertex`` (:mod:`sphere3d.paths` asks at every vertex past
+        the first): its edge terms' side paths have ``max_depth - vertex`` further vertices."""
+        return dataclasses.replace(self, vertex=vertex)
 
     def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
         r"""The mean of ``per_point`` edge samples of the boundary term of E per shading point
         (:func:`~sphere3d.boundary.shading.shading_edge_term`; uniforms ``"boundary.edge"``, keyed on
         the points' samples), in slices of :func:`draw_points` points (:func:`draw_bytes`); with
-        ``weight(rows, ω)``, of $∫ L_i\, weight \cos θ\, dω$ (a glossy point's BSDF at θ0)."""
+        ``weight(rows, ω)``, of $∫ L_i\, weight \cos θ\, dω$ (a glossy point's BSDF at θ0). At a vertex
+        v < d of a path, plus the mean of ``indirect`` samples of the jump of the reflected radiance
+        (:func:`~sphere3d.boundary.indirect.indirect_edge_term`, uniforms ``"boundary.indirect"``)."""
         if not shading.state.dual:
             return None
         m, step, k = len(shading), draw_points(self.per_point), shading.state.k
@@ -80,6 +102,12 @@ class BoundaryTransforms(Identity):
             u = part.draws.uniforms("boundary.edge", 2, self.per_point)
             sliced = None if weight is None else (lambda rows, w, lo=lo: weight(lo + rows, w))
             out[..., lo : lo + step] = shading_edge_term(part, self.edges, u, sliced)
+            further = self.max_depth - self.vertex  # vertices the side paths have beyond this one
+            if further > 0:  # the jump of the radiance the surfaces behind the edges reflect
+                u = part.draws.uniforms("boundary.indirect", 2, self.indirect)
+                out[..., lo : lo + step] += indirect_edge_term(
+                    part, self.side, u, further, self.vertex, sliced
+                )
         return out
 
     def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
@@ -92,6 +120,8 @@ class BoundaryTransforms(Identity):
         rate = self.rate * (task.spp // task.batches)
         segments = film_edges(state, plain, self.edges)  # the same for every batch
         # the batches on the threads: each draws from its own stream (seed, batch)
-        term = lambda b: camera_edge_term(state, plain, self.edges, task.seed, b, rate, segments)  # noqa: E731
+        term = lambda b: camera_edge_term(  # noqa: E731
+            state, plain, self.edges, task.seed, b, rate, segments, self.max_depth
+        )
         per_batch = execution.map_chunks(term, range(task.batches), counted=False)
         return np.stack(per_batch, axis=0 if state.k is None else 1)

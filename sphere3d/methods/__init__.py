@@ -16,8 +16,9 @@ module's docstring says which of these it changes; the guide
 ``boundary``              edge sampling (Li et al. 2018): naive plus the
                           boundary terms of the pixel integrals
                           (:mod:`sphere3d.boundary.camera`) and of the shading
-                          integrals (:mod:`sphere3d.boundary.shading`); option
-                          ``rate``
+                          integrals (:mod:`sphere3d.boundary.shading`; on paths
+                          :mod:`sphere3d.boundary.indirect`); options
+                          ``rate``, ``secondary``, ``indirect``
 ``reparam``               rotations chosen by probe rays, vMF convolution;
                           options ``kappa``, ``probes``, ``spread``,
                           ``refine``, ``paired``

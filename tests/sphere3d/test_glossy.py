@@ -21,9 +21,9 @@ r"""Glossy shapes in sphere3d (a ``roughness``: the rough GGX conductor of :mod:
    misses the moving shadow's visibility terms, a bias of many standard errors (shown, as a bias).
 6. ``boundary`` at depth 1 on the glossy floor against finite differences by region (shadow halves,
    reflection, occluder), ``reparam`` against finite differences and ``boundary`` (its emitter-rotation
-   bias in the shadow's leading half, as on the diffuse floor, bounded); ``boundary`` refuses glossy
-   paths beyond depth 1 (``reparam``'s: tests/sphere3d/test_path_reparam.py), ``reparam`` its paired
-   kernel samples on glossy shapes.
+   bias in the shadow's leading half, as on the diffuse floor, bounded); ``reparam`` refuses its paired
+   kernel samples on glossy shapes (both methods' glossy paths: tests/sphere3d/test_path_boundary.py,
+   tests/sphere3d/test_path_reparam.py).
 7. A glossy vertex beyond the first: the irradiance under a glossy floor lit by a uniform sky, with
    one further vertex, against $2π S ∫ A(c) c\, dc$ by quadrature; the optimiser's bounds on roughness.
 
@@ -283,15 +283,12 @@ def test07_naive_misses_the_moving_shadow_at_every_depth(scene, depth):
     assert abs(naive) < 0.1 * fd  # naive has (almost) nothing here
 
 
-@pytest.mark.parametrize("method", ["reparam", "boundary"])
-def test08_boundary_refuses_glossy_paths_and_reparam_paired_samples(method):
-    if method == "boundary":  # glossy shapes at depth 1 only (reparam's paths: test_path_reparam.py)
-        with pytest.raises(ValidationError, match="max_depth"):
-            render_gradient(_task_scene(), "occluder.translate.x", method, spp=4, max_depth=2)
-    if method == "reparam":  # its paired kernel samples assume cosine-sampled centres
-        with pytest.raises(ValidationError) as err:
-            render_gradient(_task_scene(), "occluder.translate.x", method, spp=4, paired=True)
-        assert err.value.field == "paired" and "glossy" in str(err.value)
+def test08_reparam_refuses_paired_samples_on_glossy_shapes():
+    # its paired kernel samples assume cosine-sampled centres (boundary's glossy paths:
+    # tests/sphere3d/test_path_boundary.py, reparam's: test_path_reparam.py)
+    with pytest.raises(ValidationError) as err:
+        render_gradient(_task_scene(), "occluder.translate.x", "reparam", spp=4, paired=True)
+    assert err.value.field == "paired" and "glossy" in str(err.value)
 
 
 def _glossy_floor_regions(width: int) -> tuple:

@@ -190,11 +190,12 @@ def test07_naive_and_finite_differences_agree_where_the_image_is_affine_in_the_p
 
 @pytest.mark.parametrize(
     ("method", "options"),
-    [("boundary", {}), ("reparam", {"variant": "paper"}), ("reparam", {"paired": True})],
+    [("reparam", {"variant": "paper"}), ("reparam", {"paired": True})],
 )
-def test08_boundary_and_reparams_paired_samples_refuse_paths_and_say_why(method, options):
+def test08_reparams_paired_samples_refuse_paths_and_say_why(method, options):
     """``reparam`` goes on along its rotated samples (tests/sphere3d/test_path_reparam.py), but its paired
-    kernel samples (the paper variant always pairs) have no single direction to go on along."""
+    kernel samples (the paper variant always pairs) have no single direction to go on along.
+    (``boundary`` takes paths: tests/sphere3d/test_path_boundary.py.)"""
     with pytest.raises(ValidationError) as err:
         render_gradient(_open(8), "occluder.translate.x", method, spp=4, max_depth=2, **options)
     assert err.value.field == "max_depth"
