@@ -64,11 +64,6 @@ def _operands(a: Any, b: Any) -> tuple[tuple[Any, Any], tuple[Any, Any], Any]:
     return _vt(a, ndim), _vt(b, ndim), lambda shape: (k, *shape)
 
 
-def _constant(t: Any) -> bool:
-    """Whether ``t`` is a constant's tangent (:func:`_vt`: the scalar 0, not an array)."""
-    return isinstance(t, float) and t == 0.0
-
-
 def _shape_like(t: Any, shape: tuple[int, ...]) -> np.ndarray:
     """``t`` as a writable float array of ``shape`` (tangents of constants are scalars)."""
     arr = np.asarray(t, dtype=np.float64)
@@ -133,23 +128,16 @@ def _subtract(a, b):
 @_binary(np.multiply)
 def _multiply(a, b):
     (av, at), (bv, bt), full = _operands(a, b)
-    # product rule: (ab)' = a' b + a b'; a constant's term (tangent the scalar 0) is left out, not added
-    # as zeros over the other's k slots
-    if _constant(bt):
-        t_dot = at * bv
-    elif _constant(at):
-        t_dot = av * bt
-    else:
-        t_dot = at * bv + av * bt
-    return av * bv, _shape_like(t_dot, full(np.broadcast_shapes(np.shape(av), np.shape(bv))))
+    # product rule: (ab)' = a' b + a b'
+    return av * bv, _shape_like(at * bv + av * bt, full(np.broadcast_shapes(np.shape(av), np.shape(bv))))
 
 
 @_binary(np.divide)
 def _divide(a, b):
     (av, at), (bv, bt), full = _operands(a, b)
     q = av / bv
-    # quotient rule: (a/b)' = (a' - q b') / b (a constant divisor: a' / b)
-    return q, _shape_like((at if _constant(bt) else at - q * bt) / bv, full(np.shape(q)))
+    # quotient rule: (a/b)' = (a' - q b') / b
+    return q, _shape_like((at - q * bt) / bv, full(np.shape(q)))
 
 
 @_binary(np.power)
