@@ -9,8 +9,8 @@ camera ray and three more segments, Mitsuba's ``max_depth`` 4 counting the emitt
 **Reference** (:mod:`benchmarks.paths_reference`, cached in ``.cache/paths_reference``): per pixel
 the Richardson extrapolation (4 D(h/2) - D(h)) / 3 of central finite differences at h = 0.01 with
 common random numbers (the four renders of a pass share every sample), unbiased up to O(h⁴),
-averaged over passes of 1024 spp (16 on ``glossy_reflection``, 8 on ``interreflection``, whose
-differences are less noisy); its spp and standard error are a row. The same passes at depth 2
+averaged over :data:`~benchmarks.paths_reference.PASSES` passes of 1024 spp; its spp and
+standard error are a row. The same passes at depth 2
 give the RMS of (depth 4 - depth 2), what the third and fourth vertices add to the gradient.
 
 **Rows** per scene and method (``reparam``, ``boundary`` where it takes depth 4, ``naive``, whose
