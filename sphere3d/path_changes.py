@@ -30,12 +30,19 @@ about twentyfold on ``interreflection`` (docs/theory/radiometry, "Paths"). As fo
 ω), is subtracted with $c = π \hat L(ω)$ any estimate that does not depend on μ given ω: here the
 diffuse light the surface the kernel's centre hits reflects by one emitter-and-cosine MIS estimate at
 that point, with the next vertex's own uniforms (common random numbers with the carried radiance,
-which they do not make depend on μ). Unbiased whatever c is; it only lowers the variance where
-$c ≈ π L$. Not applied at glossy vertices (their samples' density is not the cosine one).
+which they do not make depend on μ). On paths of more vertices the carried radiance is also the
+light the further vertices bring, so $\hat L(ω)$ is the whole path's: from the centre's hit the
+estimate goes on along its cosine samples to the last vertex, every vertex with the uniforms the
+carried path draws there (:func:`sphere3d.paths.carrier`). Without that the further light, large
+where the next vertex lies in shadow, multiplies $\dot w$ unchecked, and $\dot w$ has no bound
+where a moving point nears a static crease (docs/theory/radiometry, "Paths"). Unbiased whatever
+c is; it only lowers the variance where $c ≈ π L$. Not applied at glossy vertices (their samples'
+density is not the cosine one).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -147,12 +154,24 @@ def glossy_throughput(
     return np.where(above, f / np.where(above, p0, 1.0), 0.0)
 
 
-def path_baseline(shading: Shading, go: Steer, mu: np.ndarray, scale: Any, name: str) -> Any:
+def path_baseline(
+    shading: Shading,
+    go: Steer,
+    mu: np.ndarray,
+    scale: Any,
+    name: str,
+    carry: Callable[[Shading, np.ndarray], Any] | None = None,
+) -> Any:
     r"""The control variate of the radiance carried along cosine samples (module docstring), per
     shading point: a derivative-only Dual (value 0), $-s\, \hat L(ω)\, \dot q / p(μ)$ with s = ``scale``
     (ρ of a diffuse vertex, π at a fixed point: the throughput's factor before $\cos / p$; then
     $s\, q / p$ is the throughput and $c = π \hat L$ in the module's terms), or None where
-    there is nothing to subtract. ``name``: the next vertex's uniforms (``"bounce.k"``)."""
+    there is nothing to subtract. ``name``: the next vertex's uniforms (``"bounce.k"``).
+
+    ``carry(at, u)``: the irradiance estimate at the centre's hit ``at`` (plain, detached) from its
+    uniforms ``u``, with the further vertices the carried path has (:func:`sphere3d.paths.carrier`:
+    their own uniforms, common random numbers with the carried radiance's); None: the direct
+    irradiance only, one MIS estimate (the carried radiance of a path's last segment)."""
     members, state = go.members, shading.state
     if members is None or members.centre is None or members.weights is None:
         return None
@@ -173,7 +192,8 @@ def path_baseline(shading: Shading, go: Steer, mu: np.ndarray, scale: Any, name:
     normal = plain.shading_normals(tri, it.b1, it.b2, it.normal) * side
     at = Shading.at(plain, it.point, normal, sub.draws.take(ok), it.normal * side)
     u = at.draws.uniforms(name, 5)  # the next vertex's own: common random numbers with the carried radiance
-    c = rho[ok] / np.pi * detach(irradiance_samples(at, u, Identity()))  # L = (ρ/π) E at the centre's hit
+    e = irradiance_samples(at, u, Identity()) if carry is None else carry(at, u)
+    c = rho[ok] / np.pi * detach(e)  # L = (ρ/π) E at the centre's hit
     # q / p(μ) = cos(n0·Rμ) w / cos(n0·μ): value 1, tangent with zero mean given ω
     n0 = detach(sub.n)[ok]
     cos0 = dot(n0, mu[rows][ok])

@@ -28,6 +28,7 @@ code above, unchanged.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,12 +36,12 @@ import numpy as np
 
 from flatland.core.dual import detach
 from sphere3d.glossy import glossy_samples
-from sphere3d.integrator import INV_PI, Shading, Transforms, irradiance_samples
+from sphere3d.integrator import INV_PI, Identity, Shading, Transforms, irradiance_samples
 from sphere3d.path_changes import Onward, Recorder, Steer, glossy_throughput, path_baseline, recorder, steer
 from sphere3d.tracing import Hits, intersect_triangles
 from sphere3d.vector import dot, normalize, scatter, zeros
 
-__all__ = ["MixedPaths", "Paths", "cosine_ratio", "irradiance_paths", "reflected", "vertex"]
+__all__ = ["MixedPaths", "Paths", "carrier", "cosine_ratio", "irradiance_paths", "reflected", "vertex"]
 
 PATH_RAYS = 3
 """Rays per vertex the memory budget counts: the camera's or previous vertex's ray, the emitter
@@ -77,11 +78,38 @@ def _steered(rec: Recorder | None, mu: np.ndarray, k: int | None) -> Steer:
     return steer(None if rec is None else rec.take(), mu, k)
 
 
-def _baseline(total: Any, shading: Shading, go: Steer, mu: np.ndarray, scale: Any, depth: int) -> Any:
+def _baseline(
+    total: Any, shading: Shading, go: Steer, mu: np.ndarray, scale: Any, depth: int, last: int
+) -> Any:
     """``total`` with the control variate of the radiance carried on from vertex ``depth - 1`` subtracted
-    (:func:`~sphere3d.path_changes.path_baseline`, derivative only; the value unchanged)."""
-    term = path_baseline(shading, go, mu, scale, f"bounce.{depth}")
+    (:func:`~sphere3d.path_changes.path_baseline`, derivative only; the value unchanged), the carried
+    paths ending at vertex ``last``."""
+    term = path_baseline(shading, go, mu, scale, f"bounce.{depth}", carrier(depth, last))
     return total if term is None else total + term
+
+
+def carrier(depth: int, last: int) -> Callable[[Shading, np.ndarray], Any] | None:
+    r"""The ``carry`` of :func:`~sphere3d.path_changes.path_baseline` for a path's vertex ``depth`` of
+    ``last``: at the kernel centre's hit (plain), the MIS estimate $\hat E$ with its uniforms plus the
+    vertices ``depth + 1`` … ``last`` along its cosine samples (each vertex's own uniforms
+    ``"bounce.k"``, those the carried path draws there: common random numbers), as
+    :func:`irradiance_paths` at a fixed point. None at the last vertex: the direct $\hat E$ is all the
+    carried radiance has.
+
+    Why: the control variate cancels the kernel weight's tangent times the carried radiance only as
+    far as $c ≈ π L$; with the direct light alone, the light the further vertices bring (large where
+    the next vertex lies in shadow) multiplies that tangent unchecked, whose rate grows without bound
+    where a moving point nears a static crease (docs/theory/radiometry.md, "Paths")."""
+    if depth >= last:
+        return None
+
+    def carry(at: Shading, u: np.ndarray) -> Any:
+        e, mu, hits = irradiance_samples(at, u, Identity(), True)
+        beta = np.pi * cosine_ratio(dot(at.n, mu))  # cos / p = π cos_θ / cos_θ0 (value π: a plain point)
+        walk = _continue_mixed if at.state.glossy.any() else _continue
+        return e + walk(at, mu, hits, beta, Identity(), depth + 1, last)
+
+    return carry
 
 
 def _weighted(beta: Any, go: Steer) -> Any:
@@ -132,7 +160,8 @@ def _continue(
         total[rows] = total[rows] + beta * (albedo * INV_PI * e)
         if depth < last:  # a diffuse vertex's cosine sample: f cos / p = ρ cos_θ / cos_θ0 (at Rμ, times w)
             go = _steered(rec, mu, state.k)
-            cv = path_baseline(shading, go, mu, detach(beta) * detach(albedo), f"bounce.{depth + 1}")
+            carry = carrier(depth + 1, last)
+            cv = path_baseline(shading, go, mu, detach(beta) * detach(albedo), f"bounce.{depth + 1}", carry)
             if cv is not None:
                 total[rows] = total[rows] + cv
             beta = _weighted(beta * albedo * cosine_ratio(dot(shading.n, go.direction)), go)
@@ -158,7 +187,7 @@ class Paths:
             albedo * cosine_ratio(dot(shading.n, go.direction)), go
         )  # (ρ/π) cos_θ / (cos_θ0 / π)
         indirect = _continue(shading, go.direction, hits, beta, transforms, 2, self.max_depth)
-        return _baseline(albedo * INV_PI * e + indirect, shading, go, mu, albedo, 2)
+        return _baseline(albedo * INV_PI * e + indirect, shading, go, mu, albedo, 2, self.max_depth)
 
 
 def _arrive(shading: Shading, mu: np.ndarray, hits: Hits, keep: np.ndarray) -> Shading:
@@ -182,6 +211,7 @@ def _reflect(
     albedo: Any,
     transforms: Transforms,
     depth: int,
+    last: int,
 ):
     r"""Per vertex of either material: (its MIS estimate of the light it reflects towards ``wi``, the
     continuation directions, their hits, the throughput $f \cos / p$, where the path may go on).
@@ -216,7 +246,9 @@ def _reflect(
         else:
             e, mu_d, hits_d = irradiance_samples(sub, u[rows], transforms, True)
             go = _steered(rec, mu_d, state.k)
-            radiance[rows] = _baseline(albedo[rows] * INV_PI * e, sub, go, mu_d, albedo[rows], depth + 1)
+            radiance[rows] = _baseline(
+                albedo[rows] * INV_PI * e, sub, go, mu_d, albedo[rows], depth + 1, last
+            )
             throughput[rows] = _weighted(albedo[rows] * cosine_ratio(dot(sub.n, go.direction)), go)
             mu[rows] = go.direction
             parts.append((rows, hits_d))
@@ -247,7 +279,7 @@ def _continue_mixed(
         rows, beta = rows[keep], beta[keep]
         u = shading.draws.uniforms(f"bounce.{depth}", 5)  # keyed on (sample, depth): chunking changes nothing
         radiance, mu, hits, factor, above = _reflect(
-            shading, wi, u, shape[keep], albedo[keep], transforms, depth
+            shading, wi, u, shape[keep], albedo[keep], transforms, depth, last
         )
         total[rows] = total[rows] + beta * radiance
         beta = beta * factor
@@ -279,7 +311,7 @@ def reflected(
     $w_i$ points to the camera; ``boundary``'s side paths, :mod:`sphere3d.boundary.indirect`)."""
     if max_depth > 1:
         shading, transforms, _ = _onward(shading, transforms, True)
-    radiance, mu, hits, beta, above = _reflect(shading, wi, u, shape, albedo, transforms, 1)
+    radiance, mu, hits, beta, above = _reflect(shading, wi, u, shape, albedo, transforms, 1, max_depth)
     if max_depth == 1:
         return radiance
     hits = Hits(np.where(above, hits.shape, -1), hits.triangle, hits.t, hits.u, hits.v)
@@ -307,5 +339,11 @@ def irradiance_paths(shading: Shading, u: np.ndarray, transforms: Transforms, ma
     beta = _weighted(np.pi * cosine_ratio(dot(shading.n, go.direction)), go)
     walk = _continue_mixed if shading.state.glossy.any() else _continue
     return _baseline(
-        e + walk(shading, go.direction, hits, beta, transforms, 2, max_depth), shading, go, mu, np.pi, 2
+        e + walk(shading, go.direction, hits, beta, transforms, 2, max_depth),
+        shading,
+        go,
+        mu,
+        np.pi,
+        2,
+        max_depth,
     )
