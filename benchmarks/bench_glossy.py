@@ -6,8 +6,8 @@ and occluder. Rows:
 
 - the primal at 64 x 64 and 16 spp for ``max_depth`` 1, 2 and 4 on both scenes (best of
   :data:`REPEATS`; meaningful on an idle machine only), and the ratio of depth 4 to depth 1;
-- d/d ``occluder.translate.x`` of ``glossy_reflection`` at depth 1 (``reparam`` and ``boundary``
-  take glossy shapes at depth 1 only): against a ``boundary`` reference of :data:`REF_SPP` spp (its
+- d/d ``occluder.translate.x`` of ``glossy_reflection`` at depth 1 (depth 4:
+  :mod:`benchmarks.bench_paths_sphere3d`): against a ``boundary`` reference of :data:`REF_SPP` spp (its
   own seed; ``boundary`` agrees with finite differences region by region, tests/sphere3d/test_glossy.py
   test09), the RMSE at 16, 64 and 256 spp (mean over :data:`SEEDS`), the bias floor at 256 spp
   (:func:`benchmarks.bench_hard_shadow.bias_floor`: the rms per-pixel bias of the mean over the
