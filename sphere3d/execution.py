@@ -121,14 +121,19 @@ def _heap_for_temporaries() -> Any:
     return libc if done else None
 
 
-def prepare(transforms: Any, state: Any) -> None:
+def prepare(transforms: Any, state: Any, jobs: Sequence[Callable[[], Any]] = ()) -> list[Any]:
     """Build the per-state tables a method names, ``transforms.tables(state)`` (an optional hook of
     :class:`~sphere3d.integrator.Transforms`: builders :func:`~sphere3d.state.per_state` keeps), on the
     threads at once, before the chunks: otherwise the first chunks ask for them one after the other,
-    each thread waiting for the one building. Changes no number (a table is what its builder makes)."""
+    each thread waiting for the one building. ``jobs``, work that needs no chunk (a method's per-image
+    term, batch by batch), run after them in the same pass: a thread done with the tables takes the
+    jobs while another still builds (a table can take as long as several jobs). Returns the jobs'
+    results, in order. Changes no number (a table is what its builder makes, a job is independent)."""
     builders = tuple(getattr(transforms, "tables", lambda _: ())(state))
-    if builders:
-        map_chunks(lambda i: builders[i](state), range(len(builders)), counted=False)
+    work = [functools.partial(b, state) for b in builders] + list(jobs)
+    if not work:
+        return []
+    return map_chunks(lambda i: work[i](), range(len(work)), counted=False)[len(builders) :]
 
 
 def map_chunks(func: Callable[[int], Any], items: range, counted: bool = True) -> list[Any]:

@@ -425,7 +425,8 @@ def build_state(
 
     plain = np.asarray(detach(triangles))
     check_world(scene, param, theta, plain, shape_of, np.asarray(detach(origin), dtype=np.float64))
-    extent = float(np.max(np.ptp(plain.reshape(-1, 3), axis=0)))
+    # per coordinate over its own strided row: numpy reduces axis 0 of an (n, 3) array element by element
+    extent = float(max(np.ptp(column) for column in plain.reshape(-1, 3).T))
     extent = max(extent, float(np.max(np.abs(detach(origin) - plain.reshape(-1, 3).mean(axis=0)))))
     return SceneState(
         scene=scene,

@@ -192,7 +192,9 @@ class ImageTask(_Parameters):
         if execution.client() is not None:
             return self._on_cluster(theta, transforms)
         state = build_state(self.scene, self.param, theta, self.tracer)
-        execution.prepare(transforms, state)  # the method's per-state tables, built at once
+        # the method's per-state tables, built at once, and its per-image term's batches beside them
+        jobs = getattr(transforms, "pixel_terms", lambda *_: ())(self, state)
+        terms = execution.prepare(transforms, state, jobs)
         batches, per_batch = self.batches, self.spp // self.batches
         chunk = functools.partial(self._chunk, state, transforms)
         chunks = range(self._chunk_count())
@@ -201,7 +203,9 @@ class ImageTask(_Parameters):
         else:
             parts = execution.map_chunks(chunk, chunks)
             tally = _tally(list(np.concatenate(parts, axis=1)), self.shape)
-        extra = transforms.pixel_extra(self, state)  # a method's derivative-only term per batch and pixel
+        # a method's derivative-only term per batch and pixel: its jobs' results, or its own pass
+        stacked = np.stack(terms, axis=0 if state.k is None else 1) if jobs else None
+        extra = stacked if jobs else transforms.pixel_extra(self, state)
         return tally if extra is None else Tally(tally.value, tally.derivative + extra)
 
     def _chunk_count(self) -> int:

@@ -10,6 +10,8 @@ the identity's, so the value and the interior term are ``naive``'s.
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,10 +19,12 @@ import numpy as np
 
 from sphere3d import execution
 from sphere3d.boundary.camera import camera_edge_term, film_edges
+from sphere3d.boundary.edge_tree import edge_tree
 from sphere3d.boundary.edges import Edges
 from sphere3d.boundary.indirect import indirect_edge_term
-from sphere3d.boundary.shading import shading_edge_term
+from sphere3d.boundary.shading import moving_edges, shading_edge_term
 from sphere3d.integrator import Identity, Shading
+from sphere3d.live import moves
 from sphere3d.state import SceneState, plain_state
 
 __all__ = ["DRAW_BYTES", "DRAW_CHUNK", "BoundaryTransforms", "draw_bytes", "draw_points"]
@@ -110,18 +114,41 @@ class BoundaryTransforms(Identity):
                 )
         return out
 
-    def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
-        """The boundary term of every pixel integral per batch, shape (batches, height, width), or (k,
-        batches, height, width) for k parameters (:func:`~sphere3d.boundary.camera.camera_edge_term`), for
-        an image task with tangents."""
+    def tables(self, state: SceneState) -> tuple[Callable[[SceneState], Any], ...]:
+        """The per-state table the shading term's chunks share (:func:`sphere3d.execution.prepare`): the
+        edge tree with the moving edges first (:func:`~sphere3d.boundary.edge_tree.edge_tree`)."""
+        return (self._tree,) if state.dual and len(self.edges) else ()
+
+    def _tree(self, state: SceneState) -> None:
+        """Build the edge tree where a shading point may walk it: where an edge or the camera moves
+        (a fixed point walks the moving edges, a moving one every edge, :func:`~sphere3d.boundary.shading.
+        moving_edges`); under a parameter that moves neither (an albedo) no chunk asks for it."""
+        moving = moving_edges(state, self.edges)
+        if moving.any() or moves(state.camera.origin).any():
+            edge_tree(self.edges, moving)
+
+    def pixel_terms(self, task: Any, state: SceneState) -> list[Callable[[], np.ndarray]]:
+        """The boundary term of every pixel integral, one job per batch (none for a task without tangents
+        or pixels): each gives (height, width), or (k, height, width) for k parameters
+        (:func:`~sphere3d.boundary.camera.camera_edge_term`, its own stream (seed, batch)). They need no
+        chunk: :meth:`~sphere3d.tasks.ImageTask.evaluate` runs them beside the tables."""
         if not state.dual or not hasattr(task, "spp"):
-            return None
+            return []
         plain = plain_state(task.scene, task.param, task.tracer)
         rate = self.rate * (task.spp // task.batches)
         segments = film_edges(state, plain, self.edges)  # the same for every batch
-        # the batches on the threads: each draws from its own stream (seed, batch)
-        term = lambda b: camera_edge_term(  # noqa: E731
-            state, plain, self.edges, task.seed, b, rate, segments, self.max_depth
-        )
-        per_batch = execution.map_chunks(term, range(task.batches), counted=False)
+        return [
+            functools.partial(
+                camera_edge_term, state, plain, self.edges, task.seed, b, rate, segments, self.max_depth
+            )
+            for b in range(task.batches)
+        ]
+
+    def pixel_extra(self, task: Any, state: SceneState) -> np.ndarray | None:
+        """The jobs of :meth:`pixel_terms` on the threads, stacked: (batches, height, width), or (k,
+        batches, height, width) for k parameters; None without them."""
+        jobs = self.pixel_terms(task, state)
+        if not jobs:
+            return None
+        per_batch = execution.map_chunks(lambda b: jobs[b](), range(len(jobs)), counted=False)
         return np.stack(per_batch, axis=0 if state.k is None else 1)
