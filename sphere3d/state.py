@@ -149,6 +149,10 @@ class SceneState:
         Built on the detached triangles.
     epsilon : float
         Ray offset against self-intersection (scene-size relative).
+    corners : ndarray of int, shape (T, 3), optional
+        Each triangle corner's vertex, numbered across the shapes: corners with one number are
+        copies of one world-space vertex, so their positions are bit-equal (the weld of
+        :func:`sphere3d.boundary.edges.mesh_edges` then sorts vertices, not corners).
     """
 
     scene: Scene
@@ -172,6 +176,7 @@ class SceneState:
     epsilon: float
     roughness: Any = None
     glossy: np.ndarray | None = None
+    corners: np.ndarray | None = None
 
     @property
     def dual(self) -> bool:
@@ -367,7 +372,7 @@ def build_state(
     k = next((t.k for t in offsets if isinstance(t, Dual)), None)  # None: one tangent (or plain)
 
     triangles, shape_of, uv, fade_kind, fade, albedo, emission = [], [], [], [], [], [], []
-    normals, smooth, roughness = [], [], []
+    normals, smooth, roughness, corners, first_vertex = [], [], [], [], 0
     for index, s in enumerate(scene.shapes):
         mine = {kind: offs for (owner, kind), offs in bound.items() if owner == s.name}
         translate = _offset(s.translate, mine.get("translate", {}))
@@ -378,6 +383,8 @@ def build_state(
         local, local_normals = deform(s.mesh.vertices, s.mesh.normals, mine.get("shape", {}))
         world = translate + (scale * local) @ rotation_t
         triangles.append(world[s.mesh.faces])
+        corners.append(s.mesh.faces + first_vertex)  # every corner of one vertex: world[that vertex]
+        first_vertex += len(s.mesh.vertices)
         normals.append((local_normals @ rotation_t)[s.mesh.faces])  # a uniform scale: still unit
         smooth.append(np.full(len(s.mesh.faces), s.smooth))
         n = len(s.mesh.faces)
@@ -450,6 +457,7 @@ def build_state(
         epsilon=1e-4 * max(extent, 1e-3),
         roughness=roughness,
         glossy=np.array([s.roughness is not None for s in scene.shapes]),
+        corners=np.concatenate(corners).astype(np.int64, copy=False),
     )
 
 

@@ -347,12 +347,14 @@ def walk(
                     continue
                 if far:
                     # the edge's cone from o (its sphere: midpoint, half length h) meets the emitters'
-                    # (angle between the centres <= arcsin(h / |mid|) + γ), or o lies in its sphere
+                    # (angle between the centres <= β_e + γ, sin β_e = h / |mid|), or o lies in its
+                    # sphere; in cosines (β_e + γ <= π, where cos decreases): cos < cos(β_e + γ) culls
                     mx, my, mz = spheres[j, 0] - ox, spheres[j, 1] - oy, spheres[j, 2] - oz
                     d_mid = np.sqrt(mx * mx + my * my + mz * mz)
                     if d_mid > spheres[j, 3]:
                         cos = min(1.0, max(-1.0, (mx * tx + my * ty + mz * tz) / (d_mid * d_to)))
-                        if np.arccos(cos) > np.arcsin(spheres[j, 3] / d_mid) + np.arcsin(sin_e):
+                        sin_h = spheres[j, 3] / d_mid
+                        if cos < np.sqrt(1.0 - sin_h * sin_h) * cos_e - sin_h * sin_e:
                             continue
                     if n_tris and not _meets(
                         mx / d_mid, my / d_mid, mz / d_mid, spheres[j, 3] / d_mid, sides, facing

@@ -121,6 +121,20 @@ def row_ids(rows: np.ndarray) -> np.ndarray:
     return ids
 
 
+def _vertex_ids(tri: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """:func:`row_ids` of the corners ``tri`` (T, 3, 3) from one corner per vertex number of ``corners``
+    (T, 3): the distinct positions and their ranks are those of the corners, since every corner of a
+    number holds the same position."""
+    flat = corners.ravel()
+    count = int(flat.max()) + 1 if flat.size else 0
+    one = np.full(count, -1, dtype=np.int64)
+    one[flat] = np.arange(flat.size)  # some corner of each numbered vertex (the last written)
+    used = one >= 0
+    ids = np.zeros(count, dtype=np.int64)
+    ids[used] = row_ids(tri.reshape(-1, 3)[one[used]])
+    return ids[corners]
+
+
 def sort_ties(order: np.ndarray, rows: np.ndarray) -> None:
     """Complete ``order``, a permutation sorting ``rows`` (N, 3) by their first column, into a
     lexicographic one (ties in any order), in place: each run of rows equal in the columns before c
@@ -155,14 +169,20 @@ def sort_ties(order: np.ndarray, rows: np.ndarray) -> None:
             i = j
 
 
-def mesh_edges(triangles: object, shape_of: np.ndarray) -> Edges:
+def mesh_edges(triangles: object, shape_of: np.ndarray, corners: np.ndarray | None = None) -> Edges:
     """The unique edges of ``triangles`` (T, 3, 3), welded by exact position (see the module doc).
 
     O(T log T): vertex ids from one sort of the positions (:func:`row_ids`), then the half-edges
-    grouped into edges by their id pairs (:func:`edge_groups`).
+    grouped into edges by their id pairs (:func:`edge_groups`). ``corners`` (T, 3), optional: each
+    corner's vertex number, corners of one number at one position (:attr:`SceneState.corners
+    <sphere3d.state.SceneState>`); the sort then ranks one corner per vertex (a closed mesh has about
+    a sixth as many vertices as corners), and the ids are the same: the distinct positions, ranked.
     """
     tri = np.asarray(detach(triangles), dtype=np.float64)
-    vid = row_ids(tri.reshape(-1, 3)).reshape(len(tri), 3)
+    if corners is None:
+        vid = row_ids(tri.reshape(-1, 3)).reshape(len(tri), 3)
+    else:
+        vid = _vertex_ids(tri, corners)
     face1, slot1, other, count = compiled(edge_groups)(vid)
     two = count == 2
     ia, ib = slot1, (slot1 + 1) % 3
@@ -242,4 +262,4 @@ def edge_groups(vid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
 @per_state
 def state_edges(state: SceneState) -> Edges:
     """:func:`mesh_edges` of a state's triangles, once per state (kept while it lives)."""
-    return mesh_edges(state.triangles, state.shape_of)
+    return mesh_edges(state.triangles, state.shape_of, state.corners)

@@ -101,7 +101,7 @@ def _corner_table(state: SceneState) -> _Corners:
     their fans of maps (module docstring). O(E log E) time, O(E) memory."""
     cam = state.camera
     o = np.asarray(detach(cam.origin), dtype=np.float64)
-    edges = mesh_edges(state.triangles, state.shape_of)
+    edges = mesh_edges(state.triangles, state.shape_of, state.corners)
     to = o - edges.a
     s1, s2 = np.einsum("ek,ek->e", to, edges.n1), np.einsum("ek,ek->e", to, edges.n2)
     # silhouettes, and creases where the radiance jumps (flat-shaded, reflecting) seen between two faces

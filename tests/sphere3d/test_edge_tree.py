@@ -318,3 +318,33 @@ def test09_the_welded_edges_are_those_of_a_dictionary_of_vertex_pairs(mesh):
     assert count.max() >= (3 if mesh == "grid" else 2)
     for got, want in zip(edges_module.edge_groups(vid), (face, slot, other, count), strict=True):
         assert np.array_equal(got, want)  # the Python it is compiled from
+
+
+@pytest.mark.parametrize("numbering", ["state", "one per corner", "shared, with unused numbers"])
+def test10_the_weld_by_vertex_numbers_gives_the_edges_of_the_weld_by_positions(numbering):
+    # mesh_edges with ``corners`` ranks one corner per number: the same ids, hence the same edges, as
+    # ranking every corner, whether numbers are shared (a state's meshes), unique per corner (a mesh
+    # whose equal positions carry different numbers) or leave gaps (vertices no face uses)
+    rng = np.random.default_rng(5)
+    if numbering == "state":
+        scene = s3.load_scene("hard_shadow_cube")
+        state = build_state(scene)
+        tri, shape_of, corners = np.asarray(state.triangles), state.shape_of, state.corners
+        flat = tri.reshape(-1, 3)
+        for c in (0, 1, 2):  # every corner of one number holds one position, bit for bit
+            first = np.full(corners.max() + 1, -1)
+            first[corners.ravel()] = np.arange(corners.size)
+            assert np.array_equal(flat[first[corners.ravel()], c], flat[:, c])
+    else:
+        tri = _grid_mesh(12, rng)
+        shape_of = np.zeros(len(tri), dtype=np.int64)
+        corners = np.arange(tri.size // 3).reshape(-1, 3)
+        if numbering != "one per corner":
+            ids = np.unique(tri.reshape(-1, 3), axis=0, return_inverse=True)[1].ravel()
+            spread = rng.permutation(3 * (ids.max() + 1))[: ids.max() + 1]  # gaps between numbers
+            corners = spread[ids].reshape(-1, 3)
+    by_position = mesh_edges(tri, shape_of)
+    by_number = mesh_edges(tri, shape_of, corners)
+    assert len(by_number.face) > 0
+    for field in by_position.__dataclass_fields__:
+        assert np.asarray(getattr(by_number, field)).tobytes() == np.asarray(getattr(by_position, field)).tobytes()
