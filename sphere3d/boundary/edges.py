@@ -179,10 +179,7 @@ def mesh_edges(triangles: object, shape_of: np.ndarray, corners: np.ndarray | No
     a sixth as many vertices as corners), and the ids are the same: the distinct positions, ranked.
     """
     tri = np.asarray(detach(triangles), dtype=np.float64)
-    if corners is None:
-        vid = row_ids(tri.reshape(-1, 3)).reshape(len(tri), 3)
-    else:
-        vid = _vertex_ids(tri, corners)
+    vid = row_ids(tri.reshape(-1, 3)).reshape(len(tri), 3) if corners is None else _vertex_ids(tri, corners)
     face1, slot1, other, count = compiled(edge_groups)(vid)
     two = count == 2
     ia, ib = slot1, (slot1 + 1) % 3

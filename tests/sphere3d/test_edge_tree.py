@@ -347,4 +347,5 @@ def test10_the_weld_by_vertex_numbers_gives_the_edges_of_the_weld_by_positions(n
     by_number = mesh_edges(tri, shape_of, corners)
     assert len(by_number.face) > 0
     for field in by_position.__dataclass_fields__:
-        assert np.asarray(getattr(by_number, field)).tobytes() == np.asarray(getattr(by_position, field)).tobytes()
+        got, want = (np.asarray(getattr(e, field)).tobytes() for e in (by_number, by_position))
+        assert got == want
