@@ -172,9 +172,10 @@ def render_gradient(
         A progress bar per chunk on stderr: None (default) when stderr is a terminal, True
         always, False never (:mod:`flatland.core.progress`); it changes no number.
     max_depth : int
-        Diffuse vertices per path, >= 1 (1: direct illumination), as in :func:`render`. ``naive``
-        and ``finite_difference`` take any depth; ``reparam`` and ``boundary`` only 1 for now (their
-        transforms and jump terms at the further vertices are not implemented: refused).
+        Vertices per path, >= 1 (1: direct illumination), as in :func:`render`. Every method takes
+        any depth: ``reparam`` changes variables at every vertex and ``boundary`` adds every vertex's
+        jump terms, their sides' radiance estimated along paths (:func:`flatland.methods.reparam.reparam`,
+        :func:`flatland.methods.boundary.boundary`); ``reparam``'s paired kernel samples only at 1.
     **options
         Method options: ``h`` (finite_difference); ``kappa``, ``kappa_film``,
         ``probes``, ``spread``, ``refine``, ``paired`` (reparam, see

@@ -184,15 +184,16 @@ def render_gradient(
     max_depth : int
         Vertices per path, >= 1, as in :func:`render`. ``naive``, ``finite_difference`` and ``reparam``
         take any depth (``reparam``'s paired kernel samples and its paper variant only 1; on paths it
-        changes variables at every vertex, :mod:`sphere3d.path_changes`); ``boundary`` only 1 for now
-        (its boundary terms at the further vertices are not implemented: refused with a
-        ValidationError).
+        changes variables at every vertex, :mod:`sphere3d.path_changes`); ``boundary`` adds the edge
+        terms of every vertex, their sides' radiance estimated along paths
+        (:mod:`sphere3d.boundary.indirect`).
     **options
         ``h`` (finite_difference, default 1e-2); ``kappa``, ``probes``, ``spread``,
         ``refine`` (bisection rays toward a silhouette, default 3), ``paired`` (reparam,
         see :func:`sphere3d.methods.reparam.reparam`); ``rate``
-        (boundary: edge points per pixel of projected edge length and sample) and
-        ``secondary`` (boundary: edge samples per shading point).
+        (boundary: edge points per pixel of projected edge length and sample),
+        ``secondary`` (boundary: edge samples per shading point) and ``indirect`` (boundary on
+        paths: edge samples per vertex of the reflected radiance's jump).
 
     Returns
     -------
