@@ -32,14 +32,21 @@ At each point:
   matter: only $v · n$ enters);
 - the edge point must be seen by the camera: a shadow ray to it, blocked more than
   2ε before it, makes the point contribute 0;
-- $L(x ∓ δn)$ by :func:`~sphere3d.integrator.camera_radiance` on the plain state at θ0,
-  with the same shading uniforms on both sides (common random numbers), δ =
+- $L(x ∓ δn)$ and $L(x ∓ 2δn)$ by :func:`~sphere3d.integrator.camera_radiance` on the plain
+  state at θ0, with the same shading uniforms on all four sides (common random numbers), δ =
   :data:`EPS_FILM` pixels; on paths of ``max_depth`` d the full radiance of paths of d vertices
-  (:mod:`sphere3d.paths`), the further vertices' numbers keyed alike on both sides;
-- the contribution $Λ_e/N_e\, [L^- - L^+] (v · n)$ goes to every pixel whose filter
+  (:mod:`sphere3d.paths`), the further vertices' numbers keyed alike on every side;
+- the jump extrapolated to δ → 0 (Richardson, as the shading term's):
+  $J = 2 J(δ) - J(2δ)$ with $J(δ) = L(x - δn) - L(x + δn)$. Where another curve crosses this one
+  (a moving silhouette across a static edge: a T-junction on the film), the side ray crosses it
+  within about δ / sin α of the crossing (α their angle), a whole jump wrong on a stretch of that
+  length: one pair alone is biased by $O(δ)$ there (tests/sphere3d/test_junctions.py test07, on
+  :func:`~sphere3d.closed_form.junction_scene`); the step of $J(2δ)$ lies twice as far, so the
+  extrapolation's errors on the two stretches cancel;
+- the contribution $Λ_e/N_e\, J\, (v · n)$ goes to every pixel whose filter
   support covers the point, weighted by $k(x - p)$.
 
-Unbiased for these curves; the side rays are δ off the curve (a bias of $O(δ)$ in the
+Unbiased for these curves up to $O(δ^2)$ (the side rays are δ and 2δ off the curve: in the
 shading, and where two curves come within δ of each other). The batches are independent (their
 own strata and keyed draws), so the batch standard error is honest per pixel; where a pixel's
 filter support meets the edges only in a sliver (the filter's tail, near a vertex) a batch's
@@ -77,24 +84,25 @@ __all__ = [
 ]
 
 EPS_FILM = 1e-3
-"""Offset (pixels) of the two camera rays traced beside an edge point, along the edge's film normal."""
+"""Offset δ (pixels) of the camera rays traced beside an edge point, along the edge's film normal (at
+δ and 2δ on each side)."""
 SHADING_UNIFORMS = 5
 """Uniforms of the shading at a side point (3 emitter + 2 cosine), the same on both sides."""
 POINT_CHUNK = 1 << 16
 """Edge points per memory chunk of :func:`camera_edge_term`: its memory is bounded whatever ``rate``."""
-POINT_BYTES = 4096
-"""Bytes per edge point of a chunk at most: its film and 3D positions (Duals), two side rays with their
+POINT_BYTES = 6144
+"""Bytes per edge point of a chunk at most: its film and 3D positions (Duals), four side rays with their
 hits and shading, the shadow ray and the splat's temporaries."""
-POINT_RAYS = 7
-"""Rays per edge point with direct light: the shadow ray to it, the two side rays, and each side's two
-shading rays."""
+POINT_RAYS = 13
+"""Rays per edge point with direct light: the shadow ray to it, the four side rays (δ and 2δ on each
+side), and each side's two shading rays."""
 
 
 def point_rays(max_depth: int) -> int:
-    """Rays per edge point with paths of ``max_depth`` vertices on each side: the shadow ray, and per
-    side its ray and :data:`~sphere3d.paths.PATH_RAYS` a vertex less the first vertex's incoming ray
-    (:data:`POINT_RAYS` at 1)."""
-    return POINT_RAYS + 2 * PATH_RAYS * (max_depth - 1)
+    """Rays per edge point with paths of ``max_depth`` vertices on each of its four sides: the shadow
+    ray, and per side its ray and :data:`~sphere3d.paths.PATH_RAYS` a vertex less the first vertex's
+    incoming ray (:data:`POINT_RAYS` at 1)."""
+    return POINT_RAYS + 4 * PATH_RAYS * (max_depth - 1)
 
 
 def _liang_barsky(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -322,21 +330,26 @@ def _splat_points(
     to = p0 - o0
     dist = norm(to)
     seen = ~plain.tracer.occluded(o0, to / dist[:, None], np.maximum(dist - 2.0 * plain.epsilon, 0.0))
-    # radiance just beside the curve, the same shading uniforms on both sides
-    side = np.concatenate([x - EPS_FILM * normal, x + EPS_FILM * normal])
-    d = cam.directions(side[:, 0], side[:, 1])
+    # radiance just beside the curve, at δ and 2δ, the same shading uniforms on every side
     u = _uniforms(*key, n + SHADING_UNIFORMS * points.start, (count, SHADING_UNIFORMS))
     # keyed per batch, apart from the primary samples' keys (below 2^62): no draw shared between batches;
-    # the same keys on both sides, so the paths beyond the first vertex share their numbers too
+    # the same keys on every side, so the paths beyond the first vertex share their numbers too
     draws = Draws.of(key[0], np.tile((1 << 62) + key[1] * (1 << 40) + i, 2))
-    hits = _side_hits(plain, edges.take(k), d)
     shade = vertex(
         max_depth, plain
     )  # paths of max_depth vertices, glossy shapes by their BSDF (sphere3d.paths)
-    radiance = np.asarray(
-        camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits, shade)
-    )
-    jump = radiance[:count] - radiance[count:]
+    near = edges.take(k)
+    jumps = []
+    for offset in (EPS_FILM, 2.0 * EPS_FILM):
+        side = np.concatenate([x - offset * normal, x + offset * normal])
+        d = cam.directions(side[:, 0], side[:, 1])
+        hits = _side_hits(plain, near, d)
+        radiance = np.asarray(
+            camera_radiance(plain, Identity(), d, d, np.concatenate([u, u]), draws, hits, shade)
+        )
+        jumps.append(radiance[:count] - radiance[count:])
+    # J(δ) = L(x - δn) - L(x + δn) = J + a δ + O(δ²): 2 J(δ) - J(2δ) = J + O(δ²)   (Richardson)
+    jump = 2.0 * jumps[0] - jumps[1]
     # Reynolds: the side x⁻ grows into x⁺ at speed v · n   (Loubet et al. 2019, Sec. 3.2); for k
     # parameters the same jumps times each parameter's v · n, into its own image
     slots = [(out, v)] if v.ndim == 2 else list(zip(out, v, strict=True))

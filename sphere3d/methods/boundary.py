@@ -72,11 +72,11 @@ def boundary(task: ImageTask | PointTask, rate: float, secondary: int, indirect:
     The value is ``naive``'s, bit for bit. Unbiased for meshes whose edges are the
     only discontinuities (see :mod:`sphere3d.boundary.edges` for what is not handled: partly
     overlapping edges, surfaces cutting through each other), up to the offsets of the rays
-    traced beside the edges ($O(δ)$ on the film, $O(δ^2)$ at shading points, extrapolated).
-    Cost: two rays per edge point on the film, and per shading point ``4 secondary`` rays (both
-    sides of the arc at two offsets) plus the silhouette test against the edges the edge tree
+    traced beside the edges ($O(δ^2)$ on the film and at shading points: extrapolated from δ and 2δ).
+    Cost: four rays per edge point on the film (both sides at two offsets), and per shading point
+    ``4 secondary`` rays (likewise) plus the silhouette test against the edges the edge tree
     finds (:mod:`sphere3d.boundary.edge_tree`); on paths, per vertex v < d, ``2 indirect`` side paths
-    of d - v vertices, and each film edge point's sides are paths of d vertices.
+    of d - v vertices, and each film edge point's four sides are paths of d vertices.
     """
     plain = plain_state(task.scene, task.param, task.tracer)
     edges = state_edges(plain)
