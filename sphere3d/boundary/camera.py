@@ -26,7 +26,7 @@ image: a T-junction) at a uniform place in its stratum in every batch. With fixe
 lying near a stratum's end would be crossed with the same small probability f in every batch: a
 batch's estimate is then a rare event (the point beyond the jump) on top of a tight core, and
 in the seeds where none of the batches draws it the standard error from their spread misses the
-event's share f (one pixel 85 standard errors off in 3 of 24 seeds at 2 048 spp beside the
+event's share f (single pixels tens of standard errors off in some seeds beside the
 T-junction of :func:`~sphere3d.closed_form.junction_scene`, tests/sphere3d/test_standard_errors.py).
 At each point:
 

@@ -18,7 +18,11 @@ while at a high rate of edge points, where the tail pixels receive many, they ar
 intervals too: test03).
 
 The same two claims beside a T-junction on the film (test04), where a jump of the integrand along an
-edge once made whole seeds' spreads miss its share.
+edge once made whole seeds' spreads miss its share. Claim 1 for ``reparam`` and ``boundary`` against
+their own expectation, each seed against the others' mean (test05: honest errors whatever the bias);
+``finite_difference``'s z-scores have significantly heavier tails than the law at this sample count
+(test06: each batch's difference is a sum of rare samples in the strip an edge sweeps); ``naive``'s
+derivative of this image is 0 in every sample (a black triangle: no interior term), no spread to test.
 """
 
 from __future__ import annotations
@@ -150,3 +154,63 @@ def test04_beside_a_t_junction_the_law_holds_in_every_seed(param):
     )
     assert lo <= beyond <= hi
     assert np.abs(z).max() <= q
+
+
+HONEST_METHODS = ["reparam", "boundary"]
+
+
+@functools.cache
+def _loo_z_scores(param: str, method: str) -> np.ndarray:
+    """Per seed (rows) and tested pixel with spread in every seed, the z-score of the seed's mean
+    against the mean of the other SEEDS - 1 seeds, over their combined standard errors: the law of
+    claim 1 whatever the method's bias (the method's own expectation is the reference)."""
+    scene = s3.load_scene(SCENE)
+    exact = cf.triangle_image(SCENE, param).derivative
+    tested = np.abs(exact) >= 0.01 * np.abs(exact).max()
+    means, errors = [], []
+    for seed in range(SEEDS):
+        d = GRADIENT_METHODS.run(method, ImageTask(scene, param, 64, 100 + seed, BATCHES)).derivative
+        means.append(d.mean(axis=0)[tested])
+        errors.append(d.std(axis=0, ddof=1)[tested] / np.sqrt(BATCHES))
+    m, se = np.array(means), np.array(errors)
+    live = np.all(se > 0.0, axis=0)
+    rows = []
+    for s in range(SEEDS):
+        others = np.arange(SEEDS) != s
+        ref, ref_se = m[others].mean(axis=0), np.sqrt(np.sum(se[others] ** 2, axis=0)) / (SEEDS - 1)
+        rows.append(((m[s] - ref) / np.sqrt(se[s] ** 2 + ref_se**2))[live])
+    return np.array(rows)
+
+
+@pytest.mark.parametrize(
+    ("param", "method"),
+    sweep(
+        [(p, m) for p in MOTIONS for m in HONEST_METHODS],
+        [("tri.translate.x", "reparam"), ("tri.translate.x", "boundary")],
+    ),
+)
+def test05_every_method_s_standard_error_covers_its_own_spread(param, method):
+    """Claim 1 for ``reparam`` and ``boundary`` against their own expectation (a seed against the
+    others' mean): a biased method's errors must still be honest. The share beyond 3 within its
+    two-sided binomial interval (Šidák over the motions and methods)."""
+    z = _loo_z_scores(param, method)
+    beyond = int(np.count_nonzero(np.abs(z) > 3.0))
+    level = sidak(ALPHA, len(MOTIONS) * 2)
+    lo, hi = stats.binom.ppf([0.5 * level, 1.0 - 0.5 * level], z.size, P_BEYOND_3)
+    print(f"{param} {method}: {beyond} of {z.size} beyond 3 in [{lo:g}, {hi:g}]")
+    assert lo <= beyond <= hi
+
+
+@pytest.mark.parametrize("param", sweep(MOTIONS, ["tri.translate.x"]))
+def test06_finite_differences_errors_have_heavier_tails_than_the_law(param):
+    """``finite_difference``'s batches are independent too, but at a pixel an edge moves across, a
+    batch's difference (I(θ + h) - I(θ - h)) / 2h is nonzero only for the few samples in the strip
+    the edge sweeps (about 2h |v| pixels wide): a sum of rare events, far from normal, so its
+    z-scores exceed 3 significantly more often than Student's t says (one-sided binomial test),
+    whatever the seed count: its error bars are not reliable per pixel at this sample count."""
+    z = _loo_z_scores(param, "finite_difference")
+    beyond = int(np.count_nonzero(np.abs(z) > 3.0))
+    level = sidak(ALPHA, len(MOTIONS))
+    hi = stats.binom.ppf(1.0 - level, z.size, P_BEYOND_3)
+    print(f"{param} finite_difference: {beyond} of {z.size} beyond 3 > {hi:g}")
+    assert beyond > hi
