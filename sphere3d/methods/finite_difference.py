@@ -5,6 +5,12 @@ Where the integrator calls it: three ``task.evaluate`` calls with
 no transform is involved, the method combines the three tallies (the value from θ = 0,
 the derivative as the central difference per batch). For k parameters 2k + 1 calls: the value at
 θ = 0, then each parameter's pair at ±h alone.
+
+The batches are independent, but at a pixel a discontinuity moves across a batch's difference is
+nonzero only for the few samples in the strip it sweeps between ±h (about 2h |v| pixels wide): a
+sum of rare events, far from normal, so per pixel the standard error from 16 batches misses more
+often than Student's t says (tests/sphere3d/test_standard_errors.py test06); sums over regions of
+pixels, with many such samples, are closer to normal.
 """
 
 from __future__ import annotations
