@@ -431,10 +431,18 @@ def build_state(
     )
 
     plain = np.asarray(detach(triangles))
-    check_world(scene, param, theta, plain, shape_of, np.asarray(detach(origin), dtype=np.float64))
-    # per coordinate over its own strided row: numpy reduces axis 0 of an (n, 3) array element by element
-    extent = float(max(np.ptp(column) for column in plain.reshape(-1, 3).T))
-    extent = max(extent, float(np.max(np.abs(detach(origin) - plain.reshape(-1, 3).mean(axis=0)))))
+    origin0 = np.asarray(detach(origin), dtype=np.float64)
+    kept = _last_plain(scene, param, tracer)
+    if kept is not None and _same_geometry(kept, plain, origin0):
+        # a Dual state at θ0: the kept state's geometry, checked when it was built, and its tracer
+        epsilon, traced = kept.epsilon, kept.tracer
+    else:
+        traced = _tracer(scene, param, plain, shape_of, tracer)
+        check_world(scene, param, theta, plain, shape_of, origin0)
+        # per coordinate over its own strided row: numpy reduces axis 0 of an (n, 3) array element by element
+        extent = float(max(np.ptp(column) for column in plain.reshape(-1, 3).T))
+        extent = max(extent, float(np.max(np.abs(origin0 - plain.reshape(-1, 3).mean(axis=0)))))
+        epsilon = 1e-4 * max(extent, 1e-3)
     return SceneState(
         scene=scene,
         param=param,
@@ -453,12 +461,19 @@ def build_state(
         emitters=emitters,
         emitter_area=emitter_area,
         camera=camera,
-        tracer=_tracer(scene, param, plain, shape_of, tracer),
-        epsilon=1e-4 * max(extent, 1e-3),
+        tracer=traced,
+        epsilon=epsilon,
         roughness=roughness,
         glossy=np.array([s.roughness is not None for s in scene.shapes]),
         corners=np.concatenate(corners).astype(np.int64, copy=False),
     )
+
+
+def _same_geometry(kept: SceneState, plain: np.ndarray, origin: np.ndarray) -> bool:
+    """Whether ``kept`` (a plain state) has these detached triangles and camera position, bit for bit."""
+    return np.array_equal(
+        np.asarray(detach(kept.camera.origin), dtype=np.float64), origin
+    ) and np.array_equal(np.asarray(detach(kept.triangles)), plain)
 
 
 def _tracer(scene: Scene, param: str | None, plain: np.ndarray, shape_of: np.ndarray, backend: str) -> Any:
