@@ -123,7 +123,7 @@ def _heap_for_temporaries() -> Any:
 
 def prepare(transforms: Any, state: Any, jobs: Sequence[Callable[[], Any]] = ()) -> list[Any]:
     """Build the per-state tables a method names, ``transforms.tables(state)`` (an optional hook of
-    :class:`~sphere3d.integrator.Transforms`: builders :func:`~sphere3d.state.per_state` keeps), on the
+    :class:`~sphere3d.integrator.Transforms`: builders :func:`~sphere3d.tables.per_state` keeps), on the
     threads at once, before the chunks: otherwise the first chunks ask for them one after the other,
     each thread waiting for the one building. ``jobs``, work that needs no chunk (a method's per-image
     term, batch by batch), run after them in the same pass: a thread done with the tables takes the

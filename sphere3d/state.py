@@ -17,12 +17,10 @@ scene as written at the summed offsets, and a derivative taken at a moved scene
 
 from __future__ import annotations
 
-import functools
 import threading
 import weakref
-from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 
@@ -233,8 +231,6 @@ class SceneState:
         return out
 
 
-T = TypeVar("T")
-
 SCENE_BYTES_PER_TRIANGLE = 2048
 """Memory model of a render's scene states and their per-state tables, bytes per triangle: the plain
 and the differentiated state (world triangles, normals, Dual tangents), the mesh edges, the edge trees
@@ -251,41 +247,6 @@ def scene_term(scene: Scene) -> Term:
     return Term(
         "shapes", triangles, what, "its states' per-triangle tables", SCENE_BYTES_PER_TRIANGLE * triangles
     )
-
-
-def per_state(build: Callable[[SceneState], T]) -> Callable[[SceneState], T]:
-    """``build(state)`` computed once per state and kept while the state lives (states are immutable;
-    every chunk of a render asks for the same tables). Keyed by ``id(state)`` with a weak reference
-    that drops the entry with its state. One thread builds it; threads asking meanwhile wait for it
-    (the chunks of a render start together: each building its own copy cost the table's time and
-    memory once per thread). The value must be treated as read-only."""
-    cache: dict[int, tuple[weakref.ref, Any]] = {}
-    building: dict[int, threading.Event] = {}
-    lock = threading.Lock()
-
-    def cached(state: SceneState) -> T:
-        key = id(state)
-        while True:
-            with lock:
-                hit = cache.get(key)
-                if hit is not None and hit[0]() is state:
-                    return hit[1]
-                event = building.get(key)
-                if event is None:  # this thread builds it
-                    event = building[key] = threading.Event()
-                    break
-            event.wait()  # another thread builds it; then read it (or build it, had that failed)
-        try:
-            value = build(state)
-            with lock:
-                cache[key] = (weakref.ref(state, lambda _, key=key: cache.pop(key, None)), value)
-            return value
-        finally:
-            with lock:
-                del building[key]
-            event.set()
-
-    return functools.update_wrapper(cached, build)
 
 
 _PLAIN: dict[tuple, tuple[weakref.ref, SceneState]] = {}

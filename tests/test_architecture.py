@@ -184,7 +184,7 @@ LAYERS = {
                 "film",
             ),
         ),
-        ("scene at θ", ("scene", "materials", "offsets", "state", "world")),
+        ("scene at θ", ("scene", "materials", "offsets", "state", "tables", "world")),
         ("integrals", ("integrator", "glossy", "paths", "path_changes", "execution", "tasks")),
         ("method parts", ("boundary", "reparam", "closed_form")),
         ("methods", ("methods",)),

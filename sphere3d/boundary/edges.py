@@ -33,7 +33,8 @@ import numpy as np
 
 from flatland.core.dual import detach
 from sphere3d.jit import compiled
-from sphere3d.state import SceneState, per_state
+from sphere3d.state import SceneState
+from sphere3d.tables import per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import dot
 

@@ -48,7 +48,7 @@ from sphere3d.boundary.edges import mesh_edges
 from sphere3d.live import any_rows, moves, take_rows
 from sphere3d.rotation import Rotation
 from sphere3d.shapes import FADE_NONE, FADE_RECTANGLE
-from sphere3d.state import per_state
+from sphere3d.tables import per_state
 from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import cross, dot, norm
 

@@ -56,7 +56,7 @@ from sphere3d.boundary.edge_tree import edge_tree
 from sphere3d.boundary.edges import Edges
 from sphere3d.jit import compiled
 from sphere3d.live import moves
-from sphere3d.state import per_state
+from sphere3d.tables import per_state
 from sphere3d.tracing import face_normals
 from sphere3d.vector import cross, dot, norm
 

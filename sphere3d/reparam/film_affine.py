@@ -36,7 +36,8 @@ import numpy as np
 from flatland.core.dual import detach, tangent
 from sphere3d.film import AffineFilm
 from sphere3d.live import moves
-from sphere3d.state import SceneState, per_state
+from sphere3d.state import SceneState
+from sphere3d.tables import per_state
 
 __all__ = ["inner_shapes"]
 

@@ -52,7 +52,8 @@ from flatland.core.dual import detach, tangent
 from sphere3d.boundary.camera import camera_candidates
 from sphere3d.boundary.edges import mesh_edges, row_ids
 from sphere3d.film import AffineFilm
-from sphere3d.state import SceneState, per_state
+from sphere3d.state import SceneState
+from sphere3d.tables import per_state
 
 __all__ = ["silhouette_corners"]
 

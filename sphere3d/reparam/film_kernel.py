@@ -82,7 +82,8 @@ from sphere3d.reparam.junctions import junction_rotation
 from sphere3d.reparam.probes import follow_probes, ring_offsets
 from sphere3d.reparam.snaps import Snap, edge_snap
 from sphere3d.rotation import Rotation
-from sphere3d.state import SceneState, per_state
+from sphere3d.state import SceneState
+from sphere3d.tables import per_state
 from sphere3d.tracing import Hits, face_normals
 
 __all__ = [

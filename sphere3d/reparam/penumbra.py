@@ -46,7 +46,7 @@ from scipy.spatial import ConvexHull, HalfspaceIntersection
 
 from flatland.core.dual import detach
 from sphere3d.live import triangles_change
-from sphere3d.state import per_state
+from sphere3d.tables import per_state
 from sphere3d.vector import dot, norm
 
 __all__ = [

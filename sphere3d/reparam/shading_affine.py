@@ -44,7 +44,8 @@ import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.live import moves
-from sphere3d.state import SceneState, per_state
+from sphere3d.state import SceneState
+from sphere3d.tables import per_state
 from sphere3d.vector import frame
 
 __all__ = ["MAX_ANCHORS", "ShadingAffine", "inner_shape_map"]

@@ -19,7 +19,8 @@ from flatland.core.validate import ValidationError
 from sphere3d import shapes
 from sphere3d.sampling import triangle_area
 from sphere3d.scene import list_scenes, load_scene
-from sphere3d.state import build_state, euler_matrix, per_state
+from sphere3d.state import build_state, euler_matrix
+from sphere3d.tables import per_state
 
 
 def _area(mesh):
