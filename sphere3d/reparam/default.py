@@ -217,11 +217,14 @@ class ReparamTransforms(Identity):
     def kernel_kappa(self, lobe: Any, rows: np.ndarray) -> float | np.ndarray:
         """The kernel's concentration at points ``rows``: the option ``kappa`` at diffuse points (``lobe``
         None) or without ``lobe``; at glossy ones, per point, :func:`~sphere3d.reparam.lobe.lobe_kappa`
-        of the lobe's radius at θ0 (:class:`~sphere3d.glossy.Lobe`)."""
+        of the lobe's radius at θ0 (:class:`~sphere3d.glossy.Lobe`), one float where that is κ at
+        every point."""
         if lobe is None or self.lobe is None or self.kappa is None:
             return self.kappa
         radius = lobe_radius(lobe.wi[rows], lobe.n[rows], lobe.alpha[rows])
-        return lobe_kappa(self.kappa, self.spread, self.lobe, radius)
+        kappa = lobe_kappa(self.kappa, self.spread, self.lobe, radius)
+        # every lobe wide enough: the user's κ as one float, the scalar code path (bit for bit as without)
+        return self.kappa if np.all(kappa == self.kappa) else kappa
 
     def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits, lobe: Any = None) -> Members:
         """Cosine-sampled integral (BSDF-sampled at glossy points, ``lobe`` their
