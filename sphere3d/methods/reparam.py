@@ -131,8 +131,9 @@ def reparam(
                                      default variant)
     ``lobe``              1          at glossy points the kernel's κ per point: its     > 0; None: ``kappa``
                                      probe ring within ``lobe`` × the GGX lobe's        at every point
-                                     median radius $r_l = 2α \cos θ_i$, κ the lower
-                                     bound: $κ_x = \max(κ, s^2 / (2 (1 - \cos(λ r_l))))$,
+                                     median radius $r_l = 2 \arctan(α) \cos θ_i$,
+                                     κ the lower bound:
+                                     $κ_x = \max(κ, s^2 / (2 (1 - \cos(λ r_l))))$,
                                      s = ``spread``, λ = ``lobe``
                                      (:mod:`sphere3d.reparam.lobe`; default variant)
     ====================  =========  =================================================  ======================

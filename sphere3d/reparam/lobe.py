@@ -24,10 +24,12 @@ is the κ whose ring lies exactly at angle $\mathrm{fraction}\; r_l$: the ring's
 
 **The lobe's radius** (GGX, :mod:`sphere3d.bsdf`). The microfacet slopes $(a, b)$ of GGX are
 distributed with $P(|(a, b)| ≤ t) = t^2 / (α^2 + t^2)$: their median length is α (heavy tails: no
-standard deviation). At incidence $θ_i$, a normal tilted by slopes (a, b) (a in the plane of
-incidence) reflects $w_i$ to the mirror direction plus $(2a, 2b \cos θ_i)$ to first order: the
-lobe's median radius is $2α$ in the plane of incidence and $2α \cos θ_i$ across it. The rule
-takes the narrower, $r_l = 2 α \cos θ_i$, so the ring stays inside the lobe's median ellipse
+standard deviation), the median tilt $θ_h = \arctan α$. At normal incidence the reflection
+deviates from the normal by exactly $2 θ_h$ (the visible normals are then the normals' projected
+distribution), median $2 \arctan α$. At incidence $θ_i$, a normal tilted by slopes (a, b) (a in
+the plane of incidence) reflects $w_i$ to the mirror direction plus $(2a, 2b \cos θ_i)$ to first
+order: the lobe is $\cos θ_i$ times narrower across the plane of incidence. The rule takes the
+narrower axis, $r_l = 2 \arctan(α) \cos θ_i$, so the ring stays inside the lobe's median ellipse
 along both axes ("never beyond ``fraction`` of the lobe"). Assumptions and where it is biased:
 small α (first order in the slopes: for $α ≳ 0.3$ the user's κ wins anyway at the default
 fraction 1 and spread 3); the lobe's core about its centre (its heavy tails reach beyond the ring:
@@ -63,11 +65,11 @@ def check_lobe(name: str, value: Any) -> float | None:
 
 
 def lobe_radius(wi: np.ndarray, n: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    r"""The GGX lobe's median angular radius across the plane of incidence, $r_l = 2 α \cos θ_i$ (radians;
-    module docstring), per row of unit ``wi`` and ``n`` (m, 3) and roughness ``alpha`` (m,); 0 where
+    r"""The GGX lobe's median angular radius across the plane of incidence, $r_l = 2 \arctan(α) \cos θ_i$
+    (radians; module docstring), per row of unit ``wi`` and ``n`` (m, 3) and roughness ``alpha`` (m,); 0 where
     $w_i$ lies on or below the surface (no lobe: the integrand is 0 there)."""
     cos_i = np.einsum("ij,ij->i", np.asarray(wi, dtype=np.float64), np.asarray(n, dtype=np.float64))
-    return 2.0 * np.asarray(alpha, dtype=np.float64) * np.maximum(cos_i, 0.0)
+    return 2.0 * np.arctan(np.asarray(alpha, dtype=np.float64)) * np.maximum(cos_i, 0.0)
 
 
 def lobe_kappa(kappa: float, spread: float, fraction: float, radius: np.ndarray) -> np.ndarray:

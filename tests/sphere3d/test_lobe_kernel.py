@@ -3,24 +3,25 @@ r"""``reparam``'s BSDF-strategy kernel at glossy points follows the lobe's width
 
 1. The rule, as a function: the per-point κ is the user's ``kappa`` at diffuse points, with the option
    ``lobe`` None and where the lobe is wide; where it is narrow it is
-   $κ_x = \mathrm{spread}^2 / (2 (1 - \cos(λ\, 2α \cos θ_i)))$, whose probe ring
+   $κ_x = \mathrm{spread}^2 / (2 (1 - \cos(λ\, 2 \arctan(α) \cos θ_i)))$, whose probe ring
    (:func:`~sphere3d.reparam.probes.vmf_spread_angle`) lies at exactly λ times the lobe's radius; capped
    at ``KAPPA_MAX`` at grazing incidence; the option checked (one error naming ``lobe``).
-2. The per-row κ of the vMF sampler, the ring angle and the ring directions are the scalar functions
+2. The lobe's radius at normal incidence is the median deviation of the GGX reflection (sampled).
+3. The per-row κ of the vMF sampler, the ring angle and the ring directions are the scalar functions
    applied row by row (vectorized, no loop per sample).
-3. Diffuse scenes do not change: ``hard_shadow`` (depth 1 and 2) with the default ``lobe`` and with
+4. Diffuse scenes do not change: ``hard_shadow`` (depth 1 and 2) with the default ``lobe`` and with
    ``lobe=None``, value and derivative bit for bit.
-4. The problem and the fix at one glossy point, the case the rule is for: a floor of roughness α = 0.02
+5. The problem and the fix at one glossy point, the case the rule is for: a floor of roughness α = 0.02
    under a uniform sky reflects a moving sphere beside a static box, a gap of 0.1 between them (about
    0.085 rad from the floor point, inside the default kernel's ring of 3/√1000 = 0.095 rad, three times
-   the lobe's radius $2α \cos θ_i$ = 0.027 rad). The reflected radiance's derivative in the sphere's
+   the lobe's radius $2 \arctan(α) \cos θ_i$ = 0.027 rad). The reflected radiance's derivative in the sphere's
    x-translation, at the floor point whose mirror direction grazes the sphere's edge (x = 0.40) and at
    the one whose mirror direction meets the box next to the gap (x = 0.48): against central finite
    differences of the primal (common random numbers, h = 1e-3), the fixed kernel (``lobe=None``) is
    biased by many standard errors (its ring sees both edges; at x = 0.48 it follows the moving sphere
    where the lobe sees only the static box, a derivative of the wrong sign), the lobe-following
    kernel agrees within noise.
-5. The same scene rendered (32 x 32, depth 1), region sums of the derivative over the floor pixels
+6. The same scene rendered (32 x 32, depth 1), region sums of the derivative over the floor pixels
    that reflect the gap (slow tier): the fixed kernel's bias, the lobe-following kernel's agreement
    with finite differences.
 
@@ -40,6 +41,7 @@ from flatland.core.dual import tangent, variable
 from flatland.core.rng import Draws
 from flatland.core.stats import family_quantile
 from flatland.core.validate import ValidationError
+from sphere3d.bsdf import sample_ggx
 from sphere3d.glossy import Lobe, glossy_samples
 from sphere3d.integrator import Shading
 from sphere3d.methods import GRADIENT_METHODS
@@ -102,10 +104,10 @@ def test01_the_per_point_kappa_is_the_users_at_diffuse_points_and_follows_the_ru
     # a wide lobe (α = 0.5): the ring of κ = 1000 (0.095 rad) is well inside it, the user's κ stays
     wide = transforms.kernel_kappa(_lobe(4, 0.5, 0.7), rows)
     np.testing.assert_array_equal(wide, np.full(4, 1000.0))
-    # a narrow one: the ring lies at λ r_l, r_l = 2 α cos θ_i, for λ = 1 and 0.5
+    # a narrow one: the ring lies at λ r_l, r_l = 2 atan(α) cos θ_i, for λ = 1 and 0.5
     for fraction in (1.0, 0.5):
         kappa = ReparamTransforms(lobe=fraction).kernel_kappa(narrow, rows)
-        r = fraction * 2.0 * 0.02 * 0.7
+        r = fraction * 2.0 * np.arctan(0.02) * 0.7
         np.testing.assert_allclose(kappa, 9.0 / (2.0 * (1.0 - np.cos(r))), rtol=1e-12)
         assert np.all(kappa > 1000.0)
         np.testing.assert_allclose(vmf_spread_angle(kappa, 3.0), r, rtol=1e-9)
@@ -115,7 +117,7 @@ def test01_the_per_point_kappa_is_the_users_at_diffuse_points_and_follows_the_ru
     wi = np.stack([np.sqrt(1.0 - cos_i**2), 0.0 * cos_i, cos_i], axis=1)
     lobe = Lobe(wi, np.tile([0.0, 0.0, 1.0], (4, 1)), alpha, np.ones(4))
     radius = lobe_radius(lobe.wi, lobe.n, lobe.alpha)
-    np.testing.assert_allclose(radius, 2.0 * alpha * cos_i, rtol=1e-15)
+    np.testing.assert_allclose(radius, 2.0 * np.arctan(alpha) * cos_i, rtol=1e-15)
     expected = np.maximum(1000.0, 9.0 / (2.0 * (1.0 - np.cos(radius))))
     np.testing.assert_allclose(transforms.kernel_kappa(lobe, rows), expected, rtol=1e-12)
     # grazing incidence or no lobe: capped at the largest concentration float64 resolves
@@ -134,7 +136,21 @@ def test01_the_per_point_kappa_is_the_users_at_diffuse_points_and_follows_the_ru
     assert err.value.field == "lobe"
 
 
-def test02_per_row_concentrations_are_the_scalar_functions_row_by_row():
+@pytest.mark.parametrize("alpha", [0.02, 0.15])
+def test02_the_lobe_radius_is_the_median_deviation_of_the_reflection_at_normal_incidence(alpha):
+    """At normal incidence the visible normals are GGX's projected normals, whose slope has median α, and
+    the reflection deviates from the normal by twice the tilt: half of :func:`~sphere3d.bsdf.sample_ggx`'s
+    directions lie within $r_l = 2 \arctan α$ (binomial standard error of the fraction, normal
+    quantile, Šidák over the two α)."""
+    n = 1 << 16
+    normal = np.array([0.0, 0.0, 1.0])
+    wo = sample_ggx(np.random.default_rng(5).random((n, 2)), np.tile(normal, (n, 1)), normal, alpha)
+    radius = lobe_radius(np.tile(normal, (1, 1)), np.tile(normal, (1, 1)), np.array([alpha]))[0]
+    inside = np.mean(np.arccos(np.clip(wo[:, 2], -1.0, 1.0)) <= radius)
+    assert abs(inside - 0.5) <= family_quantile(2, 1.0 - ALPHA) * np.sqrt(0.25 / n), (alpha, inside)
+
+
+def test03_per_row_concentrations_are_the_scalar_functions_row_by_row():
     kappa = np.array([1.0, 30.0, 1000.0, 5e4, 1e8, KAPPA_MAX])
     u = np.random.default_rng(1).random((kappa.size, 2))
     mu = np.random.default_rng(2).normal(size=(kappa.size, 3))
@@ -159,7 +175,7 @@ def test02_per_row_concentrations_are_the_scalar_functions_row_by_row():
 
 
 @pytest.mark.parametrize("depth", [1, 2])
-def test03_diffuse_scenes_are_bit_identical_with_and_without_the_rule(depth):
+def test04_diffuse_scenes_are_bit_identical_with_and_without_the_rule(depth):
     d = load_scene("hard_shadow").to_dict()
     d["camera"].update(width=16, height=16)
     digests = set()
@@ -207,7 +223,7 @@ POINTS = (0.40, 0.48)
 """Mirror directions through the sphere's edge (x = 0.4) and through the box beside the gap (x = 0.48)."""
 
 
-def test04_the_fixed_kernel_is_biased_where_the_lobe_is_narrower_than_its_ring():
+def test05_the_fixed_kernel_is_biased_where_the_lobe_is_narrower_than_its_ring():
     q = family_quantile(len(POINTS), 1.0 - ALPHA, dof=BATCHES - 1)
     for x in POINTS:
         d = _point_derivatives(x)
@@ -216,7 +232,7 @@ def test04_the_fixed_kernel_is_biased_where_the_lobe_is_narrower_than_its_ring()
         assert abs(fixed - fd) > q * np.hypot(se_f, se_fd), (x, fixed, fd, se_f, se_fd)
 
 
-def test05_the_lobe_following_kernel_agrees_with_finite_differences():
+def test06_the_lobe_following_kernel_agrees_with_finite_differences():
     q = family_quantile(len(POINTS), 1.0 - ALPHA, dof=BATCHES - 1)
     for x in POINTS:
         d = _point_derivatives(x)
@@ -226,7 +242,7 @@ def test05_the_lobe_following_kernel_agrees_with_finite_differences():
 
 
 @SLOW
-def test06_region_sums_of_the_rendered_glossy_floor():
+def test07_region_sums_of_the_rendered_glossy_floor():
     """The floor pixels (their 3 x 3 neighbourhood all floor: not the film's own silhouettes) whose mirror
     ray passes within 0.15 of the gap's centre: fixed kernel biased, lobe-following kernel within noise
     of finite differences, Šidák over the 2 comparisons."""
