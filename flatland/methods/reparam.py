@@ -73,9 +73,11 @@ def reparam(
                                    as each other's control variate (theory/kernels)
     ``lobe``          1            at glossy points the kernel's κ per point: the    > 0; None:
                                    outermost probe within ``lobe`` × the GGX         ``kappa`` at
-                                   lobe's median radius $r_l = 2 \arctan(α/\sqrt 3)$,  every point
-                                   $κ_x = \max(κ, (s / (λ r_l))^2)$, s = ``spread``,
-                                   λ = ``lobe`` (:mod:`flatland.reparam.lobe`)
+                                   lobe's median radius (κ the lower bound)          every point
+                                   $r_l = 2 \arctan(α/\sqrt 3)$:
+                                   $κ_x = \max(κ, (s / (λ r_l))^2)$,
+                                   s = ``spread``, λ = ``lobe``
+                                   (:mod:`flatland.reparam.lobe`)
     ================  ===========  ================================================  ==============
 
     Every film sample (pixel integral, translation of t) and every direction sample,

@@ -129,11 +129,12 @@ def reparam(
                                      kernel weights' score scaled by the radiance
                                      the kernel's centre sees (theory/kernels;
                                      default variant)
-    ``lobe``              1          at glossy points the kernel's κ per point: its     > 0; None: ``kappa``
-                                     probe ring within ``lobe`` × the GGX lobe's        at every point
-                                     median radius $r_l = 2 \arctan(α) \cos θ_i$,
-                                     κ the lower bound:
-                                     $κ_x = \max(κ, s^2 / (2 (1 - \cos(λ r_l))))$,
+    ``lobe``              1          at glossy points the kernel's κ per point: its     > 0; None:
+                                     probe ring within ``lobe`` × the GGX lobe's        ``kappa`` at
+                                     median radius (κ the lower bound)                  every point
+                                     $r_l = 2 \arctan(α) \cos θ_i$:
+                                     $κ_x = \max(κ, κ_l)$,
+                                     $κ_l = s^2 / (2 (1 - \cos(λ r_l)))$,
                                      s = ``spread``, λ = ``lobe``
                                      (:mod:`sphere3d.reparam.lobe`; default variant)
     ====================  =========  =================================================  ======================

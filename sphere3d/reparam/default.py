@@ -83,8 +83,9 @@ class ReparamTransforms(Identity):
         (:mod:`sphere3d.reparam.emitter_probes`).
     lobe : float or None
         At glossy points the kernel's ring of probes lies within ``lobe`` times the BSDF lobe's
-        median radius (:func:`~sphere3d.reparam.lobe.lobe_kappa`: $κ_x = \max(κ, \mathrm{spread}^2 /
-        (2 (1 - \cos(\mathrm{lobe}\; 2 \arctan(α) \cos θ_i))))$), > 0; None: ``kappa`` at every point.
+        median radius $r_l = 2 \arctan(α) \cos θ_i$ (:func:`~sphere3d.reparam.lobe.lobe_kappa`:
+        $κ_x = \max(κ, s^2 / (2 (1 - \cos(λ r_l))))$, s = ``spread``, λ = ``lobe``), > 0; None:
+        ``kappa`` at every point.
     spread : float
         Radius of the ring of probes around a kernel's centre, in kernel standard
         deviations (:mod:`sphere3d.reparam.probes`), >= 0: any value has a ring, whose angle

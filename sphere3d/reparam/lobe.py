@@ -19,8 +19,9 @@ lobe's radius $r_l$,
 $κ_x = \min(κ_{max}, \max(κ, \mathrm{spread}^2 / (2 (1 - \cos(\mathrm{fraction}\; r_l)))))$
 
 with κ the user's concentration (diffuse points, and wide lobes: a lower bound). The second term
-is the κ whose ring lies exactly at angle $\mathrm{fraction}\; r_l$: the ring's $1 - \cos r =
--\mathrm{log1p}(P\, \mathrm{expm1}(-2κ)) / κ = \mathrm{spread}^2 / (2κ)$ for $e^{-2κ} ≪ 1$ (κ ≥ 1000 here).
+is the κ whose ring lies exactly at angle $\mathrm{fraction}\; r_l$: the ring's
+$1 - \cos r = -\mathrm{log1p}(P\, \mathrm{expm1}(-2κ)) / κ = \mathrm{spread}^2 / (2κ)$
+for $e^{-2κ} ≪ 1$ (κ ≥ 1000 here).
 
 **The lobe's radius** (GGX, :mod:`sphere3d.bsdf`). The microfacet slopes $(a, b)$ of GGX are
 distributed with $P(|(a, b)| ≤ t) = t^2 / (α^2 + t^2)$: their median length is α (heavy tails: no
