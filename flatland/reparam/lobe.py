@@ -9,7 +9,8 @@ the rule puts the outermost at most ``fraction`` times the lobe's radius $r_l$ f
 
 $κ_x = \max(κ, (\mathrm{spread} / (\mathrm{fraction}\; r_l))^2)$
 
-at glossy points, κ (the user's) at diffuse ones and as the lower bound.
+at glossy points, κ (the user's) at diffuse ones and as the lower bound (the rule binds only where the
+lobe is narrower than the user's probe span: $r_l < 3 / \sqrt{1000}$, α < 0.082, at the defaults).
 
 **The lobe's radius** (GGX on a profile, :mod:`flatland.bsdf`). The slopes are distributed as
 $P_2(s) = α^2 / (2 (α^2 + s^2)^{3/2})$, so $P(|s| ≤ t) = t / \sqrt{α^2 + t^2}$ and the median slope
