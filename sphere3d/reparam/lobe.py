@@ -23,24 +23,24 @@ is the κ whose ring lies exactly at angle $\mathrm{fraction}\; r_l$: the ring's
 $1 - \cos r = -\mathrm{log1p}(P\, \mathrm{expm1}(-2κ)) / κ = \mathrm{spread}^2 / (2κ)$
 for $e^{-2κ} ≪ 1$ (κ ≥ 1000 here).
 
-**The lobe's radius** (GGX, :mod:`sphere3d.bsdf`). The microfacet slopes $(a, b)$ of GGX are
-distributed with $P(|(a, b)| ≤ t) = t^2 / (α^2 + t^2)$: their median length is α (heavy tails: no
-standard deviation), the median tilt $θ_h = \arctan α$. At normal incidence the reflection deviates
-from the normal by exactly $2 θ_h$ (the visible normals are then the normals' projected
-distribution), median $2 \arctan α$. At incidence $θ_i$, a normal tilted by slopes (a, b) (a in the
-plane of incidence) reflects $w_i$ to the mirror direction plus $(2a, 2b \cos θ_i)$ to first order:
-the lobe is $\cos θ_i$ times narrower across the plane of incidence. The rule takes the narrower
-axis, $r_l = 2 \arctan(α) \cos θ_i$, so the ring stays inside the lobe's median ellipse along both
-axes ("never beyond ``fraction`` of the lobe"). Assumptions and where it is biased: small α (first
-order in the slopes; the rule binds only where $r_l$ is below the user's ring, $α < 0.048 / \cos
-θ_i$ at κ = 1000, spread 3 and fraction 1, elsewhere κ is the user's); the lobe's core about its
-centre (its heavy tails reach beyond the ring: samples there, a fraction $1/(1 + (r/r_l)^2)$ of the
-lobe beyond radius r, still get a rotation chosen near their kernel's centre, which is theirs, and
-there the lobe varies slowly: the product is the kernel, which the ring covers as at a diffuse
-point); a narrower kernel's weight has a larger derivative (variance of order κ, the cost of the
-rule). Grazing incidence ($\cos θ_i → 0$) asks for a very narrow kernel: κ is capped at $κ_{max}$
-(:data:`~sphere3d.methods.reparam.KAPPA_MAX`). α is the point's roughness at θ0 (detached): a
-kernel's concentration must be θ-free, as its samples' density.
+**The lobe's radius** (GGX, :mod:`sphere3d.bsdf`). The microfacet slopes $(a, b)$ of GGX are distributed
+with $P(|(a, b)| ≤ t) = t^2 / (α^2 + t^2)$: their median length is α (heavy tails: no standard
+deviation), the median tilt $θ_h = \arctan α$. At normal incidence the reflection deviates from the
+normal by exactly $2 θ_h$ (the visible normals are then the normals' projected distribution), median
+$2 \arctan α$. At incidence $θ_i$, a normal tilted by slopes (a, b) (a in the plane of incidence)
+reflects $w_i$ to the mirror direction plus $(2a, 2b \cos θ_i)$ to first order: the lobe is $\cos θ_i$
+times narrower across the plane of incidence. The rule takes the narrower axis,
+$r_l = 2 \arctan(α) \cos θ_i$, so the ring stays inside the lobe's median ellipse along both axes
+("never beyond ``fraction`` of the lobe"). Assumptions and where it is biased: small α (first order in
+the slopes; the rule binds only where $r_l$ is below the user's ring, $α < 0.048 / \cos θ_i$ at κ =
+1000, spread 3 and fraction 1, elsewhere κ is the user's); the lobe's core about its centre (its heavy
+tails reach beyond the ring: samples there, a fraction $1/(1 + (r/r_l)^2)$ of the lobe beyond radius r,
+still get a rotation chosen near their kernel's centre, which is theirs, and there the lobe varies
+slowly: the product is the kernel, which the ring covers as at a diffuse point); a narrower kernel's
+weight has a larger derivative (variance of order κ, the cost of the rule). Grazing incidence
+($\cos θ_i → 0$) asks for a very narrow kernel: κ is capped at $κ_{max}$
+(:data:`~sphere3d.methods.reparam.KAPPA_MAX`). α is the point's roughness at θ0 (detached): a kernel's
+concentration must be θ-free, as its samples' density.
 """
 
 from __future__ import annotations
