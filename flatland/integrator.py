@@ -139,8 +139,17 @@ class Transforms(Protocol):
         """Film evaluation points for film samples ``t`` of pixels ``pixel`` (``draws``: one row each)."""
         ...
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
-        """Direction evaluation points for direction samples ``phi`` from shading points ``x``."""
+    def directions(
+        self,
+        ctx: Context,
+        x: Any,
+        ignore: np.ndarray,
+        phi: np.ndarray,
+        draws: Draws,
+        lobe: Lobe | None = None,
+    ) -> Members:
+        """Direction evaluation points for direction samples ``phi`` from shading points ``x``; ``lobe``:
+        the rows' materials in glossy scenes (:class:`~flatland.glossy.Lobe`; None: every row diffuse)."""
         ...
 
     def shading_extra(
@@ -167,7 +176,15 @@ class Identity:
     def camera(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
         return Members(t[:, None])
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
+    def directions(
+        self,
+        ctx: Context,
+        x: Any,
+        ignore: np.ndarray,
+        phi: np.ndarray,
+        draws: Draws,
+        lobe: Lobe | None = None,
+    ) -> Members:
         return Members(phi[:, None])
 
     def shading_extra(
@@ -310,7 +327,11 @@ def shade(
     inv = np.where(keep_all, 1.0 / np.where(keep_all, denom, 1.0), 0.0)
 
     xr = x[idx]
-    members = ctx.transforms.directions(ctx, xr, ign, phi, draws.tile(techniques))
+    tiled = draws.tile(techniques)
+    if lobe is None:
+        members = ctx.transforms.directions(ctx, xr, ign, phi, tiled)
+    else:  # the rows' lobes, for a method whose kernels follow their width
+        members = ctx.transforms.directions(ctx, xr, ign, phi, tiled, lobes)
     flat, rep = members.flat()
     d = direction(flat)
     hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])

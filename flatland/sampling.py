@@ -212,15 +212,21 @@ def _von_mises(kappa: float) -> Any:
     return vonmises(kappa)
 
 
-def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.ndarray:
+def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float | np.ndarray) -> np.ndarray:
     """Von Mises samples by numerical inversion of the CDF (safeguarded Newton).
 
     The CDF is scipy's (Hill's algorithm); Newton steps use :func:`pdf_von_mises`
     and fall back to bisection when a step leaves the bracket, so every sample is
     an inverse-CDF image of its ``u`` to about 1e-12 in probability.
 
-    Returns angles in ``mu + [-π, π]``.
+    ``kappa``: one concentration, or one per row of ``u`` (its first axis; a kernel per point): the
+    rows of each distinct κ are sampled together, as by one call with that κ (a loop over the
+    distinct values, not over samples). Returns angles in ``mu + [-π, π]``.
     """
+    if np.ndim(kappa) != 0:
+        return _sample_von_mises_rows(
+            np.asarray(u, dtype=np.float64), mu, np.asarray(kappa, dtype=np.float64)
+        )
     kappa = check_positive("kappa", kappa)
     if not np.all(np.isfinite(mu)):
         raise ValidationError("mu", f"must be finite, got {mu!r}")
@@ -250,6 +256,18 @@ def sample_von_mises(u: np.ndarray, mu: float | np.ndarray, kappa: float) -> np.
             break
     phi = phi_flat.reshape(u.shape)
     return mu + phi
+
+
+def _sample_von_mises_rows(u: np.ndarray, mu: float | np.ndarray, kappa: np.ndarray) -> np.ndarray:
+    """:func:`sample_von_mises` with a concentration per row of ``u`` (first axis), ``kappa`` (n,)."""
+    if kappa.shape != u.shape[:1]:
+        raise ValidationError("kappa", f"must have one value per row ({u.shape[0]}), got shape {kappa.shape}")
+    mu = np.broadcast_to(np.asarray(mu, dtype=np.float64), u.shape)
+    out = np.empty(u.shape)
+    for k in np.unique(kappa):  # the distinct concentrations (one per roughness), not the samples
+        rows = np.flatnonzero(kappa == k)
+        out[rows] = sample_von_mises(u[rows], mu[rows], float(k))
+    return out
 
 
 # --------------------------------------------------------- emitters seen from a point

@@ -145,14 +145,16 @@ def _bsdf_term(
     alpha: Any,
     albedo: Any,
     transforms: Any,
+    lobe: Lobe,
 ) -> Any:
     r"""The BSDF-sampling estimate under a method's change of variables
-    (:class:`~sphere3d.integrator.Members`): $L_i(Rμ) f(w_i, Rμ) (n·Rμ) w_f(Rμ)\, w / p_{f,0}(μ)$ at the
+    (:class:`~sphere3d.integrator.Members`; the method is given the points' ``lobe`` at θ0, for a
+    kernel that follows its width): $L_i(Rμ) f(w_i, Rμ) (n·Rμ) w_f(Rμ)\, w / p_{f,0}(μ)$ at the
     rows it evaluates, w its kernel weights (value 1; Loubet et al. 2019, Sec. 4.2). The diffuse
     strategy's control variate (``baseline``, written for the cosine density) is not used: an unbiased
     estimate without it."""
     state = shading.state
-    members = transforms.bsdf(shading, mu, hits)
+    members = transforms.bsdf(shading, mu, hits, lobe)
     if members.directions is not None:
         raise ValidationError("paired", "paired kernel samples are not supported on glossy shapes, got True")
     rows = np.arange(len(mu)) if members.rows is None else members.rows
@@ -217,7 +219,7 @@ def glossy_samples(
     f = eval_ggx(wi, mu, shading.n, alpha, albedo) * np.maximum(dot(shading.n, mu), 0.0)
     throughput = np.where(above, f / np.where(above, p0, 1.0), 0.0)
     if state.dual and _changes(transforms, "bsdf"):
-        radiance = total + _bsdf_term(shading, wi, mu, p0, hits, alpha, albedo, transforms)
+        radiance = total + _bsdf_term(shading, wi, mu, p0, hits, alpha, albedo, transforms, lobe)
     else:
         radiance = total + throughput * _incident(shading, wi, mu, hits, alpha)
     if transforms is not None and state.dual:

@@ -262,9 +262,10 @@ class Transforms(Protocol):
         :class:`~sphere3d.glossy.Lobe` (None: diffuse), for the ``extra`` term's integrand."""
         ...
 
-    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits, lobe: Any = None) -> Members:
         r"""Where to evaluate the cosine-sampled integrand for samples $μ \sim \cos$ (``hits``: their
-        first hits, :meth:`Shading.trace`); random numbers from ``shading.draws``."""
+        first hits, :meth:`Shading.trace`); random numbers from ``shading.draws``. ``lobe``: at glossy
+        points (BSDF samples), their :class:`~sphere3d.glossy.Lobe` at θ0 (None: diffuse)."""
         ...
 
     def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:
@@ -287,7 +288,7 @@ class Identity:
         rows = np.flatnonzero(visible)
         return EmitterChange(Rotation.identity((len(rows),), shading.state.k), rows)
 
-    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits, lobe: Any = None) -> Members:
         return Members(mu if not shading.state.dual else Dual(mu, None, shading.state.k))
 
     def shading_extra(self, shading: Shading, weight: Any = None) -> np.ndarray | None:

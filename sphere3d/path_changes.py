@@ -93,8 +93,10 @@ class Recorder:
     def emitter(self, *args: Any) -> Any:
         return self.inner.emitter(*args)
 
-    def bsdf(self, shading: Any, mu: np.ndarray, hits: Any) -> Members:
-        self.members = self.inner.bsdf(shading, mu, hits)
+    def bsdf(self, shading: Any, mu: np.ndarray, hits: Any, lobe: Any = None) -> Members:
+        self.members = (
+            self.inner.bsdf(shading, mu, hits) if lobe is None else self.inner.bsdf(shading, mu, hits, lobe)
+        )
         return self.members
 
     def shading_extra(self, *args: Any) -> Any:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from scipy import special
 
-from flatland.core.validate import check_choice, check_positive
+from flatland.core.validate import ValidationError, check_choice, check_positive
 from sphere3d.vector import cross, dot, frame, norm, normalize
 
 __all__ = [
@@ -104,17 +104,32 @@ def _check_kappa(kappa: float) -> float:
     return check_positive("kappa", kappa)
 
 
-def sample_vmf(u: np.ndarray, mu: np.ndarray, kappa: float) -> np.ndarray:
+def _check_kappas(kappa: Any) -> np.ndarray:
+    """Per-row concentrations: a float array, every entry finite and > 0."""
+    out = np.asarray(kappa, dtype=np.float64)
+    bad = ~(np.isfinite(out) & (out > 0.0))
+    if bad.any():
+        raise ValidationError("kappa", f"must be finite and > 0 in every row, got {out[bad][0]!r}")
+    return out
+
+
+def sample_vmf(u: np.ndarray, mu: np.ndarray, kappa: float | np.ndarray) -> np.ndarray:
     r"""Von Mises–Fisher direction about the unit ``mu`` with concentration κ (Loubet et al. 2019, Sec. 4.2).
 
     $\cos θ = 1 + \log(ξ + (1 - ξ) e^{-2κ}) / κ$ is evaluated as
     $s = 1 - \cos θ = -\mathrm{log1p}((1 - ξ) \mathrm{expm1}(-2κ)) / κ$ and $\sin θ = \sqrt{s (2 - s)}$,
     which keeps full relative precision of small angles: stable from κ → 0 to κ = 1e6 and beyond.
+    ``kappa`` is one float, or one per row (shape ``u.shape[:-1]``, each > 0: a kernel per point).
     """
-    kappa = _check_kappa(kappa)
     u = np.asarray(u, dtype=np.float64)
+    if np.ndim(kappa) == 0:
+        kappa = _check_kappa(kappa)
+        scale = math.expm1(-2.0 * kappa)
+    else:
+        kappa = _check_kappas(kappa)
+        scale = np.expm1(-2.0 * kappa)
     with np.errstate(divide="ignore"):
-        s = -np.log1p((1.0 - u[..., 0]) * math.expm1(-2.0 * kappa)) / kappa
+        s = -np.log1p((1.0 - u[..., 0]) * scale) / kappa
     s = np.clip(s, 0.0, 2.0)
     sin_t = np.sqrt(s * (2.0 - s))
     phi = 2.0 * np.pi * u[..., 1]

@@ -282,7 +282,7 @@ PACKAGE_NAMES = {"GRADIENT_METHODS", "render", "render_gradient", "irradiance", 
 SHARED_OPTIONS = {
     "naive": (),
     "finite_difference": ("h",),
-    "reparam": ("kappa", "kappa_film", "probes", "spread", "refine", "paired"),
+    "reparam": ("kappa", "kappa_film", "probes", "spread", "refine", "paired", "lobe"),
     "boundary": (),
 }
 """Gradient methods both packages have, and their options in order (2D-only options aside)."""

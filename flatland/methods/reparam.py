@@ -26,6 +26,7 @@ from flatland.core.translation import check_continuous_filter
 from flatland.core.validate import ValidationError, check_bool, check_int, check_positive
 from flatland.methods._common import GRADIENT_METHODS
 from flatland.reparam.default import ReparamTransforms, default_kappa_film
+from flatland.reparam.lobe import LOBE, check_lobe
 from flatland.tasks import ImageTask, PointTask, Tally
 
 __all__ = ["reparam"]
@@ -39,6 +40,7 @@ __all__ = ["reparam"]
     Option("spread", 3.0, partial(check_positive, allow_zero=True)),
     Option("refine", 2, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
+    Option("lobe", LOBE, check_lobe),
 )
 def reparam(
     task: ImageTask | PointTask,
@@ -48,6 +50,7 @@ def reparam(
     spread: float,
     refine: int,
     paired: bool,
+    lobe: float | None,
 ) -> Tally:
     r"""Differentiate after translating every pixel and shading integral so its discontinuities stay put.
 
@@ -68,6 +71,13 @@ def reparam(
                                    probes bracket (:mod:`flatland.reparam.probes`)
     ``paired``        False        two evaluations share one transform and serve     bool
                                    as each other's control variate (theory/kernels)
+    ``lobe``          1            at glossy points the kernel's κ per point: the    > 0; None:
+                                   outermost probe within ``lobe`` × the GGX         ``kappa`` at
+                                   lobe's median radius (κ the lower bound)          every point
+                                   $r_l = 2 \arctan(α/\sqrt 3)$:
+                                   $κ_x = \max(κ, (s / (λ r_l))^2)$,
+                                   s = ``spread``, λ = ``lobe``
+                                   (:mod:`flatland.reparam.lobe`)
     ================  ===========  ================================================  ==============
 
     Every film sample (pixel integral, translation of t) and every direction sample,
@@ -136,5 +146,5 @@ def reparam(
         check_continuous_filter(task.scene.camera.filter)
     if kappa_film is None:
         kappa_film = default_kappa_film(task.scene.camera.pixel_width)
-    transforms = ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired)
+    transforms = ReparamTransforms(kappa, kappa_film, probes, spread, refine, paired, lobe)
     return task.evaluate(task.dual_offset(), transforms)

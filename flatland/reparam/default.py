@@ -18,7 +18,9 @@ import numpy as np
 from flatland.core.dual import as_dual, detach, is_dual, k_of
 from flatland.core.rng import Draws
 from flatland.core.translation import translation_offset, unit_weight
+from flatland.glossy import Lobe
 from flatland.integrator import Context, Identity, Members
+from flatland.reparam.lobe import lobe_kappa, lobe_radius
 from flatland.reparam.probes import (
     Choice,
     ShapeImage,
@@ -111,12 +113,16 @@ class ReparamTransforms(Identity):
     the sample is evaluated at $T(y) = y + Δ$ with $Δ = c_p(θ) - \mathrm{detach}(c_p(θ))$,
     $c_p$ the film coordinate of p or its angle seen from the (moving) shading point.
     The weight $k(T y, ω) / \mathrm{detach}(k(T y, ω))$ (value 1) carries the kernel's derivative.
+    At glossy points (``lobe`` a fraction) the direction kernel's κ is per point, following the GGX
+    lobe's width (:mod:`flatland.reparam.lobe`); None: κ at every point.
     """
 
     def __init__(
-        self, kappa: float, kappa_film: float, probes: int, spread: float, refine: int, paired: bool
-    ):
+        self, kappa: float, kappa_film: float, probes: int, spread: float, refine: int, paired: bool,
+        lobe: float | None = None,
+    ):  # fmt: skip
         self.kappa, self.kappa_film, self.paired, self.refine = kappa, kappa_film, paired, refine
+        self.spread, self.lobe = spread, lobe
         # probe offsets in kernel standard deviations, evenly spaced over [-spread, spread], in order
         self.offsets = spread * (np.linspace(-1.0, 1.0, probes) if probes > 1 else np.zeros(1))
 
@@ -206,8 +212,28 @@ class ReparamTransforms(Identity):
         log_k = -0.5 * self.kappa_film * sq + log_jacobian
         return Members(points, unit_weight(log_k), self.paired, density)
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
-        kappa = self.kappa
+    def kernel_kappa(self, lobe: Lobe | None) -> float | np.ndarray:
+        """The direction kernel's concentration: ``kappa`` (one float) without glossy rows or ``lobe``;
+        else per row, :func:`~flatland.reparam.lobe.lobe_kappa` of the detached roughness (θ-free), one
+        float where that is κ on every row."""
+        if lobe is None or self.lobe is None or not np.any(lobe.glossy):
+            return self.kappa
+        radius = lobe_radius(detach(lobe.alpha))
+        kappa = lobe_kappa(self.kappa, self.spread, self.lobe, radius, lobe.glossy)
+        # every lobe wide enough: the user's κ as one float, the scalar code path (bit for bit as without)
+        return self.kappa if np.all(kappa == self.kappa) else kappa
+
+    def directions(
+        self,
+        ctx: Context,
+        x: Any,
+        ignore: np.ndarray,
+        phi: np.ndarray,
+        draws: Draws,
+        lobe: Lobe | None = None,
+    ) -> Members:
+        kappa = self.kernel_kappa(lobe)  # fixed at the point, whatever the sample (flatland.reparam.lobe)
+        column = kappa if np.ndim(kappa) == 0 else kappa[:, None]  # per row, against (n, members)
         x0 = detach(x)
         if self.paired:  # ω = φ (the primary sample), members μ_j ~ vM(ω, κ)
             center = phi
@@ -220,7 +246,7 @@ class ReparamTransforms(Identity):
             hits = cast(ctx.geom0, x0[rows], direction(phi_probe), ignore[rows])
             return hits.prim, hits.coord
 
-        probes = center[:, None] + self.offsets / np.sqrt(kappa)  # σ = 1/√κ, the von Mises width
+        probes = center[:, None] + self.offsets / np.sqrt(column)  # σ = 1/√κ, the von Mises width
         dirs0 = direction(center)
         choice, hits = self._choose(ctx, x0, dirs0, probes, trace)
         # every segment endpoint's angle from x, once for the gap probe and the shapes' images
@@ -251,4 +277,4 @@ class ReparamTransforms(Identity):
         points, log_jacobian = _stretch(inner, mu, points, trace, ctx.geom0, end_angle)
         c = np.cos(points - center[:, None])
         # von Mises weight times |det J_T|, log k = κ cos(T y - ω) + const   (Loubet et al. 2019, Sec. 4.2)
-        return Members(points, unit_weight(kappa * c + log_jacobian), self.paired)
+        return Members(points, unit_weight(column * c + log_jacobian), self.paired)

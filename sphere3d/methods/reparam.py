@@ -32,6 +32,7 @@ from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.reparam.emitter_probes import PROBES as EMITTER_PROBES
 from sphere3d.reparam.emitter_probes import probe_rays, row_probes
 from sphere3d.reparam.film_kernel import KAPPA_FILM, check_kappa_film
+from sphere3d.reparam.lobe import LOBE, check_lobe
 from sphere3d.reparam.paper import PaperTransforms
 from sphere3d.reparam.probes import REFINE
 from sphere3d.tasks import ImageTask, PointTask, Tally
@@ -47,7 +48,7 @@ KAPPA_MAX = 1e15
 """Largest vMF concentration: the kernel's width shows in cosines near 1 as 1 - cos σ = 1/(2κ),
 which float64 resolves only down to about 1e-16 (κ = 1e15: 5e-16); beyond it the samples and the
 weight κ (Rμ·ω - 1) are rounding."""
-_DEFAULT_ONLY = {"spread": 3.0, "refine": REFINE, "paired": False, "baseline": True}
+_DEFAULT_ONLY = {"spread": 3.0, "refine": REFINE, "paired": False, "baseline": True, "lobe": LOBE}
 """Options of the default variant only, with their defaults (the paper variant has none of them)."""
 
 
@@ -75,6 +76,7 @@ def _check_kappa(name: str, value: Any) -> float | None:
     Option("refine", REFINE, partial(check_int, minimum=0)),
     Option("paired", False, check_bool),
     Option("baseline", True, check_bool),
+    Option("lobe", LOBE, check_lobe),
 )
 def reparam(
     task: ImageTask | PointTask,
@@ -87,6 +89,7 @@ def reparam(
     refine: int,
     paired: bool,
     baseline: bool,
+    lobe: float | None,
 ) -> Tally:
     r"""Rotate the samples of every integral so that the discontinuity they straddle stops moving.
 
@@ -126,6 +129,14 @@ def reparam(
                                      kernel weights' score scaled by the radiance
                                      the kernel's centre sees (theory/kernels;
                                      default variant)
+    ``lobe``              1          at glossy points the kernel's κ per point: its     > 0; None:
+                                     probe ring within ``lobe`` × the GGX lobe's        ``kappa`` at
+                                     median radius (κ the lower bound)                  every point
+                                     $r_l = 2 \arctan(α) \cos θ_i$:
+                                     $κ_x = \max(κ, κ_l)$,
+                                     $κ_l = s^2 / (2 (1 - \cos(λ r_l)))$,
+                                     s = ``spread``, λ = ``lobe``
+                                     (:mod:`sphere3d.reparam.lobe`; default variant)
     ====================  =========  =================================================  ======================
 
     Constants of the default variant that change results, each in the module that uses it:
@@ -164,7 +175,7 @@ def reparam(
         raise ValidationError("paired", "needs a convolution kernel: pass kappa > 0 as well")
     probes = PROBES[variant] if probes is None else probes
     if variant == "paper":
-        given = {"spread": spread, "refine": refine, "paired": paired, "baseline": baseline}
+        given = {"spread": spread, "refine": refine, "paired": paired, "baseline": baseline, "lobe": lobe}
         for name, value in given.items():
             if value != _DEFAULT_ONLY[name]:
                 raise ValidationError(name, f"is an option of variant 'default', not 'paper', got {value!r}")
@@ -173,7 +184,7 @@ def reparam(
         transforms: Any = PaperTransforms(kappa, kappa_film, probes, emitter_probes)
     else:
         transforms = ReparamTransforms(
-            kappa, kappa_film, probes, emitter_probes, spread, refine, paired, baseline=baseline
+            kappa, kappa_film, probes, emitter_probes, spread, refine, paired, baseline=baseline, lobe=lobe
         )
         if task.k is not None:  # the extensions choose by what moves: one pass per moving thing
             return _by_motion(task, transforms)

@@ -8,10 +8,11 @@ discontinuity where one rotation per integral cannot (Loubet et al. 2019, Sec. 4
 - ``emitter``: the rotation that follows the shadow edge (:mod:`sphere3d.reparam.emitter_probes`),
   with the emitters' own edges held fixed by their boundary term
   (:mod:`sphere3d.boundary.emitters`);
-- ``bsdf``: the vMF convolution of the cosine-sampled integral, the probes on a ring around the
-  kernel's centre, snapped onto the edge they straddle (:mod:`sphere3d.reparam.snaps`); a moving
-  shape inside the ring followed by an affine map of the gnomonic chart
-  (:mod:`sphere3d.reparam.shading_affine`); the kernel weights' control variate (theory page
+- ``bsdf``: the vMF convolution of the cosine-sampled integral (at glossy points of the BSDF-sampled
+  one, its concentration following the lobe's width: :mod:`sphere3d.reparam.lobe`), the probes on a
+  ring around the kernel's centre, snapped onto the edge they straddle
+  (:mod:`sphere3d.reparam.snaps`); a moving shape inside the ring followed by an affine map of the
+  gnomonic chart (:mod:`sphere3d.reparam.shading_affine`); the kernel weights' control variate (theory page
   *kernels*).
 
 :mod:`sphere3d.reparam.paper` is the estimator as published; the theory page *extensions* lists
@@ -42,6 +43,7 @@ from sphere3d.reparam.film_kernel import (
     _plane_table,
     film_transform,
 )
+from sphere3d.reparam.lobe import LOBE, lobe_kappa, lobe_radius
 from sphere3d.reparam.penumbra import moving_sphere, separating_planes
 from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
 from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
@@ -79,6 +81,11 @@ class ReparamTransforms(Identity):
     emitter_probes : int
         Shadow probes per shading point uniform on the emitters' area, >= 1
         (:mod:`sphere3d.reparam.emitter_probes`).
+    lobe : float or None
+        At glossy points the kernel's ring of probes lies within ``lobe`` times the BSDF lobe's
+        median radius $r_l = 2 \arctan(α) \cos θ_i$ (:func:`~sphere3d.reparam.lobe.lobe_kappa`:
+        $κ_x = \max(κ, s^2 / (2 (1 - \cos(λ r_l))))$, s = ``spread``, λ = ``lobe``), > 0; None:
+        ``kappa`` at every point.
     spread : float
         Radius of the ring of probes around a kernel's centre, in kernel standard
         deviations (:mod:`sphere3d.reparam.probes`), >= 0: any value has a ring, whose angle
@@ -131,6 +138,7 @@ class ReparamTransforms(Identity):
     film_corners: bool = True
     baseline: bool = True
     shading_shapes: bool = True
+    lobe: float | None = LOBE
 
     def tables(self, state: SceneState) -> tuple[Callable[[SceneState], Any], ...]:
         """The per-state tables the options read where triangles move (:func:`sphere3d.execution.prepare`
@@ -165,12 +173,16 @@ class ReparamTransforms(Identity):
         extra = emitter_edge_term(shading.state, shading, rotation, bsdf) if self.emitter_edges else None
         return EmitterChange(rotation, rows, extra)
 
-    def _probe_rotation(self, shading: Shading, centre: np.ndarray) -> tuple[Rotation, np.ndarray]:
-        """One rotation per shading point from a ring of probes around the kernel ``centre``, and
-        whether the centre's probe sees the sky (above the horizon, no hit).
+    def _probe_rotation(
+        self, shading: Shading, centre: np.ndarray, kappa: float | np.ndarray | None = None
+    ) -> tuple[Rotation, np.ndarray]:
+        """One rotation per shading point from a ring of probes around the kernel ``centre`` (of
+        concentration ``kappa``: one, or one per point; None: the option's), and whether the centre's
+        probe sees the sky (above the horizon, no hit).
 
         Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
+        kappa = self.kappa if kappa is None else kappa
         snap = None
         if self.kappa is None:
             d = sample_cosine_hemisphere(
@@ -178,7 +190,7 @@ class ReparamTransforms(Identity):
             )
         else:
             phase = shading.draws.uniforms("probes.bsdf.ring")
-            ring = vmf_spread_angle(self.kappa, self.spread)
+            ring = vmf_spread_angle(kappa, self.spread)
             # the centre and a ring of probes - 1, as on the film: edges within cos(π/6) of the ring
             d = ring_directions(centre, ring, self.probes, phase)
             # onto the edge, or its corner up to twice the ring's radius away (as on the film)
@@ -188,20 +200,36 @@ class ReparamTransforms(Identity):
         # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
         normal = detach(shading.n)
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
-        spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(self.kappa))
+        spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(kappa))
         sky = ~hits.hit[:, 0] & (dot(d[:, 0], normal) > 0.0)
         rotation = follow_probes(
             shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
         )
         return rotation, sky
 
-    def _kernel_weight(self, rotated: Any, centre: np.ndarray) -> Any:
+    def _kernel_weight(
+        self, rotated: Any, centre: np.ndarray, kappa: float | np.ndarray | None = None
+    ) -> Any:
         r"""$w = k(Rμ, ω) / \mathrm{detach}(k(Rμ, ω))$ in log space: value exactly 1
-        (Loubet et al. 2019, Sec. 4.2)."""
-        return unit_weight(self.kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
+        (Loubet et al. 2019, Sec. 4.2); ``kappa`` one, or one per row (None: the option's)."""
+        kappa = self.kappa if kappa is None else kappa
+        return unit_weight(kappa * dot(rotated, centre))  # the vMF normalization cancels in the ratio
 
-    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
-        """Cosine-sampled integral, reparameterized (with a vMF kernel unless ``kappa`` is None)."""
+    def kernel_kappa(self, lobe: Any, rows: np.ndarray) -> float | np.ndarray:
+        """The kernel's concentration at points ``rows``: the option ``kappa`` at diffuse points (``lobe``
+        None) or without ``lobe``; at glossy ones, per point, :func:`~sphere3d.reparam.lobe.lobe_kappa`
+        of the lobe's radius at θ0 (:class:`~sphere3d.glossy.Lobe`), one float where that is κ at
+        every point."""
+        if lobe is None or self.lobe is None or self.kappa is None:
+            return self.kappa
+        radius = lobe_radius(lobe.wi[rows], lobe.n[rows], lobe.alpha[rows])
+        kappa = lobe_kappa(self.kappa, self.spread, self.lobe, radius)
+        # every lobe wide enough: the user's κ as one float, the scalar code path (bit for bit as without)
+        return self.kappa if np.all(kappa == self.kappa) else kappa
+
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits, lobe: Any = None) -> Members:
+        """Cosine-sampled integral (BSDF-sampled at glossy points, ``lobe`` their
+        :class:`~sphere3d.glossy.Lobe`), reparameterized (with a vMF kernel unless ``kappa`` is None)."""
         if self.paired:  # evaluated at the two members only
             return self._paired(shading, mu)
         # samples whose integrand is 0 with zero derivative need no rotation (and no probes), unless
@@ -215,20 +243,21 @@ class ReparamTransforms(Identity):
         # kernel centre ω ~ k(·, μ) around the primary sample μ: the joint density of (μ, ω) is
         # the paper's "ω ~ p, μ ~ k(·, ω)" read the other way (k symmetric), and μ stays the
         # naive sample, so the primal is bit-identical to the naive one
-        centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, self.kappa)
-        rotation, sky = self._probe_rotation(sub, centre)
+        kappa = self.kernel_kappa(lobe, live)  # θ-free: fixed at the point, whatever μ (lobe.py)
+        centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, kappa)
+        rotation, sky = self._probe_rotation(sub, centre, kappa)
         rotated = rotation.apply(mu_l)
         jacobian = None
         if self.shading_shapes:
             # a moving shape inside the kernel's ring: the chart's map that follows all its edges
-            shape = inner_shape_map(sub, mu_l, centre, vmf_spread_angle(self.kappa, self.spread))
+            shape = inner_shape_map(sub, mu_l, centre, vmf_spread_angle(kappa, self.spread))
             if shape.mask.any():
                 k = rotated.k
                 t = np.where(shape.mask[:, None], shape.mu_dot, rotated.tangent)
                 rotated = Dual(rotated.value, t, k)
                 jacobian = Dual(np.ones(len(mu_l)), shape.log_jacobian_dot, k)  # |J_T|: value 1
         # f(Tμ) k(Tμ, ω) |J_T| / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
-        weights = self._kernel_weight(rotated, centre)
+        weights = self._kernel_weight(rotated, centre, kappa)
         if jacobian is not None:
             weights = weights * jacobian
         if not self.baseline:

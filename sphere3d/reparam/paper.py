@@ -278,8 +278,9 @@ class PaperTransforms(Identity):
         hits = hits.without(dot(d, detach(shading.n)[:, None]) <= 0.0)
         return follow(shading.state, shading.x, d, hits)
 
-    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits) -> Members:
-        r"""Two kernel samples around the cosine sample share one rotation (paired samples)."""
+    def bsdf(self, shading: Shading, mu: np.ndarray, hits: Hits, lobe: Any = None) -> Members:
+        r"""Two kernel samples around the cosine sample share one rotation (paired samples); one κ at
+        every point (``lobe`` unused: the published kernel, refused on glossy shapes)."""
         rotation = self._kernel_rotation(shading, mu)
         u = shading.draws.uniforms("kernel.bsdf.pair", 2, 2)
         members, rotated, weights, mass = [], [], [], []

@@ -49,7 +49,7 @@ REFINE = 3
 1/8 of the gap); the default of the ``reparam`` option ``refine``."""
 
 
-def vmf_spread_angle(kappa: float, spread: float) -> float:
+def vmf_spread_angle(kappa: float | np.ndarray, spread: float) -> float | np.ndarray:
     r"""Polar angle of the ring of probes: ``spread`` standard deviations of a $\mathrm{vMF}(κ)$ kernel.
 
     The angle r with $P(\mathrm{angle} ≤ r)$ equal to the Rayleigh probability $1 - e^{-\mathrm{spread}^2/2}$
@@ -57,8 +57,11 @@ def vmf_spread_angle(kappa: float, spread: float) -> float:
     radial inverse CDF, $1 - \cos r = -\mathrm{log1p}(P\, \mathrm{expm1}(-2κ)) / κ$;
     $r ≈ \mathrm{spread} / \sqrt{κ}$.
     Defined for every spread >= 0: r grows from 0 to π (the ring closes on the
-    antipode once the vMF's mass beyond the Rayleigh level is below $e^{-2κ}$).
+    antipode once the vMF's mass beyond the Rayleigh level is below $e^{-2κ}$). ``kappa`` may be
+    an array (a kernel per point): the same formula element by element.
     """
+    if np.ndim(kappa) != 0:
+        return _spread_angles(np.asarray(kappa, dtype=np.float64), spread)
     tail = -0.5 * spread * spread  # log(1 - P), the Rayleigh tail beyond ``spread`` σ (-inf: none)
     level = -math.expm1(tail)
     x = level * math.expm1(-2.0 * kappa)
@@ -71,14 +74,30 @@ def vmf_spread_angle(kappa: float, spread: float) -> float:
     return math.acos(1.0 - min(2.0, max(s, 0.0)))
 
 
-def ring_directions(centre: np.ndarray, angle: float, count: int, u: np.ndarray) -> np.ndarray:
-    """``count`` probe directions around unit ``centre`` (m, 3): the centre, then a ring at ``angle``.
+def _spread_angles(kappa: np.ndarray, spread: float) -> np.ndarray:
+    """:func:`vmf_spread_angle` element by element over an array of concentrations (its two branches)."""
+    tail = -0.5 * spread * spread
+    level = -math.expm1(tail)
+    x = level * np.expm1(-2.0 * kappa)
+    with np.errstate(divide="ignore"):
+        logged = -np.logaddexp(tail, -2.0 * kappa + (math.log(level) if level > 0.0 else -np.inf)) / kappa
+    s = np.where(x > -0.5, -np.log1p(np.maximum(x, -0.5)) / kappa, logged)
+    return np.arccos(1.0 - np.clip(s, 0.0, 2.0))
+
+
+def ring_directions(centre: np.ndarray, angle: float | np.ndarray, count: int, u: np.ndarray) -> np.ndarray:
+    """``count`` probe directions around unit ``centre`` (m, 3): the centre, then a ring at ``angle``
+    (radians; one, or one per row).
 
     Ring probes are evenly spaced in azimuth from the phase $2π u$ (m,). Returns (m, count, 3).
     """
     t, b = frame(centre)
     phi = 2.0 * np.pi * (u[:, None] + np.arange(count - 1)[None, :] / max(count - 1, 1))
-    ring = math.cos(angle) * centre[:, None] + math.sin(angle) * (
+    if np.ndim(angle) == 0:
+        cos_r, sin_r = math.cos(angle), math.sin(angle)
+    else:
+        cos_r, sin_r = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
+    ring = cos_r * centre[:, None] + sin_r * (
         np.cos(phi)[..., None] * t[:, None] + np.sin(phi)[..., None] * b[:, None]
     )
     return np.concatenate([centre[:, None], ring], axis=1)
@@ -190,12 +209,12 @@ def follow_probes(
     normal: np.ndarray | None = None,
     refine: int = REFINE,
     snap: Snap | None = None,
-    spin: tuple[np.ndarray, float] | None = None,
+    spin: tuple[np.ndarray, float | np.ndarray] | None = None,
 ) -> Rotation:
     """The rotation following the point chosen by :func:`select_points` (identity where none).
 
-    With ``spin`` = (kernel centres (m, 3), kernel σ in radians) and a ``snap``, where the point
-    was snapped onto an edge the rotation also turns about it so that the edge's great circle
+    With ``spin`` = (kernel centres (m, 3), kernel σ in radians: one, or one per row) and a ``snap``,
+    where the point was snapped onto an edge the rotation also turns about it so that the edge's great circle
     follows its own (:func:`~sphere3d.reparam.snaps.line_spin`); at a corner, by its two edges' rates
     weighted by the kernel.
     """
@@ -210,6 +229,7 @@ def follow_probes(
     if ok.any():
         r = rows[ok]
         o = origin if np.ndim(detach(origin)) == 1 else origin[r]
-        rate = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], spin[1])
+        sigma = spin[1] if np.ndim(spin[1]) == 0 else spin[1][r]
+        rate = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], sigma)
         turn[..., r] = rate
     return Rotation.following(to, found, Dual(np.zeros(len(found)), turn, k))

@@ -125,11 +125,13 @@ def _chart(d: Any, centre: np.ndarray, t: np.ndarray, b: np.ndarray) -> tuple[An
     return x / depth, y / depth
 
 
-def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: float) -> ShadingAffine:
+def inner_shape_map(
+    shading: Any, mu: np.ndarray, centre: np.ndarray, reach: float | np.ndarray
+) -> ShadingAffine:
     """The map of the module docstring for the kernels (centres ``centre`` (n, 3), samples ``mu``)
-    whose ring of angular radius ``reach`` holds a moving shape's image, or a thin image reaching
-    into it, or reaches a shape of one triangle (for which the map is exact everywhere); the
-    nearest such shape, seen from the point (a ray toward its centre hits it).
+    whose ring of angular radius ``reach`` (one, or one per kernel) holds a moving shape's image, or a
+    thin image reaching into it, or reaches a shape of one triangle (for which the map is exact
+    everywhere); the nearest such shape, seen from the point (a ray toward its centre hits it).
 
     Cost: (kernels × moving shapes) comparisons, then (kernels with a shape × anchors).
     """
@@ -147,7 +149,8 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
     cos = np.einsum("nkx,nx->nk", to, centre) / np.maximum(dist, 1e-300)
     gap = np.arccos(np.clip(cos, -1.0, 1.0))
     # inside the ring wholly, or near it and thin (tested on the chart below)
-    near = outside & (gap - half < reach) & (half < 0.5 * np.pi)
+    per_row = np.ndim(reach) != 0
+    near = outside & (gap - half < (reach[:, None] if per_row else reach)) & (half < 0.5 * np.pi)
     best = np.argmin(np.where(near, gap, np.inf), axis=1)
     rows = np.flatnonzero(near[np.arange(n), best])
     if not rows.size:
@@ -170,8 +173,10 @@ def inner_shape_map(shading: Any, mu: np.ndarray, centre: np.ndarray, reach: flo
     fitted = front & (extent > 0.0) & (eig[:, 0] > DEGENERATE * extent)
     # the image inside the ring (every anchor within reach of the centre), or thin: narrower than the
     # ring across its major axis, its core reaching into it
-    radius_chart = np.tan(reach)
-    inside = np.all(np.hypot(u[..., 0], u[..., 1]) < radius_chart, axis=1)
+    radius_chart = np.tan(reach[rows]) if per_row else np.tan(reach)
+    inside = np.all(
+        np.hypot(u[..., 0], u[..., 1]) < (radius_chart[:, None] if per_row else radius_chart), axis=1
+    )
     major = vec[:, :, 1]
     across = np.einsum("rai,ri->ra", q, np.stack([-major[:, 1], major[:, 0]], axis=1))
     along = np.einsum("rai,ri->ra", q, major)

@@ -50,7 +50,7 @@ Gap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 kernel centres, in the unit of the snap's ``radius``."""
 
 
-def edge_snap(state: SceneState, gap: Gap, radius: float) -> Snap:
+def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
     r"""Move a bisected probe hit onto its triangle's edge, or to that edge's corner near the kernel.
 
     The hook ``snap`` of :func:`~sphere3d.reparam.probes.select_points`. The point followed is where the
@@ -63,7 +63,8 @@ def edge_snap(state: SceneState, gap: Gap, radius: float) -> Snap:
     :func:`line_spin`, the edge's great circle), while one following a point inside T drifts by
     its distance from the edge times the image's rate of scaling. Where an end of that edge lies
     within ``radius`` of the kernel centre (``gap``), the corner is followed instead: it lies on
-    both edges that meet there, so one rotation follows the two.
+    both edges that meet there, so one rotation follows the two. ``radius``: one, or one per kernel
+    (indexed by the snap's ``rows``).
     """
     triangles = np.asarray(detach(state.triangles))
 
@@ -91,7 +92,7 @@ def edge_snap(state: SceneState, gap: Gap, radius: float) -> Snap:
         ends = np.stack([(j + 1) % 3, (j + 2) % 3], axis=1)
         away = gap(rows, vert[m[:, None], ends])
         near = np.argmin(away, axis=1)
-        corner = exits & (away[m, near] <= radius)
+        corner = exits & (away[m, near] <= (radius if np.ndim(radius) == 0 else radius[rows]))
         w[corner] = 0.0
         w[m[corner], ends[m, near][corner]] = 1.0
         u = np.where(exits, w[:, 1], hits.u)
@@ -108,9 +109,9 @@ def edge_snap(state: SceneState, gap: Gap, radius: float) -> Snap:
     return snap
 
 
-def angle_snap(state: SceneState, centre: np.ndarray, radius: float) -> Snap:
+def angle_snap(state: SceneState, centre: np.ndarray, radius: float | np.ndarray) -> Snap:
     """:func:`edge_snap` for probes on the sphere around the unit kernel centres ``centre`` (m, 3):
-    a corner within the angle ``radius`` (radians) of the centre is followed."""
+    a corner within the angle ``radius`` (radians; one, or one per kernel) of the centre is followed."""
 
     def gap(rows: np.ndarray, ends: np.ndarray) -> np.ndarray:
         cosine = dot(ends, centre[rows, None]) / norm(ends)
@@ -125,7 +126,7 @@ def line_spin(
     point: Any,
     lines: np.ndarray,
     centre: np.ndarray | None = None,
-    sigma: float = 1.0,
+    sigma: float | np.ndarray = 1.0,
 ) -> np.ndarray:
     r"""Rate of turn about the direction of ``point`` that keeps the great circles of ``lines`` on theirs.
 
@@ -150,7 +151,8 @@ def line_spin(
     centre : ndarray, shape (k, 3), optional
         Unit kernel centres: at a corner each edge's rate is weighted by its first moment
         $M_i = ∫ s\, g\, ds$ from the corner under a Gaussian of ``sigma`` (radians) about the
-        centre, the λ that zeroes the first-order error $Σ_i (λ_i - λ) M_i$ (:func:`_moment`).
+        centre, the λ that zeroes the first-order error $Σ_i (λ_i - λ) M_i$ (:func:`_moment`); one
+        σ, or one per row.
 
     Returns
     -------
@@ -174,7 +176,7 @@ def line_spin(
     return w * rates[0] + (1.0 - w) * rates[1]
 
 
-def _moment(a: np.ndarray, q: np.ndarray, centre: np.ndarray, sigma: float) -> np.ndarray:
+def _moment(a: np.ndarray, q: np.ndarray, centre: np.ndarray, sigma: float | np.ndarray) -> np.ndarray:
     r"""$∫_0^∞ s\, g(s t - x) ds$ along the edge from the corner a towards q, g the Gaussian of ``sigma``
     about the kernel ``centre`` (x: the centre's offset in a's tangent plane, small angles):
     $e^{-b^2/2σ^2} (σ^2 e^{-α^2/2σ^2} + α σ \sqrt{2π}\, Φ(α/σ))$, α = x·t, $b^2 = |x|^2 - α^2$.

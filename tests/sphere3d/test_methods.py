@@ -45,6 +45,7 @@ def test01_api_exports_and_methods():
         "refine": 3,
         "paired": False,
         "baseline": True,
+        "lobe": 1.0,
     }
     assert g.method == "reparam" and g.param == "occluder.translate.x" and g.batches == 8
 
