@@ -139,8 +139,16 @@ class Transforms(Protocol):
         """Film evaluation points for film samples ``t`` of pixels ``pixel`` (``draws``: one row each)."""
         ...
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
-        """Direction evaluation points for direction samples ``phi`` from shading points ``x``."""
+    def directions(
+        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
+        needed: np.ndarray | None = None,
+    ) -> Members:  # fmt: skip
+        """Direction evaluation points for direction samples ``phi`` from shading points ``x``.
+
+        ``needed`` (bool, one per sample; None: all): the samples whose integrand or its derivative may be
+        nonzero where the sample's ray goes at θ0, or that a path continues along
+        (:func:`shade`). Elsewhere both are 0 at every evaluation point of the sample's value, so a
+        transform whose members have the sample's value (unpaired) may leave those samples unmoved."""
         ...
 
     def shading_extra(
@@ -167,7 +175,10 @@ class Identity:
     def camera(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
         return Members(t[:, None])
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
+    def directions(
+        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
+        needed: np.ndarray | None = None,
+    ) -> Members:  # fmt: skip
         return Members(phi[:, None])
 
     def shading_extra(
@@ -310,10 +321,23 @@ def shade(
     inv = np.where(keep_all, 1.0 / np.where(keep_all, denom, 1.0), 0.0)
 
     xr = x[idx]
-    members = ctx.transforms.directions(ctx, xr, ign, phi, draws.tile(techniques))
+    # where each sample's ray goes at θ0: an emitter (or the sky) there, or a path going on along it,
+    # is what can make the sample's term or its derivative nonzero, whatever its evaluation point's tangent
+    d0 = direction(phi)
+    hits = cast(ctx.geom0, x0r, d0, ign)
+    needed = None
+    if type(ctx.transforms).directions is not Identity.directions:  # a method that moves the samples
+        needed = keep_all & _live(ctx.geom.emission, hits.prim, ctx.geom.sky)
+        one = np.flatnonzero(needed & hits.hit & ctx.geom.one_sided[np.maximum(hits.prim, 0)])
+        if one.size:  # a one-sided emitter met from behind emits nothing (:func:`emitted`'s test)
+            nrm = attach(ctx.geom0, hits, one, x0r[one], d0[one]).normal
+            needed[one] = (nrm[:, 0] * d0[one, 0] + nrm[:, 1] * d0[one, 1]) < 0.0
+        needed |= bounce & hits.hit & (np.arange(phi.size) < n)  # the first n: the BSDF samples, paths go on
+    members = ctx.transforms.directions(ctx, xr, ign, phi, draws.tile(techniques), needed)
     flat, rep = members.flat()
     d = direction(flat)
-    hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
+    if flat.shape[0] != phi.size or not np.array_equal(detach(flat), phi):  # members away from the samples
+        hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
     li, att = incident(ctx.geom, xr[rep], d, hits)
     nr = normal[idx][rep]
     cos = d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1]
@@ -344,12 +368,15 @@ def shade(
 
 
 # ------------------------------------------------------------------ paths
-def _live(rho: Any) -> np.ndarray:
-    """Rows whose albedo reflects or moves with a parameter (any of k tangents): the rest reflect nothing."""
+def _live(rho: Any, prim: np.ndarray | None = None, miss: float = 0.0) -> np.ndarray:
+    """Rows whose albedo reflects or moves with a parameter (any of k tangents): the rest reflect nothing.
+    With ``prim``: for rays that hit primitives ``prim`` (-1: a miss, live if ``miss`` is not 0), whether
+    the per-primitive ``rho`` (an emission) of their hit is live."""
     moving = tangent(rho) != 0.0
     if moving.ndim > np.ndim(detach(rho)):  # k tangents: an albedo moving with any parameter
         moving = np.any(moving, axis=0)
-    return (detach(rho) != 0.0) | moving
+    live = (detach(rho) != 0.0) | moving
+    return live if prim is None else np.where(prim >= 0, live[np.maximum(prim, 0)], miss != 0.0)
 
 
 def cosine_ratio(cosine: Any) -> Any:

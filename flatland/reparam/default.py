@@ -206,7 +206,23 @@ class ReparamTransforms(Identity):
         log_k = -0.5 * self.kappa_film * sq + log_jacobian
         return Members(points, unit_weight(log_k), self.paired, density)
 
-    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
+    def directions(
+        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
+        needed: np.ndarray | None = None,
+    ) -> Members:  # fmt: skip
+        # unpaired, a sample not ``needed`` adds 0 and moves no path wherever it goes: the identity, with no
+        # kernel draw and no probe; every other row's numbers are those of the full call (all per row)
+        if needed is None or self.paired or np.all(needed):
+            return self._directions(ctx, x, ignore, phi, draws)
+        k = ctx.geom.k
+        points, weights = as_dual(phi[:, None].copy(), k), as_dual(np.ones((phi.size, 1)), k)
+        rows = np.flatnonzero(needed)
+        if rows.size:
+            sub = self._directions(ctx, x[rows], ignore[rows], phi[rows], draws.take(rows))
+            points[rows], weights[rows] = sub.points, sub.weights
+        return Members(points, weights)
+
+    def _directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         kappa = self.kappa
         x0 = detach(x)
         if self.paired:  # ω = φ (the primary sample), members μ_j ~ vM(ω, κ)

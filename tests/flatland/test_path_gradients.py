@@ -206,3 +206,45 @@ def test08_boundary_at_a_point_sees_the_indirect_shadow_move():
     s = np.hypot(float(fd.derivative_stderr), float(bd.derivative_stderr))
     assert abs(float(bd.derivative) - float(fd.derivative)) <= q * s, (bd.derivative, fd.derivative, s)
     assert abs(float(fd.derivative)) > 10.0 * s  # the derivative is resolved
+
+
+@pytest.mark.parametrize(
+    ("name", "params"),
+    [("interreflection", PARAM), ("glossy_reflection", ["occluder.translate.x", "floor.roughness"])],
+)
+def test09_reparam_moves_only_the_samples_that_can_add_something_and_the_image_is_the_same(
+    monkeypatch, name, params
+):
+    """Under ``reparam`` a direction sample whose ray meets no emitter (a wall, an emitter's back, the
+    black sky) and that no path goes on along keeps the identity, without kernel draw or probes
+    (``needed`` of :func:`~flatland.integrator.shade`): its term and its derivative are 0 wherever it
+    goes. The depth-3 image, every array bit for bit, is that of transforming every sample, and some
+    samples were left out."""
+    from flatland.reparam.default import ReparamTransforms
+
+    scene = load_scene(name).with_camera(pixels=8)
+    args = {"spp": 16, "seed": 4, "progress": False, "max_depth": 3}
+    rows = {"given": 0, "moved": 0}
+    directions = ReparamTransforms._directions
+
+    def counted(self, ctx, x, ignore, phi, draws):
+        rows["moved"] += phi.size
+        return directions(self, ctx, x, ignore, phi, draws)
+
+    full = ReparamTransforms.directions
+
+    def every(self, ctx, x, ignore, phi, draws, needed=None):
+        rows["given"] += phi.size
+        return full(self, ctx, x, ignore, phi, draws, None if rows["all"] else needed)
+
+    monkeypatch.setattr(ReparamTransforms, "_directions", counted)
+    monkeypatch.setattr(ReparamTransforms, "directions", every)
+    rows["all"] = True
+    everything = render_gradient(scene, params, "reparam", **args)
+    assert rows["moved"] == rows["given"]
+    rows.update(given=0, moved=0, all=False)
+    needed = render_gradient(scene, params, "reparam", **args)
+    assert rows["moved"] < rows["given"], rows
+    for field in ("value", "derivative", "value_stderr", "derivative_stderr"):
+        assert getattr(needed, field).tobytes() == getattr(everything, field).tobytes(), field
+    assert np.max(np.abs(everything.derivative)) > 0.0
