@@ -259,3 +259,32 @@ def test10_the_control_variate_estimates_c_only_where_its_term_moves(monkeypatch
     assert turning.value.tobytes() == every.value.tobytes()
     assert turning.derivative.tobytes() == every.derivative.tobytes()
     assert np.max(np.abs(every.derivative)) > 0.0
+
+
+@pytest.mark.parametrize("name", ["interreflection", "glossy_reflection"])
+def test11_kernels_that_see_no_moving_triangle_keep_the_identity_without_probes(monkeypatch, name):
+    """A static shading point whose BSDF kernel's probes, snaps and shapes (within twice the ring's angle
+    of its centre) meet no changing triangle (:func:`~sphere3d.reparam.penumbra.cone_may_see_motion`,
+    by their bounding sphere) can only follow static points: its sample keeps the identity, without
+    probes. The depth-3 image, every array bit for bit, is that of probing every kernel, and some
+    kernels were left out."""
+    from sphere3d.reparam import default
+
+    scene = load_scene(_scene(name, 12))
+    task = ImageTask(scene, [PARAM, "occluder.translate.y"], 8, 3, 4, max_depth=3)
+    rotated, probed = default.ReparamTransforms._rotated, []
+
+    def counted(self, sub, mu, centre):
+        probed.append(len(mu))
+        return rotated(self, sub, mu, centre)
+
+    monkeypatch.setattr(default.ReparamTransforms, "_rotated", counted)
+    culled = GRADIENT_METHODS.run("reparam", task)
+    few = sum(probed)
+    probed.clear()
+    monkeypatch.setattr(default, "cone_may_see_motion", lambda state, x, c, h: np.ones(len(x), dtype=bool))
+    every = GRADIENT_METHODS.run("reparam", task)
+    assert 0 < few < sum(probed), (few, sum(probed))
+    assert culled.value.tobytes() == every.value.tobytes()
+    assert culled.derivative.tobytes() == every.derivative.tobytes()
+    assert np.max(np.abs(every.derivative)) > 0.0
