@@ -335,8 +335,9 @@ def shade(
         needed |= bounce & hits.hit & (np.arange(phi.size) < n)  # the first n: the BSDF samples, paths go on
     members = ctx.transforms.directions(ctx, xr, ign, phi, draws.tile(techniques), needed)
     flat, rep = members.flat()
-    d = direction(flat)
-    if flat.shape[0] != phi.size or not np.array_equal(detach(flat), phi):  # members away from the samples
+    at_samples = flat.shape[0] == phi.size and np.array_equal(detach(flat), phi)  # else: members elsewhere
+    d = d0 if at_samples and not is_dual(flat) else direction(flat)
+    if not at_samples:
         hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
     li, att = incident(ctx.geom, xr[rep], d, hits)
     nr = normal[idx][rep]
