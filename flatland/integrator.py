@@ -228,9 +228,14 @@ def emitted(geom: SceneState, prim: np.ndarray, u: Any, normal0: np.ndarray, dir
     return e * np.where(geom.one_sided[prim] & ~front, 0.0, 1.0)
 
 
-def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any, Attached | None]:
-    """Incident radiance along rays (sky on a miss) and the hits re-attached to ``geom``."""
-    rows = np.flatnonzero(hits.hit)
+def incident(
+    geom: SceneState, origins: Any, dirs: Any, hits: Hits, keep: np.ndarray | None = None
+) -> tuple[Any, Attached | None]:
+    """Incident radiance along rays (sky on a miss) and the hits re-attached to ``geom``: every hit, or
+    with ``keep`` (bool per ray) those of ``keep`` and those on an emitter (emission nonzero or moving),
+    in ray order; elsewhere the radiance is 0 (value and derivative) without re-attaching."""
+    lit = hits.hit & _live(geom.emission, hits.prim)  # on an emitter: the radiance needs the hit
+    rows = np.flatnonzero(hits.hit if keep is None else lit | (hits.hit & keep))
     n = hits.prim.size
     k = geom.k if geom.differentiable else k_of(origins, dirs)
     out = zeros((n,), geom.differentiable or is_dual(origins) or is_dual(dirs), k) + geom.sky * (~hits.hit)
@@ -238,7 +243,10 @@ def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any
         return out, None
     o = origins[rows] if np.ndim(detach(origins)) == 2 else origins
     att = attach(geom, hits, rows, o, dirs[rows])
-    out[rows] = emitted(geom, hits.prim[rows], att.u, detach(att.normal), detach(dirs)[rows])
+    on = np.flatnonzero(lit[rows])  # elsewhere the emission, 0 and static, leaves 0
+    if on.size:
+        r = rows[on]
+        out[r] = emitted(geom, hits.prim[r], att.u[on], detach(att.normal)[on], detach(dirs)[r])
     return out, att
 
 
@@ -339,7 +347,8 @@ def shade(
     d = d0 if at_samples and not is_dual(flat) else direction(flat)
     if not at_samples:
         hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
-    li, att = incident(ctx.geom, xr[rep], d, hits)
+    # re-attached: the hits a path goes on from (the first n, the BSDF samples) and those on emitters
+    li, att = incident(ctx.geom, xr[rep], d, hits, bounce & (np.arange(rep.size) < n))
     nr = normal[idx][rep]
     cos = d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1]
     if lobe is None:
