@@ -139,16 +139,9 @@ class Transforms(Protocol):
         """Film evaluation points for film samples ``t`` of pixels ``pixel`` (``draws``: one row each)."""
         ...
 
-    def directions(
-        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
-        needed: np.ndarray | None = None,
-    ) -> Members:  # fmt: skip
-        """Direction evaluation points for direction samples ``phi`` from shading points ``x``.
-
-        ``needed`` (bool, one per sample; None: all): the samples whose integrand or its derivative may be
-        nonzero where the sample's ray goes at θ0, or that a path continues along
-        (:func:`shade`). Elsewhere both are 0 at every evaluation point of the sample's value, so a
-        transform whose members have the sample's value (unpaired) may leave those samples unmoved."""
+    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
+        """Direction evaluation points for direction samples ``phi`` from shading points ``x``
+        (``ctx.needed``: which samples can add something)."""
         ...
 
     def shading_extra(
@@ -175,10 +168,7 @@ class Identity:
     def camera(self, ctx: Context, t: np.ndarray, pixel: np.ndarray, draws: Draws) -> Members:
         return Members(t[:, None])
 
-    def directions(
-        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
-        needed: np.ndarray | None = None,
-    ) -> Members:  # fmt: skip
+    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
         return Members(phi[:, None])
 
     def shading_extra(
@@ -198,6 +188,9 @@ class Context:
     """What the transforms may use: the scene state (θ-dependent and detached) and the emitters;
     how many vertices a path has, ``max_depth`` (1: direct illumination), and which of them is being
     shaded, ``vertex`` (1: the camera's hit or a :class:`~flatland.tasks.PointTask`'s point).
+    ``needed`` (``directions`` only; None: all): which direction samples may have a nonzero term or
+    derivative where their rays go at θ0, or are ones a path goes on along (:func:`shade`). Elsewhere
+    both are 0 at any evaluation point of the sample's value: unpaired transforms may leave them unmoved.
 
     Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
     argument), keyed on the primary samples, never from a per-chunk stream.
@@ -209,6 +202,7 @@ class Context:
     transforms: Transforms
     max_depth: int = 1
     vertex: int = 1
+    needed: np.ndarray | None = None
 
 
 # ------------------------------------------------------------------ radiance
@@ -341,7 +335,8 @@ def shade(
             nrm = attach(ctx.geom0, hits, one, x0r[one], d0[one]).normal
             needed[one] = (nrm[:, 0] * d0[one, 0] + nrm[:, 1] * d0[one, 1]) < 0.0
         needed |= bounce & hits.hit & (np.arange(phi.size) < n)  # the first n: the BSDF samples, paths go on
-    members = ctx.transforms.directions(ctx, xr, ign, phi, draws.tile(techniques), needed)
+    told = ctx if needed is None else replace(ctx, needed=needed)
+    members = ctx.transforms.directions(told, xr, ign, phi, draws.tile(techniques))
     flat, rep = members.flat()
     at_samples = flat.shape[0] == phi.size and np.array_equal(detach(flat), phi)  # else: members elsewhere
     d = d0 if at_samples and not is_dual(flat) else direction(flat)

@@ -246,17 +246,14 @@ class ReparamTransforms(Identity):
         log_k = -0.5 * self.kappa_film * sq + log_jacobian
         return Members(points, unit_weight(log_k), self.paired, density)
 
-    def directions(
-        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
-        needed: np.ndarray | None = None,
-    ) -> Members:  # fmt: skip
-        # unpaired, a sample not ``needed`` adds 0 and moves no path wherever it goes; one whose shading
+    def directions(self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws) -> Members:
+        # unpaired, a sample not ``ctx.needed`` adds 0 and moves no path wherever it goes; one whose shading
         # point is static and whose probes' span meets the image of no moving primitive can only follow a
         # static point (a zero derivative): both keep the identity, the first without a kernel draw, neither
         # with a probe. Every other row's numbers are those of the full call (all per row)
         if self.paired or not ctx.geom.differentiable:
             return self._directions(ctx, x, ignore, phi, draws)
-        rows = np.arange(phi.size) if needed is None else np.flatnonzero(needed)
+        rows = np.arange(phi.size) if ctx.needed is None else np.flatnonzero(ctx.needed)
         center = sample_von_mises(draws.take(rows).uniforms("kernel.directions"), phi[rows], self.kappa)
         half = np.max(np.abs(self.offsets)) / np.sqrt(self.kappa)  # the probes' span: centre ± half
         sees = _moves(x[rows]) | _may_see_motion(ctx.geom, detach(x)[rows], center, half)

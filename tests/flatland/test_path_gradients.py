@@ -221,11 +221,13 @@ def test09_reparam_moves_only_the_samples_that_can_add_something_and_the_image_i
     monkeypatch, name, params, cull
 ):
     """Under ``reparam`` a direction sample keeps the identity, without probes, where its ray meets no
-    emitter (a wall, an emitter's back, the black sky) and no path goes on along it (``needed`` of
+    emitter (a wall, an emitter's back, the black sky) and no path goes on along it (``ctx.needed`` of
     :func:`~flatland.integrator.shade`: its term and derivative are 0 wherever it goes), or where its
     shading point is static and its probes' span meets the image of no moving primitive (every point it
     may follow is static: a zero derivative). With either cull alone (the other off), the depth-3 image,
     every array bit for bit, is that of transforming every sample, and some samples were left out."""
+    from dataclasses import replace
+
     from flatland.reparam import default
     from flatland.reparam.default import ReparamTransforms
 
@@ -242,9 +244,10 @@ def test09_reparam_moves_only_the_samples_that_can_add_something_and_the_image_i
         rows["moved"] += phi.size
         return directions(self, ctx, x, ignore, phi, draws, center)
 
-    def given(self, ctx, x, ignore, phi, draws, needed=None):
+    def given(self, ctx, x, ignore, phi, draws):
         rows["given"] += phi.size
-        return full(self, ctx, x, ignore, phi, draws, None if rows["all"] or cull != "needed" else needed)
+        told = replace(ctx, needed=None) if rows["all"] or cull != "needed" else ctx
+        return full(self, told, x, ignore, phi, draws)
 
     def motion(geom, x0, center, half):
         return (
