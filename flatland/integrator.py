@@ -53,9 +53,9 @@ import numpy as np
 from flatland import glossy
 from flatland.core.dual import Dual, detach, is_dual, k_of, tangent
 from flatland.core.rng import Draws
-from flatland.core.translation import paired_combine
 from flatland.glossy import Lobe
 from flatland.lights import Lights
+from flatland.members import Members, combine
 from flatland.sampling import filter_value, pdf_filter, sample_filter
 from flatland.state import SceneState
 from flatland.tracing import Attached, Hits, attach, cast, direction, film_direction, zeros
@@ -85,46 +85,6 @@ PRIMARY_UNIFORMS = 4
 """Uniforms per primary sample: film, cosine direction, emitter choice, point on emitter."""
 
 
-@dataclass(frozen=True)
-class Members:
-    """Evaluation points for a set of samples: ``points`` (n, m), ``weights`` (n, m) or None.
-
-    m = 1 for a single evaluation per sample, m = 2 for a pair sharing one transform
-    that :func:`combine` merges with the paired-sample control variate (theory/kernels). ``density``
-    (film only) replaces the pixel filter as the density of the sample the members
-    were drawn around, when that is not the film sample itself.
-    """
-
-    points: Any
-    weights: Any = None
-    paired: bool = False
-    density: np.ndarray | None = None
-
-    def flat(self) -> tuple[Any, np.ndarray]:
-        """All evaluation points as one flat array, and the index of each one's sample."""
-        n, m = np.shape(detach(self.points))
-        return self.points.reshape(-1), np.repeat(np.arange(n), m)
-
-    def reduce(self, e_flat: Any) -> Any:
-        """Per-sample estimates from the members' estimates ``e_flat`` (in :meth:`flat` order)."""
-        e = e_flat.reshape(np.shape(detach(self.points)))
-        if self.weights is not None:
-            e = e * self.weights
-        return combine(e, self.weights, self.paired)
-
-
-def combine(e: Any, w: Any, paired: bool) -> Any:
-    """Per-sample estimate from member estimates ``e`` (n, m) carrying weights ``w`` (value 1).
-
-    Paired (theory/kernels): 0.5 (e0 - e1/w1 (w0 - detach w0)) + 0.5 (e1 - e0/w0 (w1 - detach w1)):
-    each weight's derivative has zero mean given the pair's kernel centre and is
-    independent of the other member, so it serves as the other's control variate.
-    """
-    if not paired:
-        return e[:, 0]
-    return paired_combine(e[:, 0], e[:, 1], w[:, 0], w[:, 1])
-
-
 class Transforms(Protocol):
     """How a method changes variables in the integrals (see the module docstring).
 
@@ -148,8 +108,9 @@ class Transforms(Protocol):
         draws: Draws,
         lobe: Lobe | None = None,
     ) -> Members:
-        """Direction evaluation points for direction samples ``phi`` from shading points ``x``; ``lobe``:
-        the rows' materials in glossy scenes (:class:`~flatland.glossy.Lobe`; None: every row diffuse)."""
+        """Direction evaluation points for direction samples ``phi`` from shading points ``x``
+        (``ctx.needed``: which samples can add something); ``lobe``: the rows' materials in glossy
+        scenes (:class:`~flatland.glossy.Lobe`; None: every row diffuse)."""
         ...
 
     def shading_extra(
@@ -204,6 +165,9 @@ class Context:
     """What the transforms may use: the scene state (θ-dependent and detached) and the emitters;
     how many vertices a path has, ``max_depth`` (1: direct illumination), and which of them is being
     shaded, ``vertex`` (1: the camera's hit or a :class:`~flatland.tasks.PointTask`'s point).
+    ``needed`` (``directions`` only; None: all): which direction samples may have a nonzero term or
+    derivative where their rays go at θ0, or are ones a path goes on along (:func:`shade`). Elsewhere
+    both are 0 at any evaluation point of the sample's value: unpaired transforms may leave them unmoved.
 
     Random numbers come with the rows they are for (a :class:`~flatland.core.rng.Draws`
     argument), keyed on the primary samples, never from a per-chunk stream.
@@ -215,6 +179,7 @@ class Context:
     transforms: Transforms
     max_depth: int = 1
     vertex: int = 1
+    needed: np.ndarray | None = None
 
 
 # ------------------------------------------------------------------ radiance
@@ -234,9 +199,14 @@ def emitted(geom: SceneState, prim: np.ndarray, u: Any, normal0: np.ndarray, dir
     return e * np.where(geom.one_sided[prim] & ~front, 0.0, 1.0)
 
 
-def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any, Attached | None]:
-    """Incident radiance along rays (sky on a miss) and the hits re-attached to ``geom``."""
-    rows = np.flatnonzero(hits.hit)
+def incident(
+    geom: SceneState, origins: Any, dirs: Any, hits: Hits, keep: np.ndarray | None = None
+) -> tuple[Any, Attached | None]:
+    """Incident radiance along rays (sky on a miss) and the hits re-attached to ``geom``: every hit, or
+    with ``keep`` (bool per ray) those of ``keep`` and those on an emitter (emission nonzero or moving),
+    in ray order; elsewhere the radiance is 0 (value and derivative) without re-attaching."""
+    lit = hits.hit & _live(geom.emission, hits.prim)  # on an emitter: the radiance needs the hit
+    rows = np.flatnonzero(hits.hit if keep is None else lit | (hits.hit & keep))
     n = hits.prim.size
     k = geom.k if geom.differentiable else k_of(origins, dirs)
     out = zeros((n,), geom.differentiable or is_dual(origins) or is_dual(dirs), k) + geom.sky * (~hits.hit)
@@ -244,7 +214,10 @@ def incident(geom: SceneState, origins: Any, dirs: Any, hits: Hits) -> tuple[Any
         return out, None
     o = origins[rows] if np.ndim(detach(origins)) == 2 else origins
     att = attach(geom, hits, rows, o, dirs[rows])
-    out[rows] = emitted(geom, hits.prim[rows], att.u, detach(att.normal), detach(dirs)[rows])
+    on = np.flatnonzero(lit[rows])  # elsewhere the emission, 0 and static, leaves 0
+    if on.size:
+        r = rows[on]
+        out[r] = emitted(geom, hits.prim[r], att.u[on], detach(att.normal)[on], detach(dirs)[r])
     return out, att
 
 
@@ -327,15 +300,31 @@ def shade(
     inv = np.where(keep_all, 1.0 / np.where(keep_all, denom, 1.0), 0.0)
 
     xr = x[idx]
+    # where each sample's ray goes at θ0: an emitter (or the sky) there, or a path going on along it,
+    # is what can make the sample's term or its derivative nonzero, whatever its evaluation point's tangent
+    d0 = direction(phi)
+    hits = cast(ctx.geom0, x0r, d0, ign)
+    needed = None
+    if type(ctx.transforms).directions is not Identity.directions:  # a method that moves the samples
+        needed = keep_all & _live(ctx.geom.emission, hits.prim, ctx.geom.sky)
+        one = np.flatnonzero(needed & hits.hit & ctx.geom.one_sided[np.maximum(hits.prim, 0)])
+        if one.size:  # a one-sided emitter met from behind emits nothing (:func:`emitted`'s test)
+            nrm = attach(ctx.geom0, hits, one, x0r[one], d0[one]).normal
+            needed[one] = (nrm[:, 0] * d0[one, 0] + nrm[:, 1] * d0[one, 1]) < 0.0
+        needed |= bounce & hits.hit & (np.arange(phi.size) < n)  # the first n: the BSDF samples, paths go on
+    told = ctx if needed is None else replace(ctx, needed=needed)
     tiled = draws.tile(techniques)
     if lobe is None:
-        members = ctx.transforms.directions(ctx, xr, ign, phi, tiled)
+        members = ctx.transforms.directions(told, xr, ign, phi, tiled)
     else:  # the rows' lobes, for a method whose kernels follow their width
-        members = ctx.transforms.directions(ctx, xr, ign, phi, tiled, lobes)
+        members = ctx.transforms.directions(told, xr, ign, phi, tiled, lobes)
     flat, rep = members.flat()
-    d = direction(flat)
-    hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
-    li, att = incident(ctx.geom, xr[rep], d, hits)
+    at_samples = flat.shape[0] == phi.size and np.array_equal(detach(flat), phi)  # else: members elsewhere
+    d = d0 if at_samples and not is_dual(flat) else direction(flat)
+    if not at_samples:
+        hits = cast(ctx.geom0, x0r[rep], detach(d), ign[rep])
+    # re-attached: the hits a path goes on from (the first n, the BSDF samples) and those on emitters
+    li, att = incident(ctx.geom, xr[rep], d, hits, bounce & (np.arange(rep.size) < n))
     nr = normal[idx][rep]
     cos = d[:, 0] * nr[:, 0] + d[:, 1] * nr[:, 1]
     if lobe is None:
@@ -365,12 +354,15 @@ def shade(
 
 
 # ------------------------------------------------------------------ paths
-def _live(rho: Any) -> np.ndarray:
-    """Rows whose albedo reflects or moves with a parameter (any of k tangents): the rest reflect nothing."""
+def _live(rho: Any, prim: np.ndarray | None = None, miss: float = 0.0) -> np.ndarray:
+    """Rows whose albedo reflects or moves with a parameter (any of k tangents): the rest reflect nothing.
+    With ``prim``: for rays that hit primitives ``prim`` (-1: a miss, live if ``miss`` is not 0), whether
+    the per-primitive ``rho`` (an emission) of their hit is live."""
     moving = tangent(rho) != 0.0
     if moving.ndim > np.ndim(detach(rho)):  # k tangents: an albedo moving with any parameter
         moving = np.any(moving, axis=0)
-    return (detach(rho) != 0.0) | moving
+    live = (detach(rho) != 0.0) | moving
+    return live if prim is None else np.where(prim >= 0, live[np.maximum(prim, 0)], miss != 0.0)
 
 
 def cosine_ratio(cosine: Any) -> Any:

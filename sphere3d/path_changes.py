@@ -36,8 +36,9 @@ estimate goes on along its cosine samples to the last vertex, every vertex with 
 carried path draws there (:func:`sphere3d.paths.carrier`). Without that the further light, large
 where the next vertex lies in shadow, multiplies $\dot w$ unchecked, and $\dot w$ has no bound
 where a moving point nears a static crease (docs/theory/radiometry, "Paths"). Unbiased whatever
-c is; it only lowers the variance where $c ≈ π L$. Not applied at glossy vertices (their samples'
-density is not the cosine one).
+c is; it only lowers the variance where $c ≈ π L$. Where $\dot q = 0$ (a sample whose rotation and
+weight do not move: most, where the kernels see no moving triangle) the term is 0 whatever c, and c is
+not estimated there. Not applied at glossy vertices (their samples' density is not the cosine one).
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ import numpy as np
 from flatland.core.dual import Dual, detach, tangent
 from sphere3d.bsdf import eval_ggx, pdf_ggx
 from sphere3d.integrator import Identity, Members, Shading, irradiance_samples
+from sphere3d.live import moves
 from sphere3d.state import SceneState
 from sphere3d.tracing import intersect_triangles
 from sphere3d.vector import dot
@@ -180,8 +182,15 @@ def path_baseline(
     rows = np.arange(len(mu)) if members.rows is None else members.rows
     if not rows.size:
         return None
-    plain, sub = state.detached(), shading.take(rows)
-    centre = members.centre
+    # q / p(μ) = cos(n0·Rμ) w / cos(n0·μ): value 1, tangent with zero mean given ω. Where its tangent is 0
+    # (a rotation and weight that do not move) the term is 0 whatever c: no c is estimated there
+    n0_all = detach(shading.n)[rows]
+    q_all = np.maximum(dot(n0_all, members.rotated), 0.0) * members.weights
+    turning = np.flatnonzero(moves(q_all))
+    if not turning.size:
+        return None
+    plain, sub = state.detached(), shading.take(rows[turning])
+    centre = members.centre[turning]
     hits = sub.trace(centre)
     shape = state.shape_of[np.where(hits.hit, hits.triangle, 0)]
     rho = np.asarray(detach(state.albedo), dtype=np.float64)[shape]
@@ -196,11 +205,9 @@ def path_baseline(
     u = at.draws.uniforms(name, 5)  # the next vertex's own: common random numbers with the carried radiance
     e = irradiance_samples(at, u, Identity()) if carry is None else carry(at, u)
     c = rho[ok] / np.pi * detach(e)  # L = (ρ/π) E at the centre's hit
-    # q / p(μ) = cos(n0·Rμ) w / cos(n0·μ): value 1, tangent with zero mean given ω
-    n0 = detach(sub.n)[ok]
-    cos0 = dot(n0, mu[rows][ok])
-    q = np.maximum(dot(n0, members.rotated[ok]), 0.0) * members.weights[ok]
+    rows, q = rows[turning][ok], q_all[turning[ok]]
+    cos0 = dot(n0_all[turning[ok]], mu[rows])
     q_dot = tangent(q) / np.where(cos0 > 0.0, cos0, 1.0)
     term = np.zeros((*q_dot.shape[:-1], len(mu)))
-    term[..., rows[ok]] = -c * q_dot
+    term[..., rows] = -c * q_dot
     return Dual(np.zeros(len(mu)), term * detach(scale), state.k)

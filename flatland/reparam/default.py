@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from flatland.core.dual import as_dual, detach, is_dual, k_of
+from flatland.core.dual import as_dual, detach, is_dual, k_of, tangent
 from flatland.core.rng import Draws
 from flatland.core.translation import translation_offset, unit_weight
 from flatland.glossy import Lobe
@@ -33,7 +33,7 @@ from flatland.reparam.probes import (
     select_points,
     shape_end,
 )
-from flatland.sampling import filter_blurred, sample_von_mises
+from flatland.sampling import filter_blurred, sample_von_mises, wrap_angle
 from flatland.tracing import EPS_DIST, angle_of, cast, direction, film_coordinate, film_direction, zeros
 
 __all__ = ["ReparamTransforms", "default_kappa_film"]
@@ -101,6 +101,43 @@ def _stretch(
     return points, log_jacobian
 
 
+def _moves(x: Any) -> np.ndarray:
+    """Rows of ``x`` (n, 2) with a nonzero tangent (under any of k parameters)."""
+    moving = tangent(x) != 0.0
+    return np.any(moving if moving.ndim == 2 else np.any(moving, axis=0), axis=-1)
+
+
+def _may_see_motion(geom: Any, x0: np.ndarray, center: np.ndarray, half: float | np.ndarray) -> np.ndarray:
+    r"""Whether the angle interval $[c - h, c + h]$ (``center`` (n,), ``half`` h) seen from ``x0`` (n, 2) may
+    meet the image of a moving primitive (one whose geometry has a nonzero tangent), conservatively.
+
+    A segment's image from x is the arc between its endpoints' angles (less than π: a segment through x,
+    or nearly, counts as seen); a circle's is its centre's angle ± $\arcsin(r / d)$ (everything from
+    inside). Every probe, bisection step, gap probe and followed end of the transform lies in the
+    interval, so where this is False every point it may follow is static."""
+    n = center.size
+    seen = np.zeros(n, dtype=bool)
+    margin = 1e-6  # radians of slack: a row kept for nothing costs probes only
+    parts = [(geom.seg_a, geom.seg_b)] if geom.n_seg else []
+    moving_seg = _moves(geom.seg_a) | _moves(geom.seg_b) if geom.n_seg else np.zeros(0, dtype=bool)
+    for i in np.flatnonzero(moving_seg):  # a loop over the few moving primitives, not over samples
+        a, b = detach(parts[0][0])[i] - x0, detach(parts[0][1])[i] - x0
+        alpha, beta = np.arctan2(a[:, 1], a[:, 0]), np.arctan2(b[:, 1], b[:, 0])
+        width = np.abs(wrap_angle(beta - alpha))
+        mid = alpha + 0.5 * wrap_angle(beta - alpha)
+        seen |= (width > np.pi - 1e-3) | (np.abs(wrap_angle(center - mid)) <= 0.5 * width + half + margin)
+    if geom.n_circ:
+        moving = _moves(geom.circ_c) | (tangent(geom.circ_r).reshape(-1, geom.n_circ) != 0.0).any(axis=0)
+        for i in np.flatnonzero(moving):
+            p = detach(geom.circ_c)[i] - x0
+            d, r = np.hypot(p[:, 0], p[:, 1]), float(detach(geom.circ_r)[i])
+            width = np.arcsin(np.minimum(r / np.maximum(d, 1e-300), 1.0))
+            inside = d <= r * (1.0 + 1e-6)
+            gap = np.abs(wrap_angle(center - np.arctan2(p[:, 1], p[:, 0])))
+            seen |= inside | (gap <= width + half + margin)
+    return seen
+
+
 class ReparamTransforms(Identity):
     r"""Film and angle translations following the point the probes choose, inside convolution kernels.
 
@@ -115,6 +152,9 @@ class ReparamTransforms(Identity):
     The weight $k(T y, ω) / \mathrm{detach}(k(T y, ω))$ (value 1) carries the kernel's derivative.
     At glossy points (``lobe`` a fraction) the direction kernel's κ is per point, following the GGX
     lobe's width (:mod:`flatland.reparam.lobe`); None: κ at every point.
+    Unpaired, a direction sample keeps the identity without probes where nothing it could follow moves
+    (a static shading point whose probes' span meets no moving primitive's image,
+    :func:`_may_see_motion`) or where it can add nothing (not ``needed``): the same numbers.
     """
 
     def __init__(
@@ -232,14 +272,42 @@ class ReparamTransforms(Identity):
         draws: Draws,
         lobe: Lobe | None = None,
     ) -> Members:
+        # unpaired, a sample not ``ctx.needed`` adds 0 and moves no path wherever it goes; one whose shading
+        # point is static and whose probes' span meets the image of no moving primitive can only follow a
+        # static point (a zero derivative): both keep the identity, the first without a kernel draw, neither
+        # with a probe. Every other row's numbers are those of the full call (all per row)
         kappa = self.kernel_kappa(lobe)  # fixed at the point, whatever the sample (flatland.reparam.lobe)
+        if self.paired or not ctx.geom.differentiable:
+            return self._directions(ctx, x, ignore, phi, draws, kappa)
+        rows = np.arange(phi.size) if ctx.needed is None else np.flatnonzero(ctx.needed)
+        per_row = (lambda r: kappa) if np.ndim(kappa) == 0 else (lambda r: kappa[r])
+        center = sample_von_mises(draws.take(rows).uniforms("kernel.directions"), phi[rows], per_row(rows))
+        half = np.max(np.abs(self.offsets)) / np.sqrt(per_row(rows))  # the probes' span: centre ± half
+        sees = _moves(x[rows]) | _may_see_motion(ctx.geom, detach(x)[rows], center, half)
+        rows, center = rows[sees], center[sees]
+        if rows.size == phi.size:
+            return self._directions(ctx, x, ignore, phi, draws, kappa, center)
+        k = ctx.geom.k
+        points, weights = as_dual(phi[:, None].copy(), k), as_dual(np.ones((phi.size, 1)), k)
+        if rows.size:
+            sub = self._directions(
+                ctx, x[rows], ignore[rows], phi[rows], draws.take(rows), per_row(rows), center
+            )
+            points[rows], weights[rows] = sub.points, sub.weights
+        return Members(points, weights)
+
+    def _directions(
+        self, ctx: Context, x: Any, ignore: np.ndarray, phi: np.ndarray, draws: Draws,
+        kappa: float | np.ndarray, center: np.ndarray | None = None,
+    ) -> Members:  # fmt: skip
         column = kappa if np.ndim(kappa) == 0 else kappa[:, None]  # per row, against (n, members)
         x0 = detach(x)
         if self.paired:  # ω = φ (the primary sample), members μ_j ~ vM(ω, κ)
             center = phi
             mu = sample_von_mises(draws.uniforms("kernel.directions.pair", 2), phi[:, None], kappa)
-        else:  # reverse order: ω ~ vM(φ, κ), the member is φ itself
-            center = sample_von_mises(draws.uniforms("kernel.directions"), phi, kappa)
+        else:  # reverse order: ω ~ vM(φ, κ) (``center``, when drawn already), the member is φ itself
+            if center is None:
+                center = sample_von_mises(draws.uniforms("kernel.directions"), phi, kappa)
             mu = phi[:, None]
 
         def trace(rows: np.ndarray, phi_probe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

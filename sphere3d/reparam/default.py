@@ -33,6 +33,7 @@ from flatland.core.translation import unit_weight
 from sphere3d.boundary.emitters import edge_table, emitter_edge_term
 from sphere3d.film import FilmTransform
 from sphere3d.integrator import EmitterChange, Identity, Members, Shading
+from sphere3d.live import any_rows, moves
 from sphere3d.reparam.emitter_probes import PROBES, emitter_rotation
 from sphere3d.reparam.film_affine import _shape_images
 from sphere3d.reparam.film_corners import _corner_table
@@ -44,7 +45,7 @@ from sphere3d.reparam.film_kernel import (
     film_transform,
 )
 from sphere3d.reparam.lobe import LOBE, lobe_kappa, lobe_radius
-from sphere3d.reparam.penumbra import moving_sphere, separating_planes
+from sphere3d.reparam.penumbra import cone_may_see_motion, moving_sphere, separating_planes
 from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
 from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
 from sphere3d.reparam.snaps import angle_snap
@@ -245,6 +246,31 @@ class ReparamTransforms(Identity):
         # naive sample, so the primal is bit-identical to the naive one
         kappa = self.kernel_kappa(lobe, live)  # θ-free: fixed at the point, whatever μ (lobe.py)
         centre = sample_vmf(sub.draws.uniforms("kernel.bsdf", 2), mu_l, kappa)
+        # a static point whose kernel's probes, snaps and shapes (within twice the ring) meet no changing
+        # triangle can only follow static points: the identity (a zero derivative), without probes
+        reach = 2.0 * vmf_spread_angle(kappa, self.spread) * (1.0 + 1e-6) + 1e-6
+        state = shading.state
+        sees = any_rows(moves(sub.x)) | cone_may_see_motion(state, detach(sub.x), centre, reach)
+        if sees.all():
+            rotated, weights, baseline = self._rotated(sub, mu_l, centre, kappa)
+        else:
+            rows = np.flatnonzero(sees)
+            rotated, weights = Dual(mu_l.copy(), None, state.k), Dual(np.ones(len(mu_l)), None, state.k)
+            baseline = np.zeros(len(mu_l))  # its term, c (q - detach q) / p, is 0 whatever c
+            if rows.size:
+                k_rows = kappa if np.ndim(kappa) == 0 else kappa[rows]
+                r, w, b = self._rotated(sub.take(rows), mu_l[rows], centre[rows], k_rows)
+                rotated[rows], weights[rows], baseline[rows] = r, w, b
+        if not self.baseline:
+            return Members(rotated, live, weights=weights)
+        return Members(rotated, live, weights=weights, baseline=baseline, centre=centre)
+
+    def _rotated(
+        self, sub: Shading, mu_l: np.ndarray, centre: np.ndarray, kappa: float | np.ndarray
+    ) -> tuple[Any, Any, np.ndarray]:
+        """The rotated samples, their kernel weights and the control variate's c(ω) (the radiance the
+        kernel's centre sees: the sky, or 0; π L(ω)), from probes around the kernel centres (of
+        concentration ``kappa``: one, or one per point)."""
         rotation, sky = self._probe_rotation(sub, centre, kappa)
         rotated = rotation.apply(mu_l)
         jacobian = None
@@ -260,11 +286,7 @@ class ReparamTransforms(Identity):
         weights = self._kernel_weight(rotated, centre, kappa)
         if jacobian is not None:
             weights = weights * jacobian
-        if not self.baseline:
-            return Members(rotated, live, weights=weights)
-        # the radiance the kernel's centre sees (the sky, or 0): the control variate's c(ω), π L(ω)
-        baseline = np.where(sky, np.pi * float(detach(sub.state.sky)), 0.0)
-        return Members(rotated, live, weights=weights, baseline=baseline, centre=centre)
+        return rotated, weights, np.where(sky, np.pi * float(detach(sub.state.sky)), 0.0)
 
     def _paired(self, shading: Shading, mu: np.ndarray) -> Members:
         r"""The paper's order: outer $ω = μ \sim p$, two kernel samples share one rotation

@@ -56,6 +56,7 @@ __all__ = [
     "PLANES",
     "SeparatingPlanes",
     "bounding_sphere",
+    "cone_may_see_motion",
     "cones_overlap",
     "may_see_motion",
     "moving_occluders",
@@ -300,3 +301,29 @@ def may_see_motion(state: Any, x: np.ndarray) -> np.ndarray:
         rows = np.flatnonzero(kept)
         kept[rows[planes.rule_out(x[rows])]] = False
     return kept
+
+
+@per_state
+def _changing_sphere(state: Any) -> tuple[np.ndarray, float] | None:
+    """The bounding sphere of the changing triangles (emitters too), once per state; None without them."""
+    changing = _changing(state)
+    return bounding_sphere(np.asarray(detach(state.triangles))[changing]) if changing.any() else None
+
+
+def cone_may_see_motion(state: Any, x: np.ndarray, centre: np.ndarray, half: float) -> np.ndarray:
+    r"""Rows of the points ``x`` (plain, (m, 3)) from which a ray within the angle ``half`` of the unit
+    directions ``centre`` (m, 3) may meet a changing triangle (:func:`triangles_change`: emitters too).
+
+    Conservative, by their bounding sphere (centre c, radius r): a ray from x meeting it lies within
+    $\arcsin(r / |c - x|)$ of the direction to c, so the cone must reach that far,
+    $α < \mathrm{half} + \arcsin(r / |c - x|)$; a point inside the sphere is kept."""
+    sphere = _changing_sphere(state)
+    if sphere is None:
+        return np.zeros(len(x), dtype=bool)
+    c, r = sphere
+    to = c - x
+    d = norm(to)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_a = np.clip(dot(to, centre) / d, -1.0, 1.0)
+        reach = np.arcsin(np.minimum(1.0, r / d)) + half
+    return (d <= r) | ~(np.arccos(cos_a) >= reach * (1.0 + 1e-9) + 1e-9)

@@ -206,3 +206,64 @@ def test08_boundary_at_a_point_sees_the_indirect_shadow_move():
     s = np.hypot(float(fd.derivative_stderr), float(bd.derivative_stderr))
     assert abs(float(bd.derivative) - float(fd.derivative)) <= q * s, (bd.derivative, fd.derivative, s)
     assert abs(float(fd.derivative)) > 10.0 * s  # the derivative is resolved
+
+
+@pytest.mark.parametrize(
+    ("name", "params", "cull"),
+    [
+        ("interreflection", PARAM, "needed"),
+        ("interreflection", PARAM, "motion"),
+        ("glossy_reflection", ["occluder.translate.x", "floor.roughness"], "needed"),
+        ("glossy_reflection", ["occluder.translate.x", "floor.roughness"], "motion"),
+    ],
+)
+def test09_reparam_moves_only_the_samples_that_can_add_something_and_the_image_is_the_same(
+    monkeypatch, name, params, cull
+):
+    """Under ``reparam`` a direction sample keeps the identity, without probes, where its ray meets no
+    emitter (a wall, an emitter's back, the black sky) and no path goes on along it (``ctx.needed`` of
+    :func:`~flatland.integrator.shade`: its term and derivative are 0 wherever it goes), or where its
+    shading point is static and its probes' span meets the image of no moving primitive (every point it
+    may follow is static: a zero derivative). With either cull alone (the other off), the depth-3 image,
+    every array bit for bit, is that of transforming every sample, and some samples were left out."""
+    from dataclasses import replace
+
+    from flatland.reparam import default
+    from flatland.reparam.default import ReparamTransforms
+
+    scene = load_scene(name).with_camera(pixels=8)
+    args = {"spp": 16, "seed": 4, "progress": False, "max_depth": 3}
+    rows = {"given": 0, "moved": 0, "all": True}
+    directions, full, sees = (
+        ReparamTransforms._directions,
+        ReparamTransforms.directions,
+        default._may_see_motion,
+    )
+
+    def counted(self, ctx, x, ignore, phi, draws, center=None):
+        rows["moved"] += phi.size
+        return directions(self, ctx, x, ignore, phi, draws, center)
+
+    def given(self, ctx, x, ignore, phi, draws):
+        rows["given"] += phi.size
+        told = replace(ctx, needed=None) if rows["all"] or cull != "needed" else ctx
+        return full(self, told, x, ignore, phi, draws)
+
+    def motion(geom, x0, center, half):
+        return (
+            sees(geom, x0, center, half)
+            if cull == "motion" and not rows["all"]
+            else np.ones(len(center), bool)
+        )
+
+    monkeypatch.setattr(ReparamTransforms, "_directions", counted)
+    monkeypatch.setattr(ReparamTransforms, "directions", given)
+    monkeypatch.setattr(default, "_may_see_motion", motion)
+    everything = render_gradient(scene, params, "reparam", **args)
+    assert rows["moved"] == rows["given"]
+    rows.update(given=0, moved=0, all=False)
+    culled = render_gradient(scene, params, "reparam", **args)
+    assert rows["moved"] < rows["given"], rows
+    for field in ("value", "derivative", "value_stderr", "derivative_stderr"):
+        assert getattr(culled, field).tobytes() == getattr(everything, field).tobytes(), field
+    assert np.max(np.abs(everything.derivative)) > 0.0

@@ -216,3 +216,37 @@ def test09_naive_albedo_derivative_is_exact_in_the_furnace_sample_by_sample():
     minus = detach(task.evaluate(-h).value)
     assert np.min(naive) > 0.5  # ∂L/∂ρ = L_e (1 + 2ρ) = 2.2 in expectation
     np.testing.assert_allclose(naive, (plus - minus) / (2.0 * h), rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("param", [None, "light.emission", "occluder.translate.x"])
+def test10_incident_re_attaches_only_the_kept_hits_and_those_on_emitters(param):
+    """``incident`` with ``keep`` (what :func:`~flatland.integrator.shade` passes: the BSDF samples a path
+    goes on along) re-attaches the kept hits and those on emitters only, in ray order, and the radiance,
+    value and tangent, is the same bit for bit as re-attaching every hit (a wall's emission is 0 and
+    static). On ``interreflection``, whose one-sided light is seen from both sides, with the emission
+    moving or not."""
+    from flatland.core.dual import Dual, tangent
+    from flatland.integrator import incident
+    from flatland.tracing import cast, direction
+
+    scene = load_scene("interreflection")
+    state = build_state(scene, None if param is None else parse_parameter(scene, param), Dual(0.0, 1.0))
+    rng = np.random.default_rng(3)
+    n = 4000
+    origins = np.column_stack([rng.uniform(-1.9, 1.9, n), rng.uniform(0.05, 2.45, n)])
+    d = direction(rng.uniform(-np.pi, np.pi, n))
+    hits = cast(state.detached(), origins, d)
+    keep = rng.random(n) < 0.3
+    every, att_all = incident(state, origins, d, hits)
+    kept, att = incident(state, origins, d, hits, keep)
+    light = np.flatnonzero(detach(state.emission) > 0.0)
+    on_light = hits.hit & np.isin(hits.prim, light)
+    rows = np.flatnonzero(hits.hit & (keep | on_light))
+    assert 0 < rows.size < np.count_nonzero(hits.hit) and on_light.any()
+    assert (
+        detach(att.point).tobytes()
+        == detach(att_all.point)[np.searchsorted(np.flatnonzero(hits.hit), rows)].tobytes()
+    )
+    assert detach(kept).tobytes() == detach(every).tobytes()
+    assert tangent(kept).tobytes() == tangent(every).tobytes()
+    assert np.any(detach(every) > 0.0)

@@ -18,7 +18,8 @@ integral under the method's change of variables, the path going on along the rot
    F distribution's 1 - ALPHA quantile (standard errors at least 4 times apart, at that level). At
    depth 3 its c is the whole carried path's radiance (:func:`~sphere3d.paths.carrier`): with the
    next vertex's direct light only, the variance is F-significantly larger, and the two differ by
-   zero-mean terms only (test09).
+   zero-mean terms only (test09). It is estimated only where its term moves, the image bit for bit
+   that of estimating it everywhere (test10).
 4. Slow: the same as 2 with 4 times the samples (which sees a path that does not go on along the
    rotated sample), and at depth 3 (depth 3 minus depth 1), where on ``interreflection`` reparam's
    variance is also bounded by finite differences' region by region (F quantile).
@@ -225,3 +226,65 @@ def test09_the_control_variate_carries_the_further_vertices_light_at_depth_three
     diff = carried - direct
     q = stats.t.ppf(1.0 - ALPHA / 2, BATCHES - 1)
     assert abs(diff.mean()) <= q * diff.std(ddof=1) / np.sqrt(BATCHES), (diff.mean(), diff.std(ddof=1))
+
+
+def test10_the_control_variate_estimates_c_only_where_its_term_moves(monkeypatch):
+    """The carried radiance's control variate is $-c\\, \\dot q / p$: where a sample's rotation and kernel
+    weight do not move ($\\dot q = 0$, most samples of ``interreflection``, whose kernels see no moving
+    triangle) it is 0 whatever c, so c (the centre's ray and its carried path) is estimated only at
+    the others. The depth-3 image, every array bit for bit, is that of estimating c at every sample,
+    with fewer carried paths."""
+    scene = load_scene(_scene("interreflection", 12))
+    task = ImageTask(scene, PARAM, 8, 3, 4, max_depth=3)
+    carrier, carried = paths.carrier, []
+
+    def counted(depth, last):
+        carry = carrier(depth, last)
+        if carry is None:
+            return None
+
+        def count(at, u):
+            carried.append(len(at))
+            return carry(at, u)
+
+        return count
+
+    monkeypatch.setattr(paths, "carrier", counted)
+    turning = GRADIENT_METHODS.run("reparam", task)
+    few = sum(carried)
+    carried.clear()
+    monkeypatch.setattr(path_changes, "moves", lambda q: np.ones(np.shape(q.value), dtype=bool))
+    every = GRADIENT_METHODS.run("reparam", task)
+    assert 0 < few < sum(carried), (few, sum(carried))
+    assert turning.value.tobytes() == every.value.tobytes()
+    assert turning.derivative.tobytes() == every.derivative.tobytes()
+    assert np.max(np.abs(every.derivative)) > 0.0
+
+
+@pytest.mark.parametrize("name", ["interreflection", "glossy_reflection"])
+def test11_kernels_that_see_no_moving_triangle_keep_the_identity_without_probes(monkeypatch, name):
+    """A static shading point whose BSDF kernel's probes, snaps and shapes (within twice the ring's angle
+    of its centre) meet no changing triangle (:func:`~sphere3d.reparam.penumbra.cone_may_see_motion`,
+    by their bounding sphere) can only follow static points: its sample keeps the identity, without
+    probes. The depth-3 image, every array bit for bit, is that of probing every kernel, and some
+    kernels were left out."""
+    from sphere3d.reparam import default
+
+    scene = load_scene(_scene(name, 12))
+    task = ImageTask(scene, [PARAM, "occluder.translate.y"], 8, 3, 4, max_depth=3)
+    rotated, probed = default.ReparamTransforms._rotated, []
+
+    def counted(self, sub, mu, centre):
+        probed.append(len(mu))
+        return rotated(self, sub, mu, centre)
+
+    monkeypatch.setattr(default.ReparamTransforms, "_rotated", counted)
+    culled = GRADIENT_METHODS.run("reparam", task)
+    few = sum(probed)
+    probed.clear()
+    monkeypatch.setattr(default, "cone_may_see_motion", lambda state, x, c, h: np.ones(len(x), dtype=bool))
+    every = GRADIENT_METHODS.run("reparam", task)
+    assert 0 < few < sum(probed), (few, sum(probed))
+    assert culled.value.tobytes() == every.value.tobytes()
+    assert culled.derivative.tobytes() == every.derivative.tobytes()
+    assert np.max(np.abs(every.derivative)) > 0.0

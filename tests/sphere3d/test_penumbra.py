@@ -17,6 +17,7 @@ import sphere3d as s3
 from flatland.core.dual import variable
 from sphere3d.reparam.penumbra import (
     HULL_VERTICES,
+    cone_may_see_motion,
     cones_overlap,
     may_see_motion,
     moving_occluders,
@@ -133,3 +134,40 @@ def test04_a_fine_occluder_is_culled_through_an_outer_polytope():
     kept = may_see_motion(state, x)
     assert np.all(kept[gap < 0.9 * radius]) and (gap < 0.9 * radius).sum() > 200
     assert not np.any(kept[gap > 2.0 * radius]) and (gap > 2.0 * radius).sum() > 1000
+
+
+def test05_a_cone_that_may_meet_the_moving_occluder_is_kept():
+    """:func:`cone_may_see_motion` (the BSDF kernels' cull): from random points, cones of random
+    half-angles about random directions (half of them towards the square's neighbourhood); of 64 rays
+    in each cone (its axis, and directions uniform in the cone's solid angle), any that meets the
+    moving square (exactly: the plane z = 0.5 within [-A, A]²) has its cone kept. Cones pointing away
+    are ruled out: the cull culls."""
+    state = _state()
+    rng = np.random.default_rng(5)
+    m = 4000
+    x = np.column_stack([rng.uniform(-2, 2, m), rng.uniform(-2, 2, m), rng.uniform(-1, 0.45, m)])
+    axis = rng.normal(size=(m, 3))  # half of them random, half towards the square's neighbourhood
+    aim = np.column_stack(
+        [rng.uniform(-0.5, 0.5, m // 2), rng.uniform(-0.5, 0.5, m // 2), np.full(m // 2, 0.5)]
+    )
+    axis[: m // 2] = aim - x[: m // 2]
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    half = rng.uniform(0.0, 0.3, m)
+    kept = np.concatenate([cone_may_see_motion(state, x[i : i + 1], axis[i : i + 1], h) for i, h in
+                           enumerate(half)])  # fmt: skip
+    # directions in each cone: cos θ uniform in [cos h, 1] about the axis (the axis itself first)
+    t = np.cross(axis, np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    b = np.cross(axis, t)
+    cos = 1.0 - rng.random((m, 64)) * (1.0 - np.cos(half))[:, None]
+    cos[:, 0] = 1.0
+    sin, phi = np.sqrt(1.0 - cos**2), rng.uniform(0.0, 2.0 * np.pi, (m, 64))
+    d = cos[..., None] * axis[:, None] + sin[..., None] * (
+        np.cos(phi)[..., None] * t[:, None] + np.sin(phi)[..., None] * b[:, None]
+    )
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (0.5 - x[:, None, 2]) / d[..., 2]
+    hit_xy = x[:, None, :2] + s[..., None] * d[..., :2]
+    meets = ((s > 0.0) & np.all(np.abs(hit_xy) <= A, axis=-1)).any(axis=1)
+    assert meets.sum() > 100 and (~kept).sum() > 1000, (meets.sum(), (~kept).sum())
+    assert np.all(kept[meets])
