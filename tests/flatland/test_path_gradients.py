@@ -240,14 +240,14 @@ def test09_reparam_moves_only_the_samples_that_can_add_something_and_the_image_i
         default._may_see_motion,
     )
 
-    def counted(self, ctx, x, ignore, phi, draws, center=None):
+    def counted(self, ctx, x, ignore, phi, draws, kappa, center=None):
         rows["moved"] += phi.size
-        return directions(self, ctx, x, ignore, phi, draws, center)
+        return directions(self, ctx, x, ignore, phi, draws, kappa, center)
 
-    def given(self, ctx, x, ignore, phi, draws):
+    def given(self, ctx, x, ignore, phi, draws, lobe=None):
         rows["given"] += phi.size
         told = replace(ctx, needed=None) if rows["all"] or cull != "needed" else ctx
-        return full(self, told, x, ignore, phi, draws)
+        return full(self, told, x, ignore, phi, draws, lobe)
 
     def motion(geom, x0, center, half):
         return (

@@ -274,9 +274,9 @@ def test11_kernels_that_see_no_moving_triangle_keep_the_identity_without_probes(
     task = ImageTask(scene, [PARAM, "occluder.translate.y"], 8, 3, 4, max_depth=3)
     rotated, probed = default.ReparamTransforms._rotated, []
 
-    def counted(self, sub, mu, centre):
+    def counted(self, sub, mu, centre, kappa):
         probed.append(len(mu))
-        return rotated(self, sub, mu, centre)
+        return rotated(self, sub, mu, centre, kappa)
 
     monkeypatch.setattr(default.ReparamTransforms, "_rotated", counted)
     culled = GRADIENT_METHODS.run("reparam", task)
