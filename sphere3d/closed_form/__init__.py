@@ -64,6 +64,7 @@ from sphere3d.closed_form.scenes import (
     pinhole_triangle_scene,
     share_lost,
     sky_triangle_scene,
+    sliver_scene,
 )
 
 __all__ = [
@@ -90,6 +91,7 @@ __all__ = [
     "projected_solid_angle",
     "share_lost",
     "sky_triangle_scene",
+    "sliver_scene",
     "triangle_image",
     "triangle_vertices",
 ]

@@ -104,6 +104,29 @@ def corner_junction_scene(below: float = 0.1, size: float = 6.0, width: int = 16
     return scene
 
 
+def sliver_scene(gap: float = 0.3, angle: float = 1.0, size: float = 40.0, width: int = 16) -> dict:
+    """:func:`junction_scene` with a triangle ``size`` px across turned until its lower edge runs ``angle``
+    degrees off the wall's edge, ``gap`` px above it at the film's centre column: a thin sliver of sky
+    between a moving silhouette and a static edge, the triangle's corners off the film. Lines that
+    nearly meet outside the film, no T-junction in sight (:mod:`sphere3d.reparam.junctions`)."""
+    scene = junction_scene(size, width)
+    tri = scene["shapes"][0]
+    a, b = (np.array(v[:2]) * size * PIXEL for v in TRIANGLE_SHAPE[:2])
+    # the wall's edge has world slope -1/30 (film slope +1/30); the lower edge's world angle after a
+    # turn phi about z: its own angle + phi, set to the wall's minus ``angle``
+    phi = np.arctan(-1.0 / 30.0) - np.radians(angle) - np.arctan2(*(b - a)[::-1])
+    turn = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+    a, b = turn @ a, turn @ b
+    # at world x = 0 (the film's centre column) the wall's edge is 0.4 px below the axis: the lower
+    # edge there ``gap`` px above it, in world units at the triangle's depth
+    x = tri["translate"][0]
+    y_at_centre = a[1] + (-x - a[0]) * (b[1] - a[1]) / (b[0] - a[0])
+    tri["translate"][1] = (gap - 0.4) * PIXEL - y_at_centre
+    tri["rotate"] = [0.0, 0.0, float(phi)]
+    scene["name"] = f"sliver_{gap:g}px_{angle:g}deg"
+    return scene
+
+
 def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:
     """A black triangle with world ``vertices`` (3, 3) under a constant sky, centred on their centroid.
 

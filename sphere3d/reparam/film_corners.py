@@ -26,15 +26,14 @@ all the derivative needs. The sample's sector is the one its own film point lies
 weight carries $|\det A|$ (:func:`sphere3d.film.affine_directions`). Loubet et al. 2019, Sec. 4.3:
 a refinement of the heuristic.
 
-Biased where the kernel also holds a discontinuity not through V (a static edge: a T-junction at
-the corner, which keeps its own rule, :mod:`sphere3d.reparam.junctions`; an edge of another
-shape), and not applied where the ring holds one edge of V only, nor along a crease far from its
-ends, which is followed by a point of one face (the probes pair different shapes only): a 4 px
-triangle tilting, seen at 30 degrees, keeps a few per cent (the atlas). The box of
-``hard_shadow_cube`` keeps most of its bias under every motion but the sideways translation where
-its corner lies on the ground's far edge (a junction at a corner, :mod:`sphere3d.reparam.junctions`),
-and under turns some along its front crease (the probes pair different shapes only): the
-occluder-motions table gives both, with and without the junction pixels.
+Biased where the kernel also holds a discontinuity not through V (a static edge, which the fan
+drags: the corner on the ground's far edge, where a map keeping that line as well has a variance
+growing without bound as the corner nears the line, :mod:`sphere3d.reparam.film_lines`; an edge of
+another shape), and not applied where the ring holds one edge of V only, nor along a crease far
+from its ends, which is followed by a point of one face (the probes pair different shapes only): a
+4 px triangle tilting, seen at 30 degrees, keeps a few per cent (the atlas). The occluder-motions
+table gives ``hard_shadow_cube``'s bias with and without the pixels where its corner meets the
+ground's far edge.
 
 The vertices are found by a k-d tree over their film images (built once per state,
 O(V log V)); a vertex hidden behind other geometry is skipped; the mesh edges are

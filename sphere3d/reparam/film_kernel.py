@@ -48,10 +48,10 @@ surface then moves in the image), nor to smooth shapes (interpolated normals: th
 varies across the probes' triangles). Rows whose probes cannot reach a moving triangle's film
 image (the hull of its vertices' images, :func:`_reaching_motion`) are not probed at all.
 
-**T-junctions.** Where a ring sees a moving silhouette cross a static edge (the ground's far
-edge behind an occluder), the rotation follows their crossing instead of the silhouette point
-(:mod:`sphere3d.reparam.junctions`): one rotation, locally a translation of the film, keeps both
-edges where a rotation following the silhouette drags the static one.
+**Junctions.** Where a kernel's ring holds one moving silhouette edge and a static edge (the
+ground's far edge behind an occluder: a T-junction, or a sliver of sky between the two), an affine
+map of the film that keeps both lines replaces the rotation (:mod:`sphere3d.reparam.junctions`): a
+rotation, locally a translation of the film, that follows the silhouette drags the static edge.
 
 Where it is biased: a kernel holding a discontinuity its rotation does not follow: an edge
 between the ring's probes, or a feature about a pixel across whose edges move differently
@@ -78,7 +78,7 @@ from sphere3d.film import AffineFilm, FilmTransform
 from sphere3d.live import all_rows, any_rows, moves
 from sphere3d.reparam.film_affine import inner_shapes
 from sphere3d.reparam.film_corners import silhouette_corners
-from sphere3d.reparam.junctions import junction_rotation
+from sphere3d.reparam.junctions import junction_maps
 from sphere3d.reparam.probes import follow_probes, ring_offsets
 from sphere3d.reparam.snaps import Snap, edge_snap
 from sphere3d.rotation import Rotation
@@ -152,7 +152,7 @@ def film_transform(
         module docstring),
         while the camera stands still.
     junctions : bool, optional
-        Where a ring sees a moving silhouette cross a static edge, follow their crossing
+        Where a ring holds one moving silhouette edge and a static edge, the affine map keeping both
         (:mod:`sphere3d.reparam.junctions`).
     shapes : bool, optional
         Where a moving shape's whole image lies inside a ring, follow it by an affine map of the
@@ -175,7 +175,7 @@ def film_transform(
     phase = draws.uniforms("probes.film", 2).T.ravel()
     k = state.k  # None, or k parameters: every tangent below with a leading axis of k
     rotation = Rotation.identity((2 * n,), k)
-    at_junction = np.zeros(2 * n, dtype=bool)
+    junction = AffineFilm.none(2 * n, k)  # the rows holding a moving silhouette and a static edge
     moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)
@@ -200,17 +200,9 @@ def film_transform(
         pixel_angle = 2.0 * cam.tan_half / cam.width
         spin = (axis / np.linalg.norm(axis, axis=1, keepdims=True), sigma * pixel_angle)
         sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap, spin=spin)
-        if (
-            junctions
-        ):  # a moving silhouette across a static edge: follow their crossing (sphere3d.reparam.junctions)
-            at, crossing = junction_rotation(
-                state, o, d, hits, moving, centre[rows], 2.0 * spread * sigma, refine
-            )
-            at_junction[rows[at]] = True
-            sub.target[at] = crossing.target
-            sub.active[at] = crossing.active
-            if sub.spin is not None:  # the crossing's rotation has no turn of its own
-                sub.spin.tangent[..., at] = 0.0
+        if junctions:  # a moving silhouette and a static edge: the map keeping both (reparam.junctions)
+            at, maps = junction_maps(state, centre[rows], spread * sigma)
+            junction = _rows_of(2 * n, rows[at], maps, k)
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
         if sub.spin is not None:
@@ -221,10 +213,8 @@ def film_transform(
     affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
     if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
         corner = silhouette_corners(state, centre, spread * sigma, np.concatenate([s, s]))
-        take = corner.mask & ~affine.mask & ~at_junction  # a junction's static edge: its own rule
-        affine.mask[take] = True
-        affine.a_dot[take], affine.b_dot[take] = corner.a_dot[take], corner.b_dot[take]
-        affine.centre[take] = corner.centre[take]
+        _fill(affine, corner)
+    _fill(affine, junction)  # one moving edge and a static one (two moving ones: a corner's, above)
     if affine.mask.any():
         rotation.active[affine.mask] = False
         rotation.target.tangent[affine.mask if k is None else (slice(None), affine.mask)] = 0.0
@@ -237,6 +227,22 @@ def film_transform(
         kappa_film,
         (affine.take(first), affine.take(second)),
     )
+
+
+def _rows_of(n: int, rows: np.ndarray, maps: AffineFilm, k: int | None) -> AffineFilm:
+    """The maps of ``rows`` among n rows (none elsewhere)."""
+    out = AffineFilm.none(n, k)
+    out.mask[rows] = True
+    out.a_dot[rows], out.b_dot[rows], out.centre[rows] = maps.a_dot, maps.b_dot, maps.centre
+    return out
+
+
+def _fill(maps: AffineFilm, other: AffineFilm) -> None:
+    """Give the rows of ``other``'s maps that ``maps`` has none for (in place): the rules' precedence."""
+    take = other.mask & ~maps.mask
+    maps.mask[take] = True
+    maps.a_dot[take], maps.b_dot[take] = other.a_dot[take], other.b_dot[take]
+    maps.centre[take] = other.centre[take]
 
 
 COPLANAR = 1e-9
