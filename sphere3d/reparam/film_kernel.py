@@ -175,7 +175,10 @@ def film_transform(
     phase = draws.uniforms("probes.film", 2).T.ravel()
     k = state.k  # None, or k parameters: every tangent below with a leading axis of k
     rotation = Rotation.identity((2 * n,), k)
-    junction = AffineFilm.none(2 * n, k)  # the rows holding a moving silhouette and a static edge
+    # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
+    affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
+    if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
+        _fill(affine, silhouette_corners(state, centre, spread * sigma, np.concatenate([s, s])))
     moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)
@@ -190,6 +193,13 @@ def film_transform(
             if plane:  # one plane in sight, nothing to follow: the identity (module docstring)
                 keep = ~one_plane(state, hits)
                 rows, d, hits = rows[keep], d[keep], hits.take(keep)
+        if junctions:  # one moving edge and a static one, two that do not meet, a crease: reparam.junctions
+            free = rows[~affine.mask[rows]]
+            at, maps = junction_maps(state, centre[free], spread * sigma)
+            _fill(affine, _rows_of(2 * n, free[at], maps, k))
+        # the probes' rotation where no affine map applies (the same, row by row, as for all rows)
+        keep = ~affine.mask[rows]
+        rows, d, hits = rows[keep], d[keep], hits.take(keep)
         # a corner up to twice the ring's radius away: its second edge still enters the ring if it
         # makes more than 30 degrees with the line to the centre (sin 30° = 1/2)
         snap = silhouette_snap(state, centre[rows], 2.0 * spread * sigma)
@@ -200,21 +210,12 @@ def film_transform(
         pixel_angle = 2.0 * cam.tan_half / cam.width
         spin = (axis / np.linalg.norm(axis, axis=1, keepdims=True), sigma * pixel_angle)
         sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap, spin=spin)
-        if junctions:  # a moving silhouette and a static edge: the map keeping both (reparam.junctions)
-            at, maps = junction_maps(state, centre[rows], spread * sigma)
-            junction = _rows_of(2 * n, rows[at], maps, k)
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
         if sub.spin is not None:
             turn = np.zeros(2 * n if k is None else (k, 2 * n))
             turn[..., rows] = tangent(sub.spin)
             rotation = Rotation(rotation.target, rotation.active, Dual(np.zeros(2 * n), turn, k))
-    # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
-    affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
-    if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
-        corner = silhouette_corners(state, centre, spread * sigma, np.concatenate([s, s]))
-        _fill(affine, corner)
-    _fill(affine, junction)  # one moving edge and a static one (two moving ones: a corner's, above)
     if affine.mask.any():
         rotation.active[affine.mask] = False
         rotation.target.tangent[affine.mask if k is None else (slice(None), affine.mask)] = 0.0
