@@ -578,3 +578,23 @@ def test02_no_figure_has_overlapping_labels_or_a_legend_over_data(
     found = {f"{case} figure {i} ({_label(fig)!r})": figure_defects(fig) for i, fig in enumerate(figures)}
     found = {name: defects for name, defects in found.items() if defects}
     assert not found, "\n".join(f"{name}:\n  " + "\n  ".join(d) for name, d in found.items())
+
+
+def test03_an_estimates_legend_never_covers_a_bar_whatever_the_values():
+    """plot_estimates puts its legend in the upper right and raises the y range under it: estimates whose
+    last (rightmost) value is the largest, where a legend in that corner would sit on it, and the
+    reverse order, both without a defect; on the same values a legend placed there with the range
+    left alone covers the bar (the check can fail)."""
+    from flatland.plotting.textbook_estimates import plot_estimates
+
+    values = {"naive": (0.2, 0.01), "reparam": (0.6, 0.02), "boundary": (1.0, 0.01)}
+    for order in (values, dict(reversed(values.items()))):
+        fig = plot_estimates(order, 0.5, of="value")
+        assert figure_defects(fig) == []
+    fig = plot_estimates(values, 0.5, of="value")
+    ax = fig.axes[0]
+    ax.relim()
+    ax.autoscale_view()
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_ylim(0.0, 1.05)
+    assert any("legend covers" in d for d in figure_defects(fig))

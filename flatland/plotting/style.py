@@ -47,6 +47,7 @@ __all__ = [
     "category_ticks",
     "coverage_label",
     "integer_ticks",
+    "legend_above_data",
     "legend_outside",
     "log_ticks",
     "method_colour",
@@ -179,6 +180,19 @@ def legend_outside(ax: Axes, where: str = "right", **options: Any) -> Legend:
     else:
         raise ValidationError("where", f"must be 'right' or 'below', got {where!r}")
     return ax.legend(**{"fontsize": 8, **placement, **options})
+
+
+def legend_above_data(ax: Axes, **options: Any) -> Legend:
+    """The legend of ``ax`` in its upper right corner, the y range raised so that every artist's data
+    (its autoscaled limits) lies below the legend's lower edge: it never covers a marker, whatever the
+    values. Linear y axes only (the raise is a fraction of the range)."""
+    legend = ax.legend(**{"fontsize": 8, "loc": "upper right", **options})
+    bottom = legend.get_window_extent().transformed(ax.transAxes.inverted()).y0  # the figure's renderer
+    lo, hi = ax.get_ylim()
+    room = bottom - 0.03  # the data's share of the height, a small gap under the legend
+    if 0.2 < room < 1.0:
+        ax.set_ylim(lo, lo + (hi - lo) / room)
+    return legend
 
 
 def category_ticks(ax: Axes, positions: Sequence[float], labels: Sequence[str]) -> None:

@@ -28,6 +28,7 @@ from flatland.plotting.style import (
     REFERENCE_STYLE,
     category_ticks,
     coverage_label,
+    legend_above_data,
     method_colour,
     new_axes,
     same_length,
@@ -100,7 +101,7 @@ def plot_estimates(
     category_ticks(ax, positions, labels)
     ax.set_xlim(-0.5, len(labels) - 0.5)
     ax.set_ylabel(ylabel or ("dI/dθ" if of == "derivative" else "I"))
-    ax.legend(loc="best", fontsize=8)
+    legend_above_data(ax)  # upper right, the values below it: it never covers a bar
     return ax.figure
 
 
@@ -150,7 +151,7 @@ def plot_variance(
     ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
-    ax.legend(loc="best", fontsize=8)
+    legend_above_data(ax)  # upper right, the values below it: it never covers a bar
     return ax.figure
 
 
@@ -293,5 +294,5 @@ def plot_histogram_vs_normal(
         ax.axvline(mean + side * z * stderr, color="gray", linestyle=":", linewidth=1.0, label=text)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("density")
-    ax.legend(loc="best", fontsize=8)
+    legend_above_data(ax)  # upper right, the values below it: it never covers a bar
     return ax.figure
