@@ -195,7 +195,7 @@ def film_transform(
                 rows, d, hits = rows[keep], d[keep], hits.take(keep)
         if junctions:  # one moving edge and a static one, two that do not meet, a crease: reparam.junctions
             free = rows[~affine.mask[rows]]
-            at, maps = junction_maps(state, centre[free], spread * sigma)
+            at, maps = junction_maps(state, centre[free], np.concatenate([s, s])[free], spread * sigma)
             _fill(affine, _rows_of(2 * n, free[at], maps, k))
         # the probes' rotation where no affine map applies (the same, row by row, as for all rows)
         keep = ~affine.mask[rows]

@@ -11,9 +11,10 @@ widened by the filter's radius, their images sampled every :data:`SPACING` px in
 motion included).
 
 An affine map of the film $\dot A(u) = \dot a + \dot B (u - c)$ has six degrees of freedom; each line
-it keeps on its moved line takes two (:func:`line_map`): a kernel holding a moving silhouette
-and a static edge is followed by the least-norm map that keeps both (:mod:`sphere3d.reparam.junctions`,
-Loubet et al. 2019, Sec. 4.3: a refinement of the heuristic).
+it keeps on its moved line takes two (:func:`line_map`, the least-norm map keeping one or two). Two
+lines a gap g apart make that map strain the whole kernel at 1 / g; :func:`blend_map` keeps both
+with a field that strains the gap only (:mod:`sphere3d.reparam.junctions`, Loubet et al. 2019,
+Sec. 4.3: a refinement of the heuristic).
 
 Not used at a moving corner on a static line (the box's corner on the ground's far edge): a map
 keeping the corner's two edges and the line exists (the triangle the three lines cut scales with
@@ -273,3 +274,68 @@ def line_map(centre: np.ndarray, *lines: FilmLines) -> tuple[np.ndarray, np.ndar
         return z[:, :2], z[:, 2:].reshape(-1, 2, 2)
     z = np.moveaxis(z, 2, 1)  # (m, k, 6)
     return z[..., :2], z[..., 2:].reshape(*z.shape[:2], 2, 2)
+
+
+def blend_map(
+    centre: np.ndarray, at: np.ndarray, first: FilmLines, second: FilmLines, reach: float
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Per sample, the velocity $v$ (m, 2) and its gradient $\nabla v$ (m, 2, 2) at its film point ``at``
+    (or (m, k, 2), (m, k, 2, 2)) of a field that keeps two lines: the blend
+    $v = t v_1 + (1 - t) v_2$, $t = d_2 / (d_1 + d_2)$, of the least-norm one-line maps $v_i$
+    (:func:`line_map`, about the kernel centres c) by the distances $d_i$ to the lines: on line 1
+    $t = 1$ and on line 2 $t = 0$, so each is kept, to first order, as by :func:`line_map` with both.
+
+    Unlike the one affine map keeping both lines, whose $\dot B$ grows as 1 / g over the whole kernel for
+    two lines a gap g apart (a silhouette beside a static edge), the blend strains only where the
+    distances are comparable: $\nabla v = t \dot B_1 + (1 - t) \dot B_2 + (v_1 - v_2) ⊗ \nabla t$ with
+    $|\nabla t| \le 1 / (d_1 + d_2)$, so the strain 1 / g is confined to the sliver and its
+    neighbourhood, a variance growing as 1 / g instead of $1 / g^2$. Where the lines cross within
+    ``reach`` of c, at J, both one-line maps are shifted along their own lines (which keeps each) to
+    J's velocity $\dot J$ there (the value of :func:`line_map` with both lines at J), so $v_1 - v_2$
+    vanishes at J and the gradient stays bounded: a translation by $\dot J$ where the lines only
+    translate. The field is Lipschitz, the change of variables it makes valid; each sample carries its
+    value and gradient (:class:`~sphere3d.film.AffineFilm` about its own point).
+    """
+    k = first.point_dot.ndim == 3
+    maps = [list(line_map(centre, line)) for line in (first, second)]
+    # the crossing J of the two lines, where it lies within reach of the kernel's centre
+    d1, d2 = first.direction, second.direction
+    den = _cross(d1, d2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = _cross(second.point - first.point, d2) / den
+    cross_at = first.point + s[:, None] * d1
+    pin = np.flatnonzero((den != 0.0) & (np.hypot(*(cross_at - centre).T) <= 2.0 * reach))
+    if pin.size:
+        a12, b12 = line_map(centre[pin], first.take(pin), second.take(pin))
+        rel = cross_at[pin] - centre[pin]
+        j_dot = a12 + _apply(b12, rel, k)
+        for a, b in maps:  # shift each one-line map along its line: its value at J becomes J's
+            a[pin] = a[pin] + j_dot - (a[pin] + _apply(b[pin], rel, k))
+    rel = at - centre
+    v1, v2 = (a + _apply(b, rel, k) for a, b in maps)
+    # distances to the lines and their gradients (unit normals, signed by the side)
+    dist, grad = [], []
+    for line in (first, second):
+        n = np.stack([-line.direction[:, 1], line.direction[:, 0]], axis=1)
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        signed = np.sum((at - line.point) * n, axis=1)
+        dist.append(np.abs(signed))
+        grad.append(np.where(signed[:, None] < 0.0, -n, n))
+    total = dist[0] + dist[1]
+    on = total > 0.0
+    safe = np.where(on, total, 1.0)
+    t = np.where(on, dist[1] / safe, 0.5)
+    grad_t = np.where(
+        on[:, None], (dist[0][:, None] * grad[1] - dist[1][:, None] * grad[0]) / safe[:, None] ** 2, 0.0
+    )
+    tk = t[:, None] if not k else t[:, None, None]
+    v = tk * v1 + (1.0 - tk) * v2
+    tb = tk[..., None]
+    b = tb * maps[0][1] + (1.0 - tb) * maps[1][1]
+    outer = (v1 - v2)[..., :, None] * (grad_t[:, None, None, :] if k else grad_t[:, None, :])
+    return v, b + outer
+
+
+def _apply(b: np.ndarray, rel: np.ndarray, k: bool) -> np.ndarray:
+    r"""$\dot B\, r$ for maps (m, 2, 2) or (m, k, 2, 2) and offsets r (m, 2)."""
+    return np.einsum("mkij,mj->mki", b, rel) if k else np.einsum("mij,mj->mi", b, rel)
