@@ -49,7 +49,7 @@ from scipy.spatial import cKDTree
 
 from flatland.core.dual import detach, tangent
 from sphere3d.boundary.camera import camera_candidates
-from sphere3d.boundary.edges import mesh_edges, row_ids
+from sphere3d.boundary.edges import row_ids, state_edges
 from sphere3d.film import AffineFilm
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
@@ -101,7 +101,7 @@ def _corner_table(state: SceneState) -> _Corners:
     their fans of maps (module docstring). O(E log E) time, O(E) memory."""
     cam = state.camera
     o = np.asarray(detach(cam.origin), dtype=np.float64)
-    edges = mesh_edges(state.triangles, state.shape_of, state.corners)
+    edges = state_edges(state)
     to = o - edges.a
     s1, s2 = np.einsum("ek,ek->e", to, edges.n1), np.einsum("ek,ek->e", to, edges.n2)
     # silhouettes, and creases where the radiance jumps (flat-shaded, reflecting) seen between two faces

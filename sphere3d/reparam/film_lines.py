@@ -33,13 +33,23 @@ from scipy.spatial import cKDTree
 
 from flatland.core.dual import detach, tangent
 from sphere3d.boundary.camera import camera_candidates
-from sphere3d.boundary.edges import mesh_edges
+from sphere3d.boundary.edges import state_edges
 from sphere3d.live import moves
 from sphere3d.sampling import filter_radius
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
 
-__all__ = ["SPACING", "FilmLines", "MovingEdges", "film_segments", "line_map", "moving_edges", "static_lines"]
+__all__ = [
+    "SPACING",
+    "FilmLines",
+    "MovingEdges",
+    "blend_map",
+    "film_segments",
+    "line_map",
+    "moving_edges",
+    "near_creases",
+    "static_lines",
+]
 
 SPACING = 1.0
 """Pixels between the k-d tree's points along a static edge's image; a query within r of a centre
@@ -113,27 +123,51 @@ def film_segments(state: SceneState, a: Any, b: Any) -> tuple[np.ndarray, np.nda
 
 
 @per_state
+def _kinds(state: SceneState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Once per state: the edges (:func:`~sphere3d.boundary.edges.state_edges`) that may carry a jump seen
+    from the camera, whose ends stay still, whose ends move, and of those the creases (indices)."""
+    edges = state_edges(state)
+    o = np.asarray(detach(state.camera.origin), dtype=np.float64)
+    silhouette = edges.silhouette(o)
+    candidate = camera_candidates(state, edges)
+    # an edge moves where either end's vertex has a tangent (under any parameter)
+    t = np.asarray(moves(state.triangles))  # (T, 3, 3): which coordinates have a tangent
+    move = np.any(t[edges.face, edges.ia] | t[edges.face, edges.ib], axis=-1)
+    return (
+        np.flatnonzero(candidate & ~move),
+        np.flatnonzero(candidate & move),
+        np.flatnonzero(candidate & move & ~silhouette),
+    )
+
+
+@per_state
 def _static_table(state: SceneState) -> _Table:
     """Once per state: the static discontinuity edges (module docstring)."""
-    return _table(state, moving=False)
+    return _table(state, _kinds(state)[0])
 
 
 @per_state
 def _moving_table(state: SceneState) -> _Table:
     """Once per state: the moving discontinuity edges (module docstring)."""
-    return _table(state, moving=True)
+    return _table(state, _kinds(state)[1])
 
 
-def _table(state: SceneState, moving: bool) -> _Table:
-    """The discontinuity edges seen from the camera whose ends move (or do not): O(E log E) time,
-    O(E + L / SPACING) memory for a total clipped image length L."""
-    edges = mesh_edges(state.triangles, state.shape_of, state.corners)
-    a, b = edges.endpoints(state.triangles)
-    move = np.any(moves(a).reshape(len(edges.a), -1) | moves(b).reshape(len(edges.a), -1), axis=1)
-    keep = np.flatnonzero(camera_candidates(state, edges) & (move == moving))
-    fa, fd, fa_dot, fd_dot = film_segments(state, a[keep], b[keep])
+@per_state
+def _crease_table(state: SceneState) -> _Table:
+    """Once per state: the moving creases alone (a subset of :func:`_moving_table`)."""
+    return _table(state, _kinds(state)[2])
+
+
+def _table(state: SceneState, keep: np.ndarray) -> _Table:
+    """The edges ``keep`` of :func:`~sphere3d.boundary.edges.state_edges`: O(E log E) time, O(E + L /
+    SPACING) memory for a total clipped image length L."""
+    edges = state_edges(state)
+    tri = state.triangles
+    a, b = tri[edges.face[keep], edges.ia[keep]], tri[edges.face[keep], edges.ib[keep]]  # attached
+    fa, fd, fa_dot, fd_dot = film_segments(state, a, b)
+    o = np.asarray(detach(state.camera.origin), dtype=np.float64)
     cam = state.camera
-    crease = ~edges.silhouette(np.asarray(detach(cam.origin), dtype=np.float64))[keep]
+    crease = ~edges.take(keep).silhouette(o)
     # the part inside the film widened by the filter's radius (Liang-Barsky): the segments kept
     r = filter_radius(cam.filter)
     lo, hi = np.array([-r, -r]), np.array([cam.width + r, cam.height + r])
@@ -188,6 +222,12 @@ def _near(table: _Table, centre: np.ndarray, reach: float) -> tuple[np.ndarray, 
 
 def _lines(table: _Table, rows: np.ndarray, seg: np.ndarray) -> FilmLines:
     return FilmLines(rows, table.a[seg], table.d[seg], table.a_dot[seg], table.d_dot[seg])
+
+
+def near_creases(state: SceneState, centre: np.ndarray, reach: float) -> np.ndarray:
+    """The rows of ``centre`` (m, 2) within ``reach`` px of a moving crease's image, ascending."""
+    row, _, _ = _near(_crease_table(state), centre, reach)
+    return np.unique(row)
 
 
 def static_lines(state: SceneState, centre: np.ndarray, reach: float) -> FilmLines:

@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from sphere3d.film import AffineFilm
-from sphere3d.reparam.film_lines import blend_map, line_map, moving_edges, static_lines
+from sphere3d.reparam.film_lines import blend_map, line_map, moving_edges, near_creases, static_lines
 from sphere3d.state import SceneState
 
 __all__ = ["junction_maps"]
@@ -45,7 +45,8 @@ def junction_maps(
     state: SceneState, centre: np.ndarray, at: np.ndarray, reach: float
 ) -> tuple[np.ndarray, AffineFilm]:
     r"""The kernels (centres (m, 2), pixels) whose ring of radius ``reach`` px holds one moving
-    discontinuity edge and a static one, two moving ones and no static one, or a crease alone, and
+    discontinuity edge and a static one, two moving ones (one a crease) and no static one, or a crease
+    alone, and
     the film maps that keep those lines on their moved lines (module docstring), each sample's at its
     own film point ``at`` (m, 2).
 
@@ -58,26 +59,33 @@ def junction_maps(
         :func:`~sphere3d.reparam.film_lines.blend_map` (each sample its field's value and gradient at
         its point), a crease alone by :func:`~sphere3d.reparam.film_lines.line_map`.
     """
-    near = moving_edges(state, centre, reach)
-    static = static_lines(state, centre[near.first.rows], reach)
+    # the rules below need a static line or a moving crease in the ring: the moving edges only there
+    static = static_lines(state, centre, reach)
+    rows = np.union1d(static.rows, near_creases(state, centre, reach))
+    near = moving_edges(state, centre[rows], reach)
+    first_rows = rows[near.first.rows]  # the rows (of the m) with a moving edge near
+    static = static.take(np.searchsorted(static.rows, first_rows[np.isin(first_rows, static.rows)]))
     with_static = np.zeros(len(centre), dtype=bool)
-    with_static[near.first.rows[static.rows]] = True
+    with_static[static.rows] = True
     count = near.count[near.first.rows]  # per row of near.first
+    has = with_static[first_rows]
     pairs = []
     # one moving edge and the nearest static one
-    one = np.flatnonzero(count[static.rows] == 1)
-    pairs.append((near.first.rows[static.rows[one]], static.take(one), near.first.take(static.rows[one])))
-    # two moving edges (not at a corner of theirs: the corner rule has those rows) and no static one
-    two = ~with_static[near.second.rows] & (near.count[near.second.rows] == 2)
+    one = np.flatnonzero(has & (count == 1))
+    pick = np.searchsorted(static.rows, first_rows[one])
+    pairs.append((first_rows[one], static.take(pick), near.first.take(one)))
+    # two moving edges (one a crease; not at a corner of theirs: the corner rule has those rows), no static
+    second_rows = rows[near.second.rows]
+    two = ~with_static[second_rows] & (near.count[near.second.rows] == 2)
     first = np.searchsorted(near.first.rows, near.second.rows[two])
-    pairs.append((near.second.rows[two], near.first.take(first), near.second.take(two)))
+    pairs.append((second_rows[two], near.first.take(first), near.second.take(two)))
     parts = []
     for rows, line_a, line_b in pairs:
         v, grad = blend_map(centre[rows], at[rows], line_a, line_b, reach)
         parts.append((rows, v, grad, at[rows]))
     # a crease alone: the map keeping its line, where a rotation follows one point of it
-    alone = np.flatnonzero((count == 1) & near.crease & ~with_static[near.first.rows])
-    rows = near.first.rows[alone]
+    alone = np.flatnonzero((count == 1) & near.crease & ~has)
+    rows = first_rows[alone]
     parts.append((rows, *line_map(centre[rows], near.first.take(alone)), centre[rows]))
     rows = np.concatenate([p[0] for p in parts])
     order = np.argsort(rows, kind="stable")
