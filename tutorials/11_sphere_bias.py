@@ -503,6 +503,7 @@ plot_error_time(
 # default: the boundary term of the light's own edges, and on the film an affine map that follows
 # a small shape whole, or every edge through a corner. A third case sits in
 # the silhouette of section 2: where the sphere's silhouette crosses the ground's far edge, a film
-# kernel that follows the silhouette drags that static edge. There one rotation can still do both,
-# following the point where the two edges cross (`sphere3d.reparam.junctions`, on by default): it moves
-# along the static edge at the speed that keeps the moving one.
+# kernel that follows the silhouette drags that static edge. There a field on the film keeps both
+# lines where they are (`sphere3d.reparam.junctions`, on by default): the two lines' own maps blended
+# by the distances to them, so it follows the crossing, and also a thin sliver of sky between a
+# silhouette and a static edge running side by side, which no rotation can.
