@@ -62,7 +62,7 @@ __all__ = ["ReparamTransforms"]
 class ReparamTransforms(Identity):
     r"""The rotations of the three integrals of :mod:`sphere3d.integrator` (defaults: the method's).
 
-    The last seven switches turn one extension off each, for the tests and studies that measure
+    The last eight switches turn one extension off each, for the tests and studies that measure
     what it adds (the method itself always uses them).
 
     Attributes
@@ -115,6 +115,10 @@ class ReparamTransforms(Identity):
         Where a moving silhouette vertex's film image lies inside a camera sample's ring of probes,
         follow both its silhouette edges by an affine map of the film
         (:mod:`sphere3d.reparam.film_corners`).
+    film_corner_lines : bool
+        Where such a ring also holds a static edge, keep the corner's edges and that edge by one
+        field of the film (:mod:`sphere3d.reparam.corner_lines`); else the corner's fan drags the
+        static edge. Applied with ``film_junctions`` and ``film_corners``.
     shading_shapes : bool
         Where a moving shape's image from the shading point lies inside a cosine kernel's ring of
         probes, or is thin and reaches into it, follow it by an affine map of the gnomonic chart
@@ -140,6 +144,7 @@ class ReparamTransforms(Identity):
     baseline: bool = True
     shading_shapes: bool = True
     lobe: float | None = LOBE
+    film_corner_lines: bool = True
 
     def tables(self, state: SceneState) -> tuple[Callable[[SceneState], Any], ...]:
         """The per-state tables the options read where triangles move (:func:`sphere3d.execution.prepare`
@@ -157,7 +162,7 @@ class ReparamTransforms(Identity):
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""
         return film_transform(
             state, x, y, draws, self.kappa_film, self.probes, self.spread, self.refine, self.film_one_plane,
-            self.film_junctions, self.film_shapes, self.film_corners,
+            self.film_junctions, self.film_shapes, self.film_corners, self.film_corner_lines,
         )  # fmt: skip
 
     def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:

@@ -54,7 +54,7 @@ from sphere3d.film import AffineFilm
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
 
-__all__ = ["silhouette_corners"]
+__all__ = ["NearCorners", "corner_table", "nearest_corners", "silhouette_corners"]
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,8 @@ class _Corners:
     tree: cKDTree | None
     edge: np.ndarray
     """(H, 2): each edge's image from the vertex to its other end."""
+    edge_dot: np.ndarray
+    """(H, 2), or (H, k, 2): the rate of ``edge`` (its far end's film velocity less the vertex's)."""
     sine: float
     """The sine of half the narrowest sector (below π) of every corner: a kernel disc of radius r
     reaches two edges of a corner only within r / sine of its vertex."""
@@ -106,9 +108,10 @@ def _corner_table(state: SceneState) -> _Corners:
     s1, s2 = np.einsum("ek,ek->e", to, edges.n1), np.einsum("ek,ek->e", to, edges.n2)
     # silhouettes, and creases where the radiance jumps (flat-shaded, reflecting) seen between two faces
     jumps = np.flatnonzero(camera_candidates(state, edges) & (edges.silhouette(o) | (s1 * s2 > 0.0)))
+    slots = () if state.k is None else (state.k,)
     empty = _Corners(
         np.zeros((0, 2)), np.zeros((0, 2)), *(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0),
-        np.zeros((0, 2, 2)), None, np.zeros((0, 2)), 1.0, 0.0,
+        np.zeros((0, 2, 2)), None, np.zeros((0, 2)), np.zeros((0, *slots, 2)), 1.0, 0.0,
     )  # fmt: skip
     if not jumps.size:
         return empty
@@ -182,7 +185,8 @@ def _corner_table(state: SceneState) -> _Corners:
         maps = np.stack(
             [_least_norm_turns(pair, pair_dot[:, :, i]) for i in range(pair_dot.shape[2])], axis=1
         )
-    return _Corners(point, v_dot, count, start, angle, maps, cKDTree(point), e, max(sine, 1e-6), longest)
+    tree = cKDTree(point)
+    return _Corners(point, v_dot, count, start, angle, maps, tree, e, e_dot, max(sine, 1e-6), longest)
 
 
 def _rows_first(t: np.ndarray) -> np.ndarray:
@@ -190,21 +194,32 @@ def _rows_first(t: np.ndarray) -> np.ndarray:
     return t if t.ndim == 2 else np.moveaxis(t, 0, 1)
 
 
-def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: np.ndarray) -> AffineFilm:
-    """Per kernel centre (n, 2), pixels: the map of the nearest visible moving vertex where two or more
-    discontinuity edges meet, whose film image lies within ``reach`` pixels (the ring's radius) or two
-    of whose edges' images pass within ``reach`` of the centre (searched up to ``reach / sine`` of the
-    narrowest sector, :class:`_Corners`), in the sector (between two of its edges) that holds the
-    sample's own film point ``at`` (n, 2); none elsewhere.
+@dataclass(frozen=True)
+class NearCorners:
+    """Kernel rows with a corner to follow (:func:`nearest_corners`): the rows ``rows`` (ascending) and
+    each one's vertex ``index`` in the state's corner table (:func:`corner_table`)."""
+
+    rows: np.ndarray
+    index: np.ndarray
+
+
+def corner_table(state: SceneState) -> _Corners:
+    """The state's moving corners and their fans (built once per state; module docstring)."""
+    return _corner_table(state)
+
+
+def nearest_corners(state: SceneState, centre: np.ndarray, reach: float) -> NearCorners:
+    """Per kernel centre (n, 2), pixels: the nearest visible moving vertex where two or more discontinuity
+    edges meet, whose film image lies within ``reach`` pixels (the ring's radius) or two of whose
+    edges' images pass within ``reach`` of the centre (searched up to ``reach / sine`` of the narrowest
+    sector, :class:`_Corners`); the rows that have one.
 
     One k-d tree query per centre (:func:`_corner_table` builds the tree once per state), and for the
     centres beyond ``reach`` of their vertex a distance to each of its edges.
     """
-    n = len(centre)
-    out = AffineFilm.none(n, state.k)
     corners = _corner_table(state)
-    if corners.tree is None or n == 0:
-        return out
+    if corners.tree is None or len(centre) == 0:
+        return NearCorners(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
     # the nearest vertex from which two of its edges can reach the disc (module docstring)
     search = min(reach / corners.sine, reach + corners.longest)
     dist, k = corners.tree.query(centre, distance_upper_bound=search)
@@ -225,6 +240,22 @@ def silhouette_corners(state: SceneState, centre: np.ndarray, reach: float, at: 
         two = np.bincount(each, weights=near, minlength=k.size) >= 2
         keep = ~far | two
         rows, k = rows[keep], k[keep]
+    return NearCorners(rows, k)
+
+
+def silhouette_corners(
+    state: SceneState, centre: np.ndarray, reach: float, at: np.ndarray, near: NearCorners | None = None
+) -> AffineFilm:
+    """Per kernel centre (n, 2), pixels: the map of its corner (:func:`nearest_corners`, or ``near``
+    when given), in the sector (between two of its edges) that holds the sample's own film point
+    ``at`` (n, 2); none elsewhere."""
+    n = len(centre)
+    out = AffineFilm.none(n, state.k)
+    corners = _corner_table(state)
+    near = nearest_corners(state, centre, reach) if near is None else near
+    rows, k = near.rows, near.index
+    if not rows.size:
+        return out
     rel = at[rows] - corners.point[k]
     phi = np.arctan2(rel[:, 1], rel[:, 0])
     # the sector: after the last edge whose angle is <= phi (before the first: the last sector, cyclic),

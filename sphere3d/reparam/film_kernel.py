@@ -76,8 +76,9 @@ from flatland.core.rng import Draws
 from flatland.core.validate import ValidationError, check_positive
 from sphere3d.film import AffineFilm, FilmTransform
 from sphere3d.live import all_rows, any_rows, moves
+from sphere3d.reparam.corner_lines import corner_line_maps
 from sphere3d.reparam.film_affine import inner_shapes
-from sphere3d.reparam.film_corners import silhouette_corners
+from sphere3d.reparam.film_corners import nearest_corners, silhouette_corners
 from sphere3d.reparam.junctions import junction_maps
 from sphere3d.reparam.probes import follow_probes, ring_offsets
 from sphere3d.reparam.snaps import Snap, edge_snap
@@ -126,6 +127,7 @@ def film_transform(
     junctions: bool = True,
     shapes: bool = True,
     corners: bool = True,
+    corner_lines: bool = True,
 ) -> FilmTransform:
     r"""Two rotations per camera sample at film point (x, y) (pixels), inside an antithetic pair of kernels.
 
@@ -160,6 +162,9 @@ def film_transform(
     corners : bool, optional
         Where a moving silhouette vertex's image lies inside a ring, follow both its silhouette
         edges by an affine map of the film (:mod:`sphere3d.reparam.film_corners`).
+    corner_lines : bool, optional
+        Where such a ring also holds a static edge (with ``junctions``), the field keeping the corner's
+        edges and that edge (:mod:`sphere3d.reparam.corner_lines`).
 
     Returns
     -------
@@ -178,7 +183,11 @@ def film_transform(
     # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
     affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
     if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
-        _fill(affine, silhouette_corners(state, centre, spread * sigma, np.concatenate([s, s])))
+        near, at = nearest_corners(state, centre, spread * sigma), np.concatenate([s, s])
+        fan = silhouette_corners(state, centre, spread * sigma, at, near)
+        if junctions and corner_lines:  # and a static edge: the field keeping all (reparam.corner_lines)
+            _fill(affine, _rows_of(2 * n, *corner_line_maps(state, near, centre, at, spread * sigma), k))
+        _fill(affine, fan)
     moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
     # and the rotation the identity: probes and heuristic run only on the other rows (same result)

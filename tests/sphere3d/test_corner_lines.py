@@ -1,0 +1,140 @@
+"""The moving least-squares field of :mod:`sphere3d.reparam.corner_lines`, on its own.
+
+A moving corner (two to four edges as rays from its vertex V) and a static line L at a distance h:
+the field keeps every line on its moved line (its normal velocity on each equals the line's), is the
+meeting point's velocity where two lines meet (V, and an edge crossing L), its gradient matches
+central differences of its value, k parameters give each one's field, and its squared strain over a
+kernel grows as log(1 / h) as the corner nears the line (the one affine map keeping all three lines
+grows as 1 / h²). The film kernel's use of it is checked pixel by pixel against a closed form in
+tests/sphere3d/test_junctions.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sphere3d.reparam.corner_lines import line_field
+from sphere3d.reparam.film_lines import FilmLines
+
+REACH = 0.85  # the film kernel's ring radius at the defaults (3 x 0.28 px)
+
+
+def _corner(rng, edges, h):
+    """A corner at (0, h) moving at a random velocity with ``edges`` random edges turning at random
+    rates, and the static line y = 0 (point, direction, velocities; ray flags)."""
+    vertex, vertex_dot = np.array([0.0, h]), rng.normal(size=2)
+    angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, edges))
+    e = 3.0 * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    e_dot = rng.normal(size=(edges, 2))
+    q = np.vstack([np.tile(vertex, (edges, 1)), [[-5.0, 0.0]]])
+    d = np.vstack([e, [[10.0, 0.0]]])
+    q_dot = np.vstack([np.tile(vertex_dot, (edges, 1)), [[0.0, 0.0]]])
+    d_dot = np.vstack([e_dot, [[0.0, 0.0]]])
+    return q, d, q_dot, d_dot, np.arange(edges + 1) < edges
+
+
+def _field(points, lines, k=None):
+    """The field at ``points`` (m, 2) for the lines of :func:`_corner` (every point sees all of them);
+    with ``k``, k parameters whose velocities are 1, 2, ... times the first's."""
+    q, d, q_dot, d_dot, ray = lines
+    m, p = len(points), len(q)
+    rows = np.repeat(np.arange(m), p)
+    tile = lambda a: np.tile(a, (m, 1))  # noqa: E731
+    qd, dd = tile(q_dot), tile(d_dot)
+    if k is not None:
+        qd = np.stack([(i + 1) * qd for i in range(k)], axis=1)
+        dd = np.stack([(i + 1) * dd for i in range(k)], axis=1)
+    film = FilmLines(rows, tile(q), tile(d), qd, dd)
+    return line_field(points, film, np.tile(ray, m), 1.0 / REACH**2)
+
+
+def _normal(d):
+    return np.array([-d[1], d[0]]) / np.linalg.norm(d)
+
+
+@pytest.mark.parametrize("edges", [2, 3, 4])
+def test01_the_field_keeps_every_line_on_its_moved_line(edges):
+    # on each line (a ray's points s >= 0, the static line anywhere) n · v = n · (q_dot + s e_dot)
+    rng = np.random.default_rng(edges)
+    lines = _corner(rng, edges, 0.1)
+    q, d, q_dot, d_dot, ray = lines
+    for j in range(len(q)):
+        s = rng.uniform(0.0, 0.4, 64) if ray[j] else rng.uniform(0.3, 0.7, 64)
+        points = q[j] + s[:, None] * d[j]
+        v, _ = _field(points, lines)
+        n = _normal(d[j])
+        want = (q_dot[j] + s[:, None] * d_dot[j]) @ n
+        assert np.abs(v @ n - want).max() <= 1e-12 * (1.0 + np.abs(want).max())
+
+
+def test02_where_two_lines_meet_the_field_is_their_meeting_point_s_velocity():
+    # at the vertex: its velocity; where an edge crosses the static line y = 0: the crossing's, which
+    # slides along the line at the rate that keeps it on the moving edge
+    rng = np.random.default_rng(7)
+    lines = _corner(rng, 2, 0.2)
+    q, d, q_dot, d_dot, _ = lines
+    v, _ = _field(q[:1], lines)
+    assert np.allclose(v[0], q_dot[0], rtol=0, atol=1e-12)
+    below = np.flatnonzero(d[:2, 1] < 0.0)
+    for j in below:
+        s = -q[j, 1] / d[j, 1]  # the edge reaches y = 0
+        x = q[j] + s * d[j]
+        v, _ = _field(x[None], lines)
+        # the crossing moves along y = 0: v_y = 0, and stays on the edge: n · v = n · (q_dot + s e_dot)
+        n = _normal(d[j])
+        assert abs(v[0, 1]) <= 1e-10
+        assert v[0] @ n == pytest.approx((q_dot[j] + s * d_dot[j]) @ n, abs=1e-10)
+
+
+@pytest.mark.parametrize("h", [0.3, 0.01])
+def test03_the_gradient_matches_central_differences_of_the_value(h):
+    rng = np.random.default_rng(3)
+    lines = _corner(rng, 3, h)
+    points = rng.uniform(-REACH, REACH, (256, 2))
+    _, grad = _field(points, lines)
+    step = 1e-6
+    for axis in range(2):
+        offset = np.zeros(2)
+        offset[axis] = step
+        fd = (_field(points + offset, lines)[0] - _field(points - offset, lines)[0]) / (2.0 * step)
+        # central differences' truncation (third derivatives up to ~1 / distance³) and rounding
+        scale = 1.0 + np.abs(grad[..., axis])
+        assert np.all(np.abs(fd - grad[..., axis]) <= 1e-5 * scale)
+
+
+def test04_k_parameters_give_each_parameter_s_own_field():
+    rng = np.random.default_rng(4)
+    lines = _corner(rng, 3, 0.1)
+    points = rng.uniform(-REACH, REACH, (128, 2))
+    v, grad = _field(points, lines)
+    vk, grad_k = _field(points, lines, k=3)
+    assert vk.shape == (128, 3, 2) and grad_k.shape == (128, 3, 2, 2)
+    for i in range(3):  # velocities (i + 1) times the first's: the field is linear in them
+        assert np.allclose(vk[:, i], (i + 1) * v, rtol=1e-13, atol=1e-13)
+        assert np.allclose(grad_k[:, i], (i + 1) * grad, rtol=1e-12, atol=1e-12)
+
+
+def _strain(h):
+    """∫ |∇v|² over the kernel disc of radius REACH about the corner's foot, on a polar grid refined
+    toward the corner's triangle (radii log-spaced from h / 100)."""
+    lines = _corner(np.random.default_rng(5), 2, h)
+    radii = np.geomspace(h / 100.0, REACH, 400)
+    r = np.sqrt(radii[1:] * radii[:-1])
+    dr = np.diff(radii)
+    phi = (np.arange(256) + 0.5) * 2.0 * np.pi / 256
+    centre = np.array([0.0, 0.5 * h])
+    points = centre + (r[:, None, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)).reshape(-1, 2)
+    _, grad = _field(points, lines)
+    area = (r * dr)[:, None] * (2.0 * np.pi / 256) * np.ones((1, 256))
+    return float(np.sum(np.sum(grad**2, axis=(1, 2)) * area.ravel()))
+
+
+def test05_the_strain_grows_as_the_log_of_one_over_the_corner_s_height():
+    # a decade nearer the line adds about the same squared strain (log growth); a 1 / h growth would
+    # multiply the increment by 10, a 1 / h² by 100 (the one affine map keeping the three lines)
+    strain = [_strain(h) for h in (1e-2, 1e-3, 1e-4, 1e-5)]
+    steps = np.diff(strain)
+    print("strain", np.round(strain, 2), "per decade", np.round(steps, 2))
+    assert np.all(steps > 0.0)
+    assert steps.max() <= 1.5 * steps.min()
