@@ -26,10 +26,10 @@ Rows, per scene, motion and method, relative to the reference's RMS over the ima
 Each row again **outside junctions**: the same over the pixels more than :data:`JUNCTION_REACH` px
 from where the occluder's silhouette meets a static edge on the film (:func:`junction_pixels`: the
 ground's far edge against the black sky, here), still relative to the whole image's RMS. There a
-film kernel holds two discontinuities with two motions, the method's documented limit
-(:mod:`sphere3d.reparam.junctions`): followed at a T-junction, not where the box's corner lies on the
-edge (tests/sphere3d/test_junctions.py test06, on a closed form). The difference of the two rows is
-what the junctions carry.
+film kernel holds two discontinuities with two motions: followed at a T-junction
+(:mod:`sphere3d.reparam.junctions`) and where the box's corner lies on the edge
+(:mod:`sphere3d.reparam.corner_lines`; tests/sphere3d/test_junctions.py test03 and test06, on
+closed forms). The difference of the two rows is what the junctions carry.
 
 A bias row above a few percent of the RMS is a method missing part of that motion's derivative
 where its RMSE stops falling with more samples; ``finite_difference`` is the control whose bias is

@@ -506,4 +506,6 @@ plot_error_time(
 # kernel that follows the silhouette drags that static edge. There a field on the film keeps both
 # lines where they are (`sphere3d.reparam.junctions`, on by default): the two lines' own maps blended
 # by the distances to them, so it follows the crossing, and also a thin sliver of sky between a
-# silhouette and a static edge running side by side, which no rotation can.
+# silhouette and a static edge running side by side, which no rotation can. Where a box's corner
+# lies on that edge, one field keeps the corner's edges and the static one
+# (`sphere3d.reparam.corner_lines`), its strain confined to the small triangle the lines cut.

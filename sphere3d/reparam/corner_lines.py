@@ -7,28 +7,26 @@ turn and move with V, and L, which stays. The corner's fan keeps its edges and d
 affine map keeping all of them exists, but the triangle the three lines cut scales with V's distance
 h from L, and its $\dot B$ grows as 1 / h over the whole kernel (a variance growing as $1 / h^2$).
 
-Here the film velocity is a moving least-squares field (Loubet et al. 2019, Sec. 4.3: a refinement of
-the heuristic). At each film point u it is the v that minimises
-
-$$\sum_j w_j(u) \left(n_j · v - c_j(u)\right)^2 + μ |v|^2, \quad w_j = 1 / d_j(u)^2,$$
-
-over the lines j: the corner's edges as rays from V along their images, and L as a line; $n_j$ is
-line j's unit normal, $d_j(u)$ the distance from u to it, and $c_j(u) = n_j · (\dot q_j + s \dot e_j)$
-the normal velocity of the line's point $q_j + s e_j$ nearest u (s clamped to the ray). On line j its
-weight is infinite, so $n_j · v = c_j$ there: every line stays on its moved line to first order,
-which is all the derivative needs; where two lines meet (V, or an edge crossing L at X) both
-conditions hold and v is the meeting point's velocity. The field is Lipschitz away from a meeting of
-three lines (its residual on a line falls as $d_j^2$, its weight's gradient grows as $1 / d_j^3$, and
-$M^{-1}$ takes $d_j^2$ back), so the change of variables it makes is valid and the estimate
-unbiased. The strain $|\dot V| / h$ is confined to the triangle the lines cut and decays as
-$|\dot V| / r$ away from it: $∫ |∇v|^2$ over the kernel grows as $\log(σ / h)$, not as $σ^2 / h^2$.
-The prior $μ = 1 / r^2$, r the ring's radius, holds the film still (v = 0) where no line is within
-about r: the only constant, the kernel's own scale.
+Here the film velocity is a moving least-squares field (Loubet et al. 2019, Sec. 4.3: a refinement
+of the heuristic). At each film point u it is the v that minimises
+$\sum_j w_j(u) (n_j · v - c_j(u))^2 + μ |v|^2$ with $w_j = 1 / d_j(u)^2$, over the lines j: the
+corner's edges as rays from V along their images, and L as a line; $n_j$ is line j's unit normal,
+$d_j(u)$ the distance from u to it, and $c_j(u) = n_j · (\dot q_j + s \dot e_j)$ the normal
+velocity of the line's point $q_j + s e_j$ nearest u (s clamped to the ray). On line j its weight is
+infinite, so $n_j · v = c_j$ there: every line stays on its moved line to first order, which is all
+the derivative needs; where two lines meet (V, or an edge crossing L at X) both conditions hold and v
+is the meeting point's velocity. The field is Lipschitz away from a meeting of three lines (its
+residual on a line falls as $d_j^2$, its weight's gradient grows as $1 / d_j^3$, and the normal
+equations' inverse takes $d_j^2$ back), so the change of variables it makes is valid and the
+estimate unbiased. The strain $|\dot V| / h$ is confined to the triangle the lines cut and decays as
+$|\dot V| / r$ away from it: $∫ |∇v|^2$ over the kernel grows as $\log(σ / h)$, not as
+$σ^2 / h^2$. The prior $μ = 1 / r^2$, r the ring's radius, holds the film still (v = 0) where no
+line is within about r: the only constant, the kernel's own scale.
 
 The value and gradient at each sample's own film point are returned (the kernel's map about that
-point, :class:`~sphere3d.film.AffineFilm`): with $M = μ I + \sum_j w_j n_j n_j^T$,
-$v = M^{-1} \sum_j w_j c_j n_j$ and
-$∂_l v = M^{-1} \sum_j n_j (∂_l w_j (c_j - n_j · v) + w_j ∂_l c_j)$.
+point, :class:`~sphere3d.film.AffineFilm`), computed as the mean of the pairs of conditions'
+solutions weighted by their squared determinants (:func:`line_field`), which stays exact next to a
+line, where the normal equations' matrix is singular to rounding.
 
 Biased where the kernel holds a line not among these (a second static line, an edge of another
 shape), as the other rules; the lines are straight to first order. The closed form

@@ -26,14 +26,14 @@ all the derivative needs. The sample's sector is the one its own film point lies
 weight carries $|\det A|$ (:func:`sphere3d.film.affine_directions`). Loubet et al. 2019, Sec. 4.3:
 a refinement of the heuristic.
 
-Biased where the kernel also holds a discontinuity not through V (a static edge, which the fan
-drags: the corner on the ground's far edge, where a map keeping that line as well has a variance
-growing without bound as the corner nears the line, :mod:`sphere3d.reparam.film_lines`; an edge of
-another shape), and not applied where the ring holds one edge of V only, nor along a crease far
-from its ends, which is followed by a point of one face (the probes pair different shapes only): a
-4 px triangle tilting, seen at 30 degrees, keeps a few per cent (the atlas). The occluder-motions
-table gives ``hard_shadow_cube``'s bias with and without the pixels where its corner meets the
-ground's far edge.
+Where the ring also holds a static edge (the corner on the ground's far edge), which the fan would
+drag, one field keeping the corner's edges and that edge replaces the fan
+(:mod:`sphere3d.reparam.corner_lines`). Biased where the kernel holds another discontinuity not
+through V (an edge of another shape), and not applied where the ring holds one edge of V only, nor
+along a crease far from its ends, which is followed by a point of one face (the probes pair
+different shapes only): a 4 px triangle tilting, seen at 30 degrees, keeps a few per cent (the
+atlas). The occluder-motions table gives ``hard_shadow_cube``'s bias with and without the pixels
+where its silhouette meets the ground's far edge.
 
 The vertices are found by a k-d tree over their film images (built once per state,
 O(V log V)); a vertex hidden behind other geometry is skipped; the mesh edges are

@@ -52,6 +52,8 @@ image (the hull of its vertices' images, :func:`_reaching_motion`) are not probe
 ground's far edge behind an occluder: a T-junction, or a sliver of sky between the two), an affine
 map of the film that keeps both lines replaces the rotation (:mod:`sphere3d.reparam.junctions`): a
 rotation, locally a translation of the film, that follows the silhouette drags the static edge.
+Where the ring holds a moving corner and a static edge, one field keeps the corner's edges and the
+static one (:mod:`sphere3d.reparam.corner_lines`).
 
 Where it is biased: a kernel holding a discontinuity its rotation does not follow: an edge
 between the ring's probes, or a feature about a pixel across whose edges move differently

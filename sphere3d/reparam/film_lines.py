@@ -16,11 +16,10 @@ lines a gap g apart make that map strain the whole kernel at 1 / g; :func:`blend
 with a field that strains the gap only (:mod:`sphere3d.reparam.junctions`, Loubet et al. 2019,
 Sec. 4.3: a refinement of the heuristic).
 
-Not used at a moving corner on a static line (the box's corner on the ground's far edge): a map
-keeping the corner's two edges and the line exists (the triangle the three lines cut scales with
-the corner's distance h to the line), but its $\dot B$ grows as 1 / h over the whole kernel, so the
-variance grows without bound as the corner nears the line; the corner's fan drags the line there
-instead (:mod:`sphere3d.reparam.film_corners`, a bias the occluder-motions table measures).
+Not used at a moving corner on a static line (the box's corner on the ground's far edge): the affine
+map keeping the corner's two edges and the line has a $\dot B$ growing as 1 / h over the whole kernel
+for the corner's distance h to the line; :mod:`sphere3d.reparam.corner_lines` keeps them all with a
+field whose strain is confined to the triangle the lines cut.
 """
 
 from __future__ import annotations

@@ -19,13 +19,13 @@ gets the map where exactly one moving discontinuity edge (a silhouette, or a cre
 shape) and at least one static one pass within its ring (the nearest static one is kept); a thin
 sliver between the two lines, which the probes miss, is still followed. A crease alone in the ring
 (two faces of one shape, which the probes, pairing different shapes, do not see as a discontinuity)
-gets the map keeping its line: a rotation following one point of a turning crease drifts off it
-with the distance from that point. Two moving edges in the ring and no static one: the corner rule
-where they meet at a vertex in it (:mod:`sphere3d.reparam.film_corners`, which drags a static line
-there), the blended field of the two elsewhere where one of them is a crease (a thin face seen
-nearly edge-on); two silhouettes that do not meet keep the probes' rotation (the lines are queried
-only near a static line or a crease: on a finely meshed smooth shape every kernel on the silhouette
-holds several short edges).
+gets the map keeping its line: a rotation following one point of a turning crease drifts off it with
+the distance from that point. Two moving edges in the ring and no static one: the corner rule where
+they meet at a vertex in it (:mod:`sphere3d.reparam.film_corners`; with a static line there as well,
+:mod:`sphere3d.reparam.corner_lines`), the blended field of the two elsewhere where one of them is a
+crease (a thin face seen nearly edge-on); two silhouettes that do not meet keep the probes' rotation
+(the lines are queried only near a static line or a crease: on a finely meshed smooth shape every
+kernel on the silhouette holds several short edges).
 
 Exact to first order for straight edges; the closed forms of :mod:`sphere3d.closed_form.junction` (a
 black triangle moving across a static one's edge, a sliver between them, and its corner on that
