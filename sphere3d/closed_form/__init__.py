@@ -19,7 +19,9 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
 2. **The irradiance at a point under the sky** (:func:`occluded_sky_irradiance`):
    $E = π L - L Φ(T)$, Φ the projected solid angle of the triangle by Lambert's
    polygon formula (:func:`projected_solid_angle`), Dual-aware, so its derivative comes
-   with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's $E = L Φ$.
+   with it; :func:`polygon_irradiance` gives a uniform polygonal emitter's $E = L Φ$. Under a square
+   light instead of the sky (:func:`light_triangle_scene`), the light minus the triangle's shadow on
+   its plane (:func:`occluded_light_irradiance`): the emitter strategy's integral.
 
 A third scene adds a static black triangle behind the moving one (:func:`junction_scene`): its
 camera image (:func:`junction_image`) is the filter integrated over the union of the two, whose
@@ -51,6 +53,7 @@ from sphere3d.closed_form.junction import clip_convex, junction_image
 from sphere3d.closed_form.lambert import (
     Flux,
     boundary_flux,
+    occluded_light_irradiance,
     occluded_sky_irradiance,
     polygon_irradiance,
     projected_solid_angle,
@@ -61,6 +64,7 @@ from sphere3d.closed_form.scenes import (
     ShareLost,
     corner_junction_scene,
     junction_scene,
+    light_triangle_scene,
     pinhole_triangle_scene,
     share_lost,
     sky_triangle_scene,
@@ -82,6 +86,8 @@ __all__ = [
     "filter_profile_1d",
     "junction_image",
     "junction_scene",
+    "light_triangle_scene",
+    "occluded_light_irradiance",
     "occluded_sky_irradiance",
     "pinhole_triangle_scene",
     "polygon_filter_derivative",

@@ -1,5 +1,6 @@
-"""The irradiance at a point under the sky with a black triangle above it: Lambert's polygon
-formula for the projected solid angle, on Duals so that its θ-derivative comes with it."""
+"""The irradiance at a point under the sky, or under a square light, with a black triangle above it:
+Lambert's polygon formula for the projected solid angle, on Duals so that its θ-derivative comes
+with it."""
 
 from __future__ import annotations
 
@@ -11,11 +12,13 @@ import numpy as np
 from flatland.core.dual import detach, tangent, variable
 from flatland.core.validate import ValidationError
 from sphere3d.closed_form.film import triangle_vertices
+from sphere3d.closed_form.junction import clip_convex
 from sphere3d.scene import check_vector, load_scene
 
 __all__ = [
     "Flux",
     "boundary_flux",
+    "occluded_light_irradiance",
     "occluded_sky_irradiance",
     "polygon_irradiance",
     "projected_solid_angle",
@@ -101,6 +104,49 @@ def occluded_sky_irradiance(
         np.pi - projected_solid_angle(point, normal / length, triangle_vertices(scene, param, dual))
     )
     return float(np.asarray(detach(e))), float(np.asarray(tangent(e))) if param is not None else 0.0
+
+
+def occluded_light_irradiance(scene: Any, param: str | None = None, eye: float = 0.0) -> tuple[float, float]:
+    r"""E and dE/dθ at the origin (normal +z) under the square light of
+    :func:`~sphere3d.closed_form.light_triangle_scene` with its black triangle ``tri`` in between.
+
+    Seen from the origin the triangle hides the part of the light inside its shadow on the light's
+    plane z = H: the triangle's vertices projected from the origin, $v H / v_z$, clipped by the
+    light's square (Sutherland-Hodgman on Duals, :func:`~sphere3d.closed_form.clip_convex`; convex by
+    convex), so $E = L (Φ(\mathrm{light}) - Φ(\mathrm{hidden}))$ by Lambert's formula
+    (:func:`projected_solid_angle`). Every crossing of a triangle edge with the light's border moves
+    with θ on the Duals: the derivative carries the shadow edge's motion across the light and along
+    its border. Returns (value, derivative), the derivative 0 without ``param``.
+
+    ``eye``: the height above the origin from which the visibility is seen, the cosine and the solid
+    angle staying at the origin (the renderer's shadow rays start ``state.epsilon`` along the normal:
+    pass it to compare at that order; the shadow is then projected from (0, 0, eye)).
+    """
+    scene = load_scene(scene)
+    names = sorted(s.name for s in scene.shapes)
+    if names != ["light", "tri"]:
+        raise ValidationError("scene.shapes", f"must be the shapes 'light' and 'tri', got {names}")
+    light = next(s for s in scene.shapes if s.name == "light")
+    height = float(light.translate[2])
+    half = 0.5 * float(dict(light.geometry)["size"][0]) * light.scale
+    square = np.array([[-half, -half], [half, -half], [half, half], [-half, half]])
+    whole = scene.to_dict()
+    alone = load_scene({**whole, "shapes": [s for s in whole["shapes"] if s["name"] == "tri"]})
+    v = triangle_vertices(alone, param, variable(0.0) if param is not None else 0.0)
+    z = np.asarray(detach(v))[:, 2]
+    if not np.all((z > eye) & (z < height)):
+        raise ValidationError(
+            "scene.shapes[tri]", f"must lie between the origin and the light, got heights {z}"
+        )
+    scale = (height - eye) / (v[:, 2] - eye)  # each vertex's shadow on the light's plane, seen from the eye
+    hidden = clip_convex([(v[k, 0] * scale[k], v[k, 1] * scale[k]) for k in range(3)], square)
+    origin, up = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    e = light.emission * projected_solid_angle(origin, up, np.column_stack([square, np.full(4, height)]))
+    if hidden:
+        lift = [np.stack([x, y, 0.0 * x + height]) for x, y in hidden]
+        e = e - light.emission * projected_solid_angle(origin, up, np.stack(lift))
+    value = float(np.asarray(detach(e)))
+    return value, float(np.asarray(tangent(e))) if param is not None and hasattr(e, "tangent") else 0.0
 
 
 @dataclass(frozen=True)

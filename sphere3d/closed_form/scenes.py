@@ -158,6 +158,32 @@ def sky_triangle_scene(vertices: Any, sky: float = 1.0) -> dict:
     }
 
 
+def light_triangle_scene(
+    vertices: Any, half: float = 0.5, height: float = 2.0, radiance: float = 5.0
+) -> dict:
+    """A square light of side ``2 half`` at ``height`` above the origin, facing down, emitting ``radiance``,
+    and a black triangle with world ``vertices`` (3, 3) between, centred on their centroid; no sky.
+
+    The irradiance at the origin (normal +z) is :func:`~sphere3d.closed_form.occluded_light_irradiance`:
+    the emitter strategy's integral with a moving occluder in front of the light. Rotate and scale
+    parameters of ``tri`` act about the centroid; the camera is a placeholder.
+    """
+    scene = sky_triangle_scene(vertices, sky=0.0)
+    scene["name"] = "light_triangle"
+    light = {
+        "name": "light",
+        "type": "rectangle",
+        "size": [2.0 * half, 2.0 * half],
+        "translate": [0.0, 0.0, height],
+        "rotate": [np.pi, 0.0, 0.0],
+        "emission": radiance,
+        "fade": 0.0,
+        "albedo": 0.0,
+    }
+    scene["shapes"] = [light, *scene["shapes"]]
+    return scene
+
+
 @dataclass(frozen=True)
 class ShareLost:
     r"""The share of an exact derivative an estimator misses, from its independent batches.

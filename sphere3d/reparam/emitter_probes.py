@@ -36,7 +36,11 @@ static point.
 
 Where it is biased (one rotation per shading point, Sec. 4.1): the shadow edge crossing the
 light along two silhouette edges at different depths (a box's corner), or crossing it on two
-sides, is followed at one crossing only; at the outermost lit points the hidden part can lie
+sides, is followed at one crossing only; where the occluder recedes, scales or turns, its
+shadow's edges across the light move apart, and a rotation following one point of one of them
+drags the others (tests/sphere3d/test_light_occluder.py, on the closed form
+:func:`~sphere3d.closed_form.occluded_light_irradiance`; the turning box's shadow of
+``hard_shadow_cube``); at the outermost lit points the hidden part can lie
 beside every probe, aimed ones included, and the emitter strategy then keeps the identity. The
 measurement pages (``hard_shadow``, the bias atlas) give the sizes.
 """

@@ -1,0 +1,124 @@
+"""A black triangle between a point and a square light: the emitter strategy's integral, in closed form.
+
+:func:`~sphere3d.closed_form.occluded_light_irradiance` (the light minus the triangle's shadow on its
+plane, clipped on Duals; :func:`~sphere3d.closed_form.light_triangle_scene`) first checks itself: its
+derivative against central differences of its own value, per motion; seen from the renderer's shadow
+ray origin (``eye``: ε along the normal). ``boundary`` (the control) matches it within its
+Šidák-corrected Student-t interval under translations and turns; under scaling it is 3e-4 of the
+derivative off, 6-11 of its standard errors in three seeds (not explained by the ray offset, which
+moves the exact value by 2e-4 of it; shown by a test, as an open item). ``reparam``'s emitter
+rotation follows one point of the shadow edge (:mod:`sphere3d.reparam.emitter_probes`); where the
+triangle's shadow crosses the light with two edges and a corner inside it and the shadow scales (the
+triangle receding, or scaling), the edges move apart and one rotation cannot follow both: a bias
+this test shows, not a tolerance.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import sphere3d as s3
+from flatland.core.dual import variable
+from flatland.core.image import summarize_batches
+from flatland.core.stats import sidak
+from sphere3d import closed_form as cf
+from sphere3d.methods.boundary import RATE, SECONDARY, boundary
+from sphere3d.reparam.default import ReparamTransforms
+from sphere3d.state import build_state
+from sphere3d.tasks import PointTask
+
+ALPHA = 1e-3
+BATCHES = 16
+SAMPLES = 1 << 16
+# a triangle whose shadow on the light's plane covers the light's right part: two of its edges cross
+# the light and one corner lies inside it
+TRIANGLE = np.array([[-0.25, -0.2, 0.0], [0.3, -0.15, 0.0], [0.0, 0.3, 0.0]]) + np.array([0.22, 0.1, 1.0])
+MOTIONS = ("tri.translate.x", "tri.translate.z", "tri.rotate.y", "tri.scale")
+BIASED = ("tri.translate.z", "tri.scale")
+CONTROL = ("tri.translate.x", "tri.translate.z", "tri.rotate.y")
+
+
+def _scene() -> dict:
+    return cf.light_triangle_scene(TRIANGLE)
+
+
+def _moved(param: str, h: float) -> dict:
+    """The scene with ``param`` offset by h (the scene format's parameters, :mod:`sphere3d.scene`)."""
+    scene = copy.deepcopy(_scene())
+    tri = next(s for s in scene["shapes"] if s["name"] == "tri")
+    _, kind, *axis = param.split(".")
+    if kind == "scale":
+        tri["scale"] = tri.get("scale", 1.0) * (1.0 + h)
+    else:
+        tri.setdefault(kind, [0.0, 0.0, 0.0])[("x", "y", "z").index(axis[0])] += h
+    return scene
+
+
+def _z(param: str, method: str) -> tuple[float, float, float]:
+    """(mean - exact) / standard error over the batches, the Šidák-corrected two-sided quantile over the
+    motions, and (mean - exact) / exact; exact seen from the renderer's shadow ray origin."""
+    loaded = s3.load_scene(_scene())
+    eye = build_state(loaded).epsilon  # shadow rays start ε along the normal (sphere3d.integrator)
+    _, exact = cf.occluded_light_irradiance(_scene(), param, eye)
+    task = PointTask(loaded, param, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), SAMPLES, 5, BATCHES)
+    if method == "reparam":
+        d = task.evaluate(variable(0.0), ReparamTransforms()).derivative
+    else:
+        d = boundary(task, rate=RATE, secondary=SECONDARY).derivative
+    summary = summarize_batches(np.asarray(d))
+    q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, len(MOTIONS)), BATCHES - 1)
+    return float((summary.mean - exact) / summary.stderr), float(q), float((summary.mean - exact) / exact)
+
+
+@pytest.mark.parametrize("param", MOTIONS)
+def test01_the_closed_form_derivative_matches_central_differences_of_its_value(param):
+    h = 1e-5
+    plus, _ = cf.occluded_light_irradiance(_moved(param, h))
+    minus, _ = cf.occluded_light_irradiance(_moved(param, -h))
+    _, exact = cf.occluded_light_irradiance(_scene(), param)
+    # truncation O(h² E''') and rounding O(eps E / h): both far below 1e-6 here
+    assert (plus - minus) / (2.0 * h) == pytest.approx(exact, abs=1e-6)
+    assert abs(exact) > 1e-3  # every motion moves the shadow across the light
+
+
+def test02_the_value_is_the_light_minus_the_shadow():
+    # no triangle in the way: the whole light (Lambert); the triangle hides a part of it
+    value, _ = cf.occluded_light_irradiance(_scene())
+    half, height, radiance = 0.5, 2.0, 5.0
+    square = np.array(
+        [[-half, -half, height], [half, -half, height], [half, half, height], [-half, half, height]]
+    )
+    whole = radiance * cf.projected_solid_angle(np.zeros(3), np.array([0.0, 0.0, 1.0]), square)
+    assert 0.0 < value < whole
+    task = PointTask(s3.load_scene(_scene()), None, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), SAMPLES, 5, BATCHES)
+    summary = summarize_batches(np.asarray(task.evaluate(0.0).value))
+    q = stats.t.ppf(1.0 - 0.5 * ALPHA, BATCHES - 1)
+    assert abs(summary.mean - value) <= q * summary.stderr
+
+
+@pytest.mark.parametrize("param", CONTROL)
+def test03_boundary_matches_the_closed_form_under_translations_and_turns(param):
+    z, q, _ = _z(param, "boundary")
+    print(f"{param}: boundary z {z:+.2f} (q {q:.2f})")
+    assert abs(z) <= q
+
+
+@pytest.mark.parametrize("param", BIASED)
+def test04_reparam_s_emitter_rotation_misses_a_scaling_shadow(param):
+    # the documented limit (sphere3d.reparam.emitter_probes): one rotation per shading point follows
+    # one point of the shadow edge; the shadow's two edges across the light move apart as it scales
+    z, q, _ = _z(param, "reparam")
+    print(f"{param}: reparam z {z:+.1f} (q {q:.2f})")
+    assert abs(z) > q
+
+
+def test05_under_scaling_boundary_is_a_few_parts_in_ten_thousand_off():
+    # an open item (module docstring): resolved (|z| beyond the quantile) and small (below 1e-3 of the
+    # derivative); if it ever falls within its interval this test says so
+    z, q, relative = _z("tri.scale", "boundary")
+    print(f"tri.scale: boundary z {z:+.1f} (q {q:.2f}), {relative:+.1e} of the derivative")
+    assert abs(z) > q and abs(relative) < 1e-3
