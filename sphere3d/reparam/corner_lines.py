@@ -86,7 +86,7 @@ def corner_line_maps(
         np.concatenate([corners.edge_dot[half], static.direction_dot]),
     )
     ray = np.concatenate([np.ones(edge_row.size, dtype=bool), np.zeros(rows.size, dtype=bool)])
-    v, grad = line_field(at[rows], lines, ray, 1.0 / reach**2)
+    v, grad = line_field(at[rows], lines, ray, (1.0 / reach) ** 2)  # 0 for an absurd reach, not an overflow
     return rows, AffineFilm(np.ones(rows.size, dtype=bool), v, grad, at[rows].copy())
 
 
@@ -160,6 +160,8 @@ def line_field(at: np.ndarray, lines: FilmLines, ray: np.ndarray, mu: float) -> 
     one = c[..., None] * kx(n)
     grad_one = kx(n)[..., :, None] * grad_c[..., None, :]
     total = np.sum(big, axis=1) + mu * np.sum(w, axis=1) + mu * mu  # (m,)
+    # no weight at all (no prior, parallel lines only): the identity (v = 0), not 0 / 0
+    total = np.where(total > 0.0, total, np.inf)
     tk = (lambda a: a[:, None]) if k else (lambda a: a)
     v = (np.sum(kx(big[..., None]) * x, axis=1) + mu * np.sum(kx(w[..., None]) * one, axis=1)) / tk(
         total[:, None]

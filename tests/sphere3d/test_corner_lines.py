@@ -138,3 +138,13 @@ def test05_the_strain_grows_as_the_log_of_one_over_the_corner_s_height():
     print("strain", np.round(strain, 2), "per decade", np.round(steps, 2))
     assert np.all(steps > 0.0)
     assert steps.max() <= 1.5 * steps.min()
+
+
+def test06_without_a_prior_parallel_lines_alone_give_the_identity_not_nan():
+    # mu = 0 (an absurdly wide ring: (1 / reach)² underflows) and two parallel lines: no pair of
+    # conditions determines v anywhere off the lines' common normal; the field is 0, finite
+    e = np.array([[1.0, 0.0], [2.0, 0.0]])
+    q = np.array([[0.0, 0.0], [0.0, 1.0]])
+    lines = FilmLines(np.array([0, 0]), q, e, np.array([[0.0, 1.0], [0.0, 2.0]]), np.zeros((2, 2)))
+    v, grad = line_field(np.array([[0.3, 0.4]]), lines, np.zeros(2, dtype=bool), 0.0)
+    assert np.all(v == 0.0) and np.all(np.isfinite(grad))
