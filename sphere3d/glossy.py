@@ -120,10 +120,11 @@ def _emitter_term(
         out = scatter(m, vis, 0.0, state.dual, k=state.k)
         return out if change is None or change.extra is None else add_tangent(out, *change.extra)
     x, n, d = shading.x[vis], shading.n[vis], w[vis]
-    if change is not None:  # R(θ) w: value w, the tangent of the method's rotation (Sec. 4.1)
+    jacobian = None
+    if change is not None:  # R(θ) w: value w, the tangent of the method's rotation (Sec. 4.1), or its field's
         place = np.empty(m, dtype=np.intp)
         place[change.rows] = np.arange(len(change.rows))
-        d = change.rotation.take(place[vis]).apply(d)
+        d, jacobian = change.directions(place[vis], d)
     # re-attach: the (rotated) direction from the moving point meets the (moving) sampled emitter triangle
     it = intersect_triangles(x, d, state.triangles[tri[vis]])
     p_light = solid_angle_pdf(1.0 / state.emitter_area, it.t, -dot(it.normal, d))
@@ -132,7 +133,8 @@ def _emitter_term(
     f = f * state.emitted(tri[vis], it.b1, it.b2)
     # balance heuristic at θ; divided by the θ-free density p_A d² / cos θ_y, p_A = 1 / area at θ0
     p0 = solid_angle_pdf(1.0 / float(detach(state.emitter_area)), dist[vis], cos_y[vis])
-    out = scatter(m, vis, f * (p_light / (p_light + p_bsdf)) / p0, state.dual, k=state.k)
+    f = f * (p_light / (p_light + p_bsdf)) / p0
+    out = scatter(m, vis, f if jacobian is None else f * jacobian, state.dual, k=state.k)
     return out if change is None or change.extra is None else add_tangent(out, *change.extra)
 
 

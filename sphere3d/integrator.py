@@ -193,11 +193,22 @@ class EmitterChange:
     extra : tuple of (ndarray of int, ndarray), optional
         A derivative-only term of E the method adds beside its change of variables: the points
         and their tangents (``reparam``'s emitter edges, :mod:`sphere3d.boundary.emitters`).
+    field : optional
+        A map per row that replaces the rotation where it has one, with a Jacobian weight:
+        ``field.take(rows).apply(ω, rotated) -> (directions, weight or None)``
+        (:class:`~sphere3d.reparam.chart_field.ChartField`); None: the rotations only.
     """
 
     rotation: Rotation
     rows: np.ndarray
     extra: tuple[np.ndarray, np.ndarray] | None = None
+    field: Any = None
+
+    def directions(self, place: np.ndarray, omega: np.ndarray) -> tuple[Any, Any]:
+        """The evaluation directions of emitter samples ``omega`` (plain, (n, 3)) at rows ``place`` of the
+        change, and their Jacobian weight (value 1; None: 1, a rotation's)."""
+        rotated = self.rotation.take(place).apply(omega)
+        return (rotated, None) if self.field is None else self.field.take(place).apply(omega, rotated)
 
 
 @dataclass(frozen=True)
@@ -326,7 +337,7 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
     lights, attached = (state if lights_change else plain), bool(points_move.any())
 
     def estimate(dual: bool, x: Any, n: Any, omega: np.ndarray, row: Any, t: Any, d: Any, c: Any) -> tuple:
-        st, rotated = (lights, change.rotation.take(row).apply(omega)) if dual else (plain, omega)
+        st, (rotated, jacobian) = (lights, change.directions(row, omega)) if dual else (plain, (omega, None))
         x, n = (x, n) if attached else (detach(x), detach(n))
         # re-attach: the rotated ray from the moving shading point meets the sampled emitter triangle
         it = intersect_triangles(x, rotated, st.triangles[t])
@@ -336,7 +347,8 @@ def _emitter_term(shading: Shading, u: np.ndarray, transforms: Transforms) -> An
         p_cos = cos_x_d * INV_PI
         f = st.emitted(t, it.b1, it.b2) * cos_x_d
         # divided by the θ-free sampling density in solid angle: p_A d² / cos θ_y, p_A = 1 / area at θ0
-        return (f * (p_light / (p_light + p_cos)) / solid_angle_pdf(inv_area, d, c),)
+        f = f * (p_light / (p_light + p_cos)) / solid_angle_pdf(inv_area, d, c)
+        return (f if jacobian is None else f * jacobian,)  # a field's change of variables: its |J|
 
     (f,) = on_rows(estimate, vis, live, shading.x, shading.n, w, place, tri, dist, cos_y)
     out = scatter(m, vis, f, state.dual)

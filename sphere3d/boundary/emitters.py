@@ -120,7 +120,7 @@ class EmitterEdgeSamples:
         return EmitterEdgeSamples(*fields, self.table, self.weight)
 
     def term(
-        self, state: Any, shading: Any, rotation: Rotation, bsdf: Any = None
+        self, state: Any, shading: Any, rotation: Rotation, bsdf: Any = None, field: Any = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """The shading points and the boundary term's tangents, given one emitter rotation per shading point.
 
@@ -131,17 +131,25 @@ class EmitterEdgeSamples:
         tmax = self.dist - 2.0 * state.epsilon
         k = np.flatnonzero(~state.tracer.occluded(take_rows(shading.origin, self.index), self.w, tmax))
         sub = self.take(k)
-        return sub.index, sub.tangent_term(state, shading.x[sub.index], rotation.take(sub.index), bsdf)
+        fields = None if field is None else field.take(sub.index)
+        return sub.index, sub.tangent_term(
+            state, shading.x[sub.index], rotation.take(sub.index), bsdf, fields
+        )
 
-    def tangent_term(self, state: Any, x: Any, rotation: Rotation, bsdf: Any = None) -> np.ndarray:
+    def tangent_term(
+        self, state: Any, x: Any, rotation: Rotation, bsdf: Any = None, field: Any = None
+    ) -> np.ndarray:
         r"""The boundary term's estimate (a tangent, shape (n,), or (p, n) for p parameters) given one
         rotation per point.
 
-        ``x``: the points ``index`` (Dual positions); ``rotation``: their emitter rotations.
+        ``x``: the points ``index`` (Dual positions); ``rotation``: their emitter rotations, followed by
+        ``field`` (one per point) where it has one.
         Estimate $-P/\mathrm{POINTS} · Σ_\mathrm{faces} F_\mathrm{in} (V_T · n_\mathrm{out})$ per edge point
         (module docstring).
         """
         rotated = rotation.apply(self.w)
+        if field is not None:  # the edge point moves with the whole map: V_T from its direction's tangent
+            rotated = field.apply(self.w, rotated)[0]
         area = float(detach(state.emitter_area))
         tri0 = np.asarray(detach(state.triangles))
         # operands without a tangent enter plain: the Dual rules give the same nonzero tangents
@@ -309,7 +317,7 @@ def sample_emitter_edges(state: Any, shading: Any) -> EmitterEdgeSamples | None:
 
 
 def emitter_edge_term(
-    state: Any, shading: Any, rotation: Rotation, bsdf: Any = None
+    state: Any, shading: Any, rotation: Rotation, bsdf: Any = None, field: Any = None
 ) -> tuple[np.ndarray, np.ndarray]:
     r"""The boundary term's shading points and tangents, given one emitter rotation per shading point.
 
@@ -320,6 +328,8 @@ def emitter_edge_term(
     by :meth:`EmitterEdgeSamples.term`. ``bsdf``: at glossy points their lobe at θ0
     (:class:`~sphere3d.glossy.Lobe`, rows of ``shading``): $F_\mathrm{in}$ then holds $f(w_i, w)$ for
     ρ/π's place and the BSDF density in the balance weight (the reflected radiance's term, not E's).
+    ``field``: a map per point after the rotation (:class:`~sphere3d.reparam.chart_field.ChartField`;
+    its points' rotations are active), whose velocity the edge points then take.
     """
     x_moves = any_rows(moves(shading.x))
     emitters_move = np.any(moves(state.triangles)[state.emitters])
@@ -329,5 +339,7 @@ def emitter_edge_term(
     if edge is None:
         return rows[:0], np.zeros(0 if state.k is None else (state.k, 0))
     lobe = None if bsdf is None else _Rows(bsdf, rows)
-    index, term = edge.term(state, sub, rotation if rows.size == len(shading) else rotation.take(rows), lobe)
+    every = rows.size == len(shading)
+    fields = None if field is None else (field if every else field.take(rows))
+    index, term = edge.term(state, sub, rotation if every else rotation.take(rows), lobe, fields)
     return rows[index], term

@@ -34,7 +34,7 @@ from sphere3d.boundary.emitters import edge_table, emitter_edge_term
 from sphere3d.film import FilmTransform
 from sphere3d.integrator import EmitterChange, Identity, Members, Shading
 from sphere3d.live import any_rows, moves
-from sphere3d.reparam.emitter_probes import PROBES, emitter_rotation
+from sphere3d.reparam.emitter_probes import PROBES, emitter_map
 from sphere3d.reparam.film_affine import _shape_images
 from sphere3d.reparam.film_corners import _corner_table
 from sphere3d.reparam.film_kernel import (
@@ -44,9 +44,10 @@ from sphere3d.reparam.film_kernel import (
     _plane_table,
     film_transform,
 )
+from sphere3d.reparam.kernel_border import border_field
 from sphere3d.reparam.lobe import LOBE, lobe_kappa, lobe_radius
 from sphere3d.reparam.penumbra import cone_may_see_motion, moving_sphere, separating_planes
-from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
+from sphere3d.reparam.probes import REFINE, follow_probe_edges, ring_directions, vmf_spread_angle
 from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
 from sphere3d.reparam.snaps import angle_snap
 from sphere3d.rotation import Rotation
@@ -62,7 +63,7 @@ __all__ = ["ReparamTransforms"]
 class ReparamTransforms(Identity):
     r"""The rotations of the three integrals of :mod:`sphere3d.integrator` (defaults: the method's).
 
-    The last eight switches turn one extension off each, for the tests and studies that measure
+    The last ten switches turn one extension off each, for the tests and studies that measure
     what it adds (the method itself always uses them).
 
     Attributes
@@ -119,6 +120,14 @@ class ReparamTransforms(Identity):
         Where such a ring also holds a static edge, keep the corner's edges and that edge by one
         field of the film (:mod:`sphere3d.reparam.corner_lines`); else the corner's fan drags the
         static edge. Applied with ``film_junctions`` and ``film_corners``.
+    emitter_field : bool
+        Where a shading point's shadow probes find shadow edges, map the emitter samples by one field
+        that keeps them and the light's border (:mod:`sphere3d.reparam.emitter_field`); else the
+        rotation follows one of them.
+    shading_border : bool
+        Where a cosine kernel's ring reaches the light's border, keep the border (and the edge the
+        rotation follows) by a field after the rotation (:mod:`sphere3d.reparam.kernel_border`); else the
+        rotation drags the border.
     shading_shapes : bool
         Where a moving shape's image from the shading point lies inside a cosine kernel's ring of
         probes, or is thin and reaches into it, follow it by an affine map of the gnomonic chart
@@ -145,6 +154,8 @@ class ReparamTransforms(Identity):
     shading_shapes: bool = True
     lobe: float | None = LOBE
     film_corner_lines: bool = True
+    emitter_field: bool = True
+    shading_border: bool = True
 
     def tables(self, state: SceneState) -> tuple[Callable[[SceneState], Any], ...]:
         """The per-state tables the options read where triangles move (:func:`sphere3d.execution.prepare`
@@ -175,16 +186,20 @@ class ReparamTransforms(Identity):
         (:class:`~sphere3d.glossy.Lobe`), the edge term's integrand then $L_e f \cos θ_x$."""
         m = len(shading)
         rows = np.arange(m) if self.emitter_edges else np.flatnonzero(visible)
-        rotation = emitter_rotation(shading if rows.size == m else shading.take(rows), self.emitter_probes)
-        extra = emitter_edge_term(shading.state, shading, rotation, bsdf) if self.emitter_edges else None
-        return EmitterChange(rotation, rows, extra)
+        sub = shading if rows.size == m else shading.take(rows)
+        maps = emitter_map(sub, self.emitter_probes, field=self.emitter_field)
+        field = maps.field if np.any(maps.field.slot >= 0) else None
+        state = shading.state
+        extra = emitter_edge_term(state, shading, maps.rotation, bsdf, field) if self.emitter_edges else None
+        return EmitterChange(maps.rotation, rows, extra, field)
 
     def _probe_rotation(
         self, shading: Shading, centre: np.ndarray, kappa: float | np.ndarray | None = None
-    ) -> tuple[Rotation, np.ndarray]:
+    ) -> tuple[Rotation, np.ndarray, Any]:
         """One rotation per shading point from a ring of probes around the kernel ``centre`` (of
-        concentration ``kappa``: one, or one per point; None: the option's), and whether the centre's
-        probe sees the sky (above the horizon, no hit).
+        concentration ``kappa``: one, or one per point; None: the option's), whether the centre's
+        probe sees the sky (above the horizon, no hit), and the edges the rotation follows
+        (:class:`~sphere3d.reparam.probes.Followed`).
 
         Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
@@ -208,10 +223,10 @@ class ReparamTransforms(Identity):
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
         spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(kappa))
         sky = ~hits.hit[:, 0] & (dot(d[:, 0], normal) > 0.0)
-        rotation = follow_probes(
+        followed = follow_probe_edges(
             shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
         )
-        return rotation, sky
+        return followed.rotation, sky, followed
 
     def _kernel_weight(
         self, rotated: Any, centre: np.ndarray, kappa: float | np.ndarray | None = None
@@ -276,17 +291,27 @@ class ReparamTransforms(Identity):
         """The rotated samples, their kernel weights and the control variate's c(ω) (the radiance the
         kernel's centre sees: the sky, or 0; π L(ω)), from probes around the kernel centres (of
         concentration ``kappa``: one, or one per point)."""
-        rotation, sky = self._probe_rotation(sub, centre, kappa)
+        rotation, sky, followed = self._probe_rotation(sub, centre, kappa)
         rotated = rotation.apply(mu_l)
         jacobian = None
-        if self.shading_shapes:
-            # a moving shape inside the kernel's ring: the chart's map that follows all its edges
-            shape = inner_shape_map(sub, mu_l, centre, vmf_spread_angle(kappa, self.spread))
-            if shape.mask.any():
-                k = rotated.k
-                t = np.where(shape.mask[:, None], shape.mu_dot, rotated.tangent)
-                rotated = Dual(rotated.value, t, k)
-                jacobian = Dual(np.ones(len(mu_l)), shape.log_jacobian_dot, k)  # |J_T|: value 1
+        ring = vmf_spread_angle(kappa, self.spread)
+        k = rotated.k
+        # a moving shape inside the kernel's ring: the chart's map that follows all its edges
+        shape = inner_shape_map(sub, mu_l, centre, ring) if self.shading_shapes else None
+        own = np.zeros(len(mu_l), dtype=bool)
+        if self.shading_border:  # the light's border in the kernel: kept by a field after the rotation
+            single = None if shape is None else shape.triangle
+            field = border_field(sub, centre, ring, rotation, followed, single)
+            # where an inner triangle's edges are kept with the border, the field after the identity
+            own = (field.slot >= 0) & (single >= 0) if single is not None else own
+            base = Dual(rotated.value, np.where(own[:, None], 0.0, rotated.tangent), k)
+            rotated, jacobian = field.apply(mu_l, base)
+        if shape is not None and (shape.mask & ~own).any():
+            mask = shape.mask & ~own
+            rotated = Dual(rotated.value, np.where(mask[:, None], shape.mu_dot, rotated.tangent), k)
+            before = 0.0 if jacobian is None else jacobian.tangent
+            # |J_T|: value 1
+            jacobian = Dual(np.ones(len(mu_l)), np.where(mask, shape.log_jacobian_dot, before), k)
         # f(Tμ) k(Tμ, ω) |J_T| / (p(μ) k(μ, ω)): value f(μ)/p(μ), derivative with the kernel factor (Sec. 4.2)
         weights = self._kernel_weight(rotated, centre, kappa)
         if jacobian is not None:

@@ -47,6 +47,7 @@ measurement pages (``hard_shadow``, the bias atlas) give the sizes.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,6 +56,8 @@ from flatland.core.dual import detach
 from sphere3d.boundary.emitters import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, moves, take_rows
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
+from sphere3d.reparam.chart_field import ChartField
+from sphere3d.reparam.emitter_field import shadow_field
 from sphere3d.reparam.paper import direction_towards, mean_point_direction
 from sphere3d.reparam.penumbra import may_see_motion, moving_occluders, moving_sphere
 from sphere3d.rotation import Rotation
@@ -62,7 +65,7 @@ from sphere3d.sampling import sample_mesh, triangle_barycentrics
 from sphere3d.tracing import attached_points, intersect_triangles
 from sphere3d.vector import dot, norm, zeros
 
-__all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "emitter_rotation", "probe_rays", "row_probes"]
+__all__ = ["AIM", "BOUNDARY", "PROBES", "REFINE", "EmitterMap", "emitter_map", "probe_rays", "row_probes"]
 
 PROBES = 4
 """Shadow probes per shading point uniform on the emitters' area."""
@@ -191,10 +194,25 @@ def _rows(rows: np.ndarray, values: np.ndarray, shape: tuple, fill: Any) -> np.n
     return out
 
 
-def emitter_rotation(
-    shading: Any, probes: int = PROBES, boundary: int = BOUNDARY, refine: int = REFINE, aim: int = AIM
-) -> Rotation:
-    """One rotation per shading point for the emitter strategy (module docstring).
+@dataclass(frozen=True)
+class EmitterMap:
+    """Per shading point the emitter strategy's rotation, and the field that replaces it where the probes
+    found shadow edges (:mod:`sphere3d.reparam.emitter_field`)."""
+
+    rotation: Rotation
+    field: ChartField
+
+
+def emitter_map(
+    shading: Any,
+    probes: int = PROBES,
+    boundary: int = BOUNDARY,
+    refine: int = REFINE,
+    aim: int = AIM,
+    field: bool = True,
+) -> EmitterMap:
+    """One rotation per shading point for the emitter strategy (module docstring), and with ``field`` the
+    field of :func:`~sphere3d.reparam.emitter_field.shadow_field` where a pair was found.
 
     ``shading``: a :class:`~sphere3d.integrator.Shading`; random numbers from its draws
     (stream ``"probes.emitter"``, keyed on each point's sample), so the primary samples are
@@ -206,25 +224,29 @@ def emitter_rotation(
     state = shading.state
     m = len(shading)
     if not state.dual:
-        return Rotation.identity((m,))
+        return EmitterMap(Rotation.identity((m,)), ChartField.none(m))
     need = np.full(m, emitters_change(state)) | any_rows(moves(shading.x))
     rest = np.flatnonzero(~need)  # the cull only where nothing else asks for probes
     need[rest] = may_see_motion(state, take_rows(detach(shading.x), rest))
     if need.all():
-        return _probe_rotation(shading, probes, boundary, refine, aim)
+        target, found, fields = _probe_rotation(shading, probes, boundary, refine, aim, field)
+        return EmitterMap(Rotation.following(target, found), fields)
     rows = np.flatnonzero(need)
     target, found = zeros((m, 3), True, state.k), np.zeros(m, dtype=bool)
+    fields = ChartField.none(m, state.k)
     if rows.size:
-        sub = _probe_rotation(shading.take(rows), probes, boundary, refine, aim, targets=True)
-        target[rows], found[rows] = sub
-    return Rotation.following(target, found)
+        target[rows], found[rows], sub = _probe_rotation(
+            shading.take(rows), probes, boundary, refine, aim, field
+        )
+        fields = sub.spread(rows, m)
+    return EmitterMap(Rotation.following(target, found), fields)
 
 
 def _probe_rotation(
-    shading: Any, probes: int, boundary: int, refine: int, aim: int, targets: bool = False
-) -> Any:
-    """The probes' rotation for every point of ``shading`` (its attached target and where it was
-    found, if ``targets``)."""
+    shading: Any, probes: int, boundary: int, refine: int, aim: int, field: bool
+) -> tuple[Any, np.ndarray, ChartField]:
+    """The probes' rotation for every point of ``shading``: its attached target, where it was found, and
+    the fields (with ``field``)."""
     state = shading.state
     m = len(shading)
     u = shading.draws.uniforms("probes.emitter", probes, 3)
@@ -257,6 +279,7 @@ def _probe_rotation(
     some_occluded, some_visible = any_rows(occluded), any_rows(visible)
     target = zeros((m, 3), state.dual, state.k)
     found = np.zeros(m, dtype=bool)
+    fields = ChartField.none(m, state.k)
     s = np.flatnonzero(some_occluded & ~some_visible)
     if s.size:  # all occluded: the mean attached hit of the occluded probes (the authors' rule)
         hits = state.tracer.intersect(shading.origin[s, None], w[s], tmax[s])
@@ -271,9 +294,14 @@ def _probe_rotation(
         inside, outside = ws[rows, i], ws[rows, j]
         hits = state.tracer.intersect(origin, inside)
         normal = take_rows(detach(shading.n), s)
-        edge, _, _ = bisect_silhouette(state, origin, inside, outside, hits, normal, refine)
+        edge, a_in, a_out = bisect_silhouette(state, origin, inside, outside, hits, normal, refine)
         point = attached_points(state.triangles[edge.triangle], edge.u, edge.v)
         target[s], found[s] = direction_towards(point, shading.x[s], np.ones(s.size, dtype=bool))
+        if field:  # every shadow edge the probes can find, and the light's border, kept by one field
+            first = (edge, a_in, a_out)
+            turn = Rotation.following(target[s], found[s])  # these rows' rotations, as in the whole one
+            fields = shadow_field(state, shading.x[s], origin, normal, ws, occ, vis, first, turn, refine)
+            fields = fields.spread(s, m)
     # where neither the shading point nor an emitter moves, that rotation would have a zero derivative
     emitters_move = np.any(moves(state.triangles)[state.emitters])
     moving = any_rows(moves(shading.x)) | emitters_move
@@ -282,4 +310,4 @@ def _probe_rotation(
         b1, b2 = triangle_barycentrics(u[f, :, 1:3])
         points = attached_points(state.triangles[state.emitters[k[f]]], b1, b2)
         target[f], found[f] = mean_point_direction(shading.x[f], points, usable[f, :inner])
-    return (target, found) if targets else Rotation.following(target, found)
+    return target, found, fields

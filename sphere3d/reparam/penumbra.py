@@ -58,6 +58,7 @@ __all__ = [
     "bounding_sphere",
     "cone_may_see_motion",
     "cones_overlap",
+    "emitter_sphere",
     "may_see_motion",
     "moving_occluders",
     "moving_sphere",
@@ -265,6 +266,11 @@ def _spheres(state: Any) -> tuple[tuple[np.ndarray, float], tuple[np.ndarray, fl
     """The bounding spheres of the changing triangles and of the emitters, once per state."""
     triangles = np.asarray(detach(state.triangles))
     return bounding_sphere(triangles[_changing(state)]), bounding_sphere(triangles[state.emitters])
+
+
+def emitter_sphere(state: Any) -> tuple[np.ndarray, float]:
+    """The emitters' bounding sphere at θ0 (centre, radius), once per state."""
+    return _spheres(state)[1]
 
 
 def cones_overlap(state: Any, x: np.ndarray) -> np.ndarray:

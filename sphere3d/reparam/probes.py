@@ -22,6 +22,7 @@ with its shape; its direction from the (possibly moving) origin gives the rotati
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,8 @@ from sphere3d.vector import frame
 
 __all__ = [
     "REFINE",
+    "Followed",
+    "follow_probe_edges",
     "follow_probes",
     "ring_directions",
     "ring_offsets",
@@ -200,6 +203,16 @@ def _choose(
     return choice.point(), choice.found, snapped
 
 
+@dataclass(frozen=True)
+class Followed:
+    """The rotation of :func:`follow_probes`, and the edges it follows: ``snapped`` = (rows, their hit
+    triangles, the edges through the followed points as vertex slots (rows, 2, 2), -1: none), None
+    without a snap or a snapped row (:data:`~sphere3d.reparam.snaps.Snap`)."""
+
+    rotation: Rotation
+    snapped: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+
+
 def follow_probes(
     state: SceneState,
     origin: Any,
@@ -218,10 +231,26 @@ def follow_probes(
     follows its own (:func:`~sphere3d.reparam.snaps.line_spin`); at a corner, by its two edges' rates
     weighted by the kernel.
     """
+    args = (state, origin, trace_origin, directions, hits, normal, refine, snap, spin)
+    return follow_probe_edges(*args).rotation
+
+
+def follow_probe_edges(
+    state: SceneState,
+    origin: Any,
+    trace_origin: np.ndarray,
+    directions: np.ndarray,
+    hits: Hits,
+    normal: np.ndarray | None = None,
+    refine: int = REFINE,
+    snap: Snap | None = None,
+    spin: tuple[np.ndarray, float | np.ndarray] | None = None,
+) -> Followed:
+    """:func:`follow_probes`, with the edges its rotation follows."""
     point, found, snapped = _choose(state, origin, trace_origin, directions, hits, normal, refine, snap)
     to, found = direction_towards(point, origin, found)
     if spin is None or snapped is None:
-        return Rotation.following(to, found)
+        return Followed(Rotation.following(to, found), snapped)
     rows, triangle, lines = snapped
     k = state.k  # None, or k parameters: a turn rate for each
     turn = np.zeros(len(found) if k is None else (k, len(found)))
@@ -232,4 +261,4 @@ def follow_probes(
         sigma = spin[1] if np.ndim(spin[1]) == 0 else spin[1][r]
         rate = line_spin(state.triangles[triangle[ok]], o, point[r], lines[ok], spin[0][r], sigma)
         turn[..., r] = rate
-    return Rotation.following(to, found, Dual(np.zeros(len(found)), turn, k))
+    return Followed(Rotation.following(to, found, Dual(np.zeros(len(found)), turn, k)), snapped)

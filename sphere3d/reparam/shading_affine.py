@@ -72,6 +72,7 @@ class _Shapes:
     radius: np.ndarray
     anchors: Any  # Dual (k, A, 3)
     single: np.ndarray
+    triangle: np.ndarray  # the shape's first triangle (its only one where ``single``)
 
 
 @per_state
@@ -101,9 +102,11 @@ def _moving_shapes(state: SceneState) -> _Shapes:
         single.append(len(corners) == 3)
     if not shapes:
         none = Dual(np.zeros((0, MAX_ANCHORS, 3)), None, k)
-        return _Shapes(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), none, np.zeros(0, dtype=bool))
+        empty = np.zeros(0, np.int64)
+        return _Shapes(empty, np.zeros((0, 3)), np.zeros(0), none, np.zeros(0, dtype=bool), empty)
     anchors = Dual(np.array(values), np.array(tangents) if k is None else np.stack(tangents, axis=1), k)
-    return _Shapes(np.array(shapes), np.array(centres), np.array(radii), anchors, np.array(single))
+    first = np.array([np.argmax(state.shape_of == s) for s in shapes], dtype=np.int64)  # per shape
+    return _Shapes(np.array(shapes), np.array(centres), np.array(radii), anchors, np.array(single), first)
 
 
 @dataclass(frozen=True)
@@ -115,6 +118,8 @@ class ShadingAffine:
     mask: np.ndarray
     mu_dot: np.ndarray
     log_jacobian_dot: np.ndarray
+    triangle: np.ndarray
+    """(n,): the shape's triangle where it is one triangle (its map exact), else -1."""
 
 
 def _chart(d: Any, centre: np.ndarray, t: np.ndarray, b: np.ndarray) -> tuple[Any, Any]:
@@ -137,7 +142,12 @@ def inner_shape_map(
     """
     n, params = len(mu), shading.state.k
     slots = () if params is None else (params,)
-    out = ShadingAffine(np.zeros(n, dtype=bool), np.zeros((*slots, n, 3)), np.zeros((*slots, n)))
+    out = ShadingAffine(
+        np.zeros(n, dtype=bool),
+        np.zeros((*slots, n, 3)),
+        np.zeros((*slots, n)),
+        np.full(n, -1, dtype=np.intp),
+    )
     shapes = _moving_shapes(shading.state)
     if not len(shapes.shape) or n == 0:
         return out
@@ -200,6 +210,7 @@ def inner_shape_map(
     s2 = 1.0 + np.einsum("ri,ri->r", um, um)
     y = (c + um[:, :1] * t + um[:, 1:] * b) / np.sqrt(s2)[:, None]
     out.mask[rows] = True
+    out.triangle[rows] = np.where(shapes.single[k[keep_idx]], shapes.triangle[k[keep_idx]], -1)
     chart = (q, scatter, mean, um, s2, y, t, b)
     for i, slot in enumerate([u_dot] if params is None else u_dot):  # each parameter's map as a single one's
         y_dot, log_jacobian_dot = _map_tangents(slot, keep_idx, *chart)

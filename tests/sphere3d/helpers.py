@@ -207,7 +207,7 @@ def rotation_loss(vertices, param, n, seed, **options):
     omega = sample_vmf(draws.uniforms("kernel.bsdf", 2), mu, kappa)
     transforms = ReparamTransforms(kappa_film=KAPPA_FILM, paired=False, **options)
     shading = Shading.at(state, Dual(np.zeros((n, 3))), Dual(up), draws)
-    rotation, _ = transforms._probe_rotation(shading, omega)
+    rotation = transforms._probe_rotation(shading, omega)[0]
     a, a_dot = np.asarray(detach(rotation.target)), np.asarray(tangent(rotation.target))
     spin = 0.0 if rotation.spin is None else np.asarray(tangent(rotation.spin))[:, None] * a
     velocity = np.where(rotation.active[:, None], np.cross(a, a_dot) + spin, 0.0)  # Ω

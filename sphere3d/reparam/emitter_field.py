@@ -1,0 +1,135 @@
+r"""The emitter strategy's field: the shadow edges found by probes, kept after the rotation.
+
+The emitter strategy's rotation (:mod:`sphere3d.reparam.emitter_probes`) follows one point of one
+shadow edge per shading point. Where the occluder recedes, scales or turns, its shadow's edges across
+the light move apart (a triangle's shadow inside the light, a box's corner casting two edges), and
+the rotation drags all but the one it follows.
+
+Here, at the shading points whose probes hold a pair of an occluded and a visible probe, the rotation
+is followed by a field of the gnomonic chart about the axis from the point to the centre of the
+emitters' bounding sphere (:class:`~sphere3d.reparam.chart_field.ChartField`, Loubet et al. 2019,
+Sec. 4.3: a refinement of the heuristic) that keeps the shadow edges: the occluder's edges found by
+bisection between pairs of an occluded and a visible probe
+(:func:`~sphere3d.reparam.bisection.bisect_silhouette`), each moved onto the edge of its triangle that
+the bisection's segment leaves by (:func:`~sphere3d.reparam.snaps.edge_snap`). The first pair is the
+closest one (the rotation's); each next one joins an occluded and a visible probe on the same side of
+every edge found so far, so another edge lies between them; at most :data:`PAIRS` (the three edges of
+a triangle's shadow). The field's scale is the light's radius in the chart, $\tan(\arcsin(R / d))$
+for its bounding sphere of radius R at distance d: beyond the light it is the rotation alone.
+
+The light's own border is dragged by the whole map as by the rotation alone, and its boundary term
+(:mod:`sphere3d.boundary.emitters`) takes the map's velocity at its edge points: the border held
+fixed, exactly, whatever the field does. A point on the light's bounding sphere gets no field.
+
+Biased where a shadow edge is found by no pair (a thin lit or hidden part between probes, a fourth
+edge), where a bisection stops on an inner edge of the occluder's mesh near its silhouette, and where
+the shadow's outline is curved (a smooth occluder's, straight per facet only: between the found edges
+the field blends their motions with the rotation's).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from flatland.core.dual import detach
+from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
+from sphere3d.reparam.chart_field import ChartField, chart_lines, relative_normal
+from sphere3d.reparam.film_lines import FilmLines
+from sphere3d.reparam.penumbra import emitter_sphere
+from sphere3d.reparam.snaps import edge_snap
+from sphere3d.rotation import Rotation
+from sphere3d.vector import cross, frame, norm
+
+__all__ = ["PAIRS", "shadow_field"]
+
+PAIRS = 3
+"""Shadow edges sought per shading point at most (bisections between probe pairs): a triangle's shadow
+has three."""
+
+
+def _no_corner(rows: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Distances of an edge's ends from the kernel for :func:`~sphere3d.reparam.snaps.edge_snap`: 0 each,
+    with a radius of -1, so no corner is ever snapped to (a line is wanted, not a point)."""
+    return np.zeros(ends.shape[:2])
+
+
+def shadow_field(
+    state: Any,
+    x: Any,
+    origin: np.ndarray,
+    normal: np.ndarray,
+    w: np.ndarray,
+    occluded: np.ndarray,
+    visible: np.ndarray,
+    first: tuple,
+    rotation: Rotation,
+    refine: int,
+    pairs: int = PAIRS,
+) -> ChartField:
+    """The fields of the points ``x`` (Dual (s, 3); ray origins ``origin``, normals ``normal``) whose probe
+    directions ``w`` (s, p, 3) hold an ``occluded`` and a ``visible`` probe each (module docstring), about
+    their ``rotation``; ``first``: the closest pair's bisection, ``(hits, inside, outside)``
+    (:func:`~sphere3d.reparam.bisection.bisect_silhouette`)."""
+    s, k = len(origin), state.k
+    if s == 0:
+        return ChartField.none(s, k)
+    x0 = np.asarray(detach(x))
+    centre, radius = emitter_sphere(state)
+    axis = centre - x0
+    distance = norm(axis)
+    ok = distance > radius  # the light inside a cone of half-angle < π/2 about the axis: in the chart
+    axis /= np.where(ok, distance, 1.0)[:, None]
+    # the light's radius in the chart, tan(asin(R / d)): the field's scale (its prior's weight 1 / scale²)
+    scale = radius / np.sqrt(np.maximum(distance * distance - radius * radius, 1e-300))
+    t, b = frame(axis)
+    snap = edge_snap(state, _no_corner, -1.0)
+    found_rows, found_m = [], []
+    planes = np.zeros((s, 0, 3))  # the found edges' great circles (plain normals), for the side tests
+    hits, inside, outside = first
+    rows, alive = np.arange(s), ok.copy()
+    for r in range(pairs):  # a few rounds of bisection, each over every point at once
+        if r:
+            # a pair on the same side of every edge found: another edge lies between them
+            side = np.sign(np.einsum("spx,sjx->spj", w, planes))  # (s, p, found)
+            same = np.all(side[:, :, None] == side[:, None, :], axis=-1)  # (s, p, p)
+            i, j, has = closest_pair(
+                w, lambda q, same=same: occluded[q, :, None] & visible[q, None, :] & same[q]
+            )
+            rows = np.flatnonzero(has & alive)
+            if not rows.size:
+                break
+            a_in, a_out = w[rows, i[rows]], w[rows, j[rows]]
+            h0 = state.tracer.intersect(origin[rows], a_in)
+            hits, inside, outside = bisect_silhouette(
+                state, origin[rows], a_in, a_out, h0, normal[rows], refine
+            )
+        _, _, lines = snap(rows, origin[rows], inside, outside, hits)
+        good = (lines[:, 0, 0] >= 0) & hits.hit & ok[rows]
+        alive[:] = False
+        alive[rows[good]] = True  # the next round only where this one found an edge
+        tri = state.triangles[hits.triangle[good]]
+        g = np.arange(good.sum())
+        v1, v2 = tri[g, lines[good, 0, 0]], tri[g, lines[good, 0, 1]]
+        xg = x[rows[good]]
+        m = cross(v1 - xg, v2 - xg)
+        found_rows.append(rows[good])
+        found_m.append(relative_normal(m, rotation.take(rows[good]), k))
+        plane = np.zeros((s, 1, 3))
+        plane[rows[good], 0] = np.asarray(detach(m))
+        planes = np.concatenate([planes, plane], axis=1)
+    shadow = np.concatenate(found_rows) if found_rows else np.zeros(0, np.intp)
+    fields = np.unique(shadow)
+    if not fields.size:
+        return ChartField.none(s, k)
+    slot = np.full(s, -1, dtype=np.intp)
+    slot[fields] = np.arange(fields.size)
+    parts = [
+        chart_lines(slot[row], m, axis[row], t[row], b[row], scale[row], k)
+        for row, m in zip(found_rows, found_m, strict=True)  # one part per round of bisection
+    ]
+    lines = FilmLines(
+        *(np.concatenate([getattr(p, f) for p in parts]) for f in FilmLines.__dataclass_fields__)
+    )
+    return ChartField(slot, axis[fields], t[fields], b[fields], scale[fields], lines, k)
