@@ -1,7 +1,7 @@
 """The cases of the bias atlas (:mod:`benchmarks.atlas`): scenes, motions and their closed forms.
 
-Four families, each a black feature against a constant sky of radiance 1, where the closed forms of
-:mod:`sphere3d.closed_form` and :mod:`flatland.closed_form` give the exact derivative:
+Five families, each a black feature against a constant sky of radiance 1 or a square light, where the
+closed forms of :mod:`sphere3d.closed_form` and :mod:`flatland.closed_form` give the exact derivative:
 
 ``sphere3d film``
     A triangle (:data:`sphere3d.closed_form.TRIANGLE_SHAPE`) ``size`` px across in front of a
@@ -13,6 +13,14 @@ Four families, each a black feature against a constant sky of radiance 1, where 
     The irradiance at the origin, normal 30 degrees off the zenith, under the same triangle
     ``size`` radians across at distance 1 straight above, tilted alike: Lambert's formula,
     :func:`sphere3d.closed_form.occluded_sky_irradiance`.
+``sphere3d light``
+    The irradiance at the origin (normal +z) under a square light of side 1 at height 2 (radiance 5,
+    sharp-edged), the same triangle ``size`` radians across at distance 1 between, tilted alike, its
+    centre at :data:`LIGHT_OFFSET` so that its shadow on the light's plane lies off the light's centre
+    (inside it for the small sizes, across its border for 0.5 rad): the light minus the shadow by
+    Lambert's formula, :func:`sphere3d.closed_form.occluded_light_irradiance`. The emitter strategy's
+    integral and the cosine strategy's kernels beside a light's border, which the sky families do not
+    have.
 ``flatland film``
     A segment ``size`` px long at depth 2.5 in front of flatland's camera (16 pixels), at ``angle``
     degrees to the line of sight: :func:`flatland.closed_form.segment_image`.
@@ -41,7 +49,7 @@ from sphere3d import closed_form as scf
 
 __all__ = ["FAMILIES", "Case", "grid"]
 
-FAMILIES = ("sphere3d film", "sphere3d shading", "flatland film", "flatland shading")
+FAMILIES = ("sphere3d film", "sphere3d shading", "sphere3d light", "flatland film", "flatland shading")
 FILM_MOTIONS_3D = {
     "translate x": "tri.translate.x",
     "translate y": "tri.translate.y",
@@ -71,6 +79,7 @@ SHADING_MOTIONS_2D = {k: v for k, v in FILM_MOTIONS_2D.items() if not k.startswi
 MOTIONS = {
     "sphere3d film": FILM_MOTIONS_3D,
     "sphere3d shading": SHADING_MOTIONS_3D,
+    "sphere3d light": SHADING_MOTIONS_3D,
     "flatland film": FILM_MOTIONS_2D,
     "flatland shading": SHADING_MOTIONS_2D,
 }
@@ -82,6 +91,11 @@ FOV_2D = 0.5
 PIXELS_2D = 16
 PIXEL_2D = 2.0 * math.tan(0.5 * FOV_2D) / PIXELS_2D * DEPTH_2D
 """flatland: one pixel's width in world units at the segment's depth."""
+LIGHT_OFFSET = (0.1, 0.05)
+"""``sphere3d light``: the triangle's centre off the axis through the light's centre, at height 1 (its
+shadow's centre twice as far off on the light's plane)."""
+LIGHT = {"half": 0.5, "height": 2.0, "radiance": 5.0}
+"""``sphere3d light``: the square light of :func:`sphere3d.closed_form.light_triangle_scene`."""
 OFFSET = (0.13, -0.21)
 """The feature's centre off the optical axis, in pixels (no edge lines up with the pixel grid)."""
 
@@ -136,6 +150,7 @@ class Case:
         return {
             "sphere3d film": self._film_3d,
             "sphere3d shading": self._shading_3d,
+            "sphere3d light": self._light_3d,
             "flatland film": self._film_2d,
             "flatland shading": self._shading_2d,
         }[self.family]()
@@ -161,6 +176,13 @@ class Case:
         shape["vertices"], shape["translate"] = self._triangle(1.0, np.array([0.0, 0.0, 1.0]))
         return scene
 
+    def _light_3d(self) -> dict:
+        centre = np.array([*LIGHT_OFFSET, 1.0])
+        scene = scf.light_triangle_scene(np.array(scf.TRIANGLE_SHAPE) + centre, **LIGHT)
+        shape = next(s for s in scene["shapes"] if s["name"] == "tri")
+        shape["vertices"], shape["translate"] = self._triangle(1.0, centre)
+        return scene
+
     def _segment(self, length: float, centre: np.ndarray) -> np.ndarray:
         a = math.radians(self.angle)
         half = 0.5 * length * np.array([math.sin(a), math.cos(a)])  # 90 deg: across the line of sight (+y)
@@ -181,6 +203,8 @@ class Case:
 
     @property
     def normal(self) -> tuple:
+        if self.family == "sphere3d light":  # the closed form's point: normal +z
+            return (0.0, 0.0, 1.0)
         s, c = math.sin(NORMAL_TILT), math.cos(NORMAL_TILT)
         return (s, 0.0, c) if self.package == "sphere3d" else (s, c)
 
@@ -205,9 +229,36 @@ class Case:
         if self.family == "flatland film":
             segment = fcf.segment_image(scene, self.param, theta)
             return segment.value, segment.derivative
+        if self.family == "sphere3d light":  # seen from the shadow rays' origin, ε above the point
+            return scf.occluded_light_irradiance(scene, self.param, self.origin(theta)[2], theta)
         if self.package == "sphere3d":
             return scf.occluded_sky_irradiance(scene, self.origin(theta), self.normal, self.param, theta)
         return fcf.occluded_sky_irradiance(scene, self.point, self.normal, self.param, theta)
+
+    def flux(self) -> float:
+        """The gross boundary flux of the shading integral (what its error is measured against): the
+        triangle's edges' (:func:`sphere3d.closed_form.boundary_flux`), for ``sphere3d light`` where they
+        lie in front of the light."""
+        if self.package == "flatland":
+            return fcf.boundary_flux(self.scene(), self.point, self.normal, self.param).gross
+        if self.family != "sphere3d light":
+            return scf.boundary_flux(self.scene(), self.origin(), self.normal, self.param).gross
+        half, height = LIGHT["half"], LIGHT["height"]
+
+        def window(omega: np.ndarray) -> np.ndarray:  # the direction meets the light's square
+            up = omega[:, 2] > 0.0
+            at = omega[:, :2] * (height / np.where(up, omega[:, 2], 1.0))[:, None]
+            return up & np.all(np.abs(at) <= half, axis=1)
+
+        scene = self.scene()
+        alone = {
+            **scene,
+            "shapes": [s for s in scene["shapes"] if s["name"] == "tri"],
+        }  # the triangle's edges
+        flux = scf.boundary_flux(
+            alone, self.origin(), self.normal, self.param, 256, LIGHT["radiance"], window
+        )
+        return flux.gross
 
     def origin(self, theta: float = 0.0) -> tuple:
         """Where the renderer evaluates the shading integral: sphere3d traces its rays from

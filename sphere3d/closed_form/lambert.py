@@ -4,6 +4,7 @@ with it."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -106,7 +107,9 @@ def occluded_sky_irradiance(
     return float(np.asarray(detach(e))), float(np.asarray(tangent(e))) if param is not None else 0.0
 
 
-def occluded_light_irradiance(scene: Any, param: str | None = None, eye: float = 0.0) -> tuple[float, float]:
+def occluded_light_irradiance(
+    scene: Any, param: str | None = None, eye: float = 0.0, theta: float = 0.0
+) -> tuple[float, float]:
     r"""E and dE/dθ at the origin (normal +z) under the square light of
     :func:`~sphere3d.closed_form.light_triangle_scene` with its black triangle ``tri`` in between.
 
@@ -120,7 +123,8 @@ def occluded_light_irradiance(scene: Any, param: str | None = None, eye: float =
 
     ``eye``: the height above the origin from which the visibility is seen, the cosine and the solid
     angle staying at the origin (the renderer's shadow rays start ``state.epsilon`` along the normal:
-    pass it to compare at that order; the shadow is then projected from (0, 0, eye)).
+    pass it to compare at that order; the shadow is then projected from (0, 0, eye)). ``theta``: the
+    parameter's offset (value and derivative there).
     """
     scene = load_scene(scene)
     names = sorted(s.name for s in scene.shapes)
@@ -132,7 +136,7 @@ def occluded_light_irradiance(scene: Any, param: str | None = None, eye: float =
     square = np.array([[-half, -half], [half, -half], [half, half], [-half, half]])
     whole = scene.to_dict()
     alone = load_scene({**whole, "shapes": [s for s in whole["shapes"] if s["name"] == "tri"]})
-    v = triangle_vertices(alone, param, variable(0.0) if param is not None else 0.0)
+    v = triangle_vertices(alone, param, variable(theta) if param is not None else 0.0)
     z = np.asarray(detach(v))[:, 2]
     if not np.all((z > eye) & (z < height)):
         raise ValidationError(
@@ -160,7 +164,15 @@ class Flux:
     gross: float
 
 
-def boundary_flux(scene: Any, point: Any, normal: Any, param: str, nodes: int = 48) -> Flux:
+def boundary_flux(
+    scene: Any,
+    point: Any,
+    normal: Any,
+    param: str,
+    nodes: int = 48,
+    radiance: float | None = None,
+    window: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Flux:
     r""":class:`Flux` of the scene's black triangle seen from ``point`` (normal ``normal``) under ``param``.
 
     Reynolds transport on the sphere of directions: the triangle's image Ω(T) is bounded by the
@@ -170,8 +182,13 @@ def boundary_flux(scene: Any, point: Any, normal: Any, param: str, nodes: int = 
     $dl = |dω/ds| ds$, $dω/ds = (I - ω ω^T)(B - A)/|P|$. Each edge by ``nodes``-point Gauss–Legendre
     quadrature (the integrand is smooth in s; the sum agrees with Lambert's formula's derivative to
     rounding, tests/sphere3d/test_closed_forms.py).
+
+    ``radiance``: behind the triangle instead of the scene's sky; ``window(ω)`` (bool per unit direction
+    (nodes, 3)): where it is (a light's extent: the integrand then jumps inside an edge, and the
+    quadrature is a scale, not a derivative to rounding).
     """
     scene = load_scene(scene)
+    radiance = scene.sky if radiance is None else radiance
     x = np.array(check_vector("point", point))
     n = np.array(check_vector("normal", normal))
     n = n / np.linalg.norm(n)
@@ -190,6 +207,8 @@ def boundary_flux(scene: Any, point: Any, normal: Any, param: str, nodes: int = 
         d = np.asarray(detach(b - a))
         dl = np.linalg.norm(d - o * (o @ d)[:, None], axis=1) / np.linalg.norm(np.asarray(detach(p)), axis=1)
         density = (o @ n) * (np.asarray(tangent(omega)) @ m) * dl
+        if window is not None:
+            density = np.where(window(o), density, 0.0)
         net += float(np.sum(w * density))
         gross += float(np.sum(w * np.abs(density)))
-    return Flux(-scene.sky * net, scene.sky * gross)
+    return Flux(-radiance * net, radiance * gross)

@@ -6,13 +6,14 @@ discontinuity where one rotation per integral cannot (Loubet et al. 2019, Sec. 4
 - ``camera``: the per-sample film kernel (:mod:`sphere3d.reparam.film_kernel`), with its
   extensions (the probe ring, bisection, snaps, junctions, one plane);
 - ``emitter``: the rotation that follows the shadow edge (:mod:`sphere3d.reparam.emitter_probes`),
-  with the emitters' own edges held fixed by their boundary term
-  (:mod:`sphere3d.boundary.emitters`);
+  then a field keeping every shadow edge the probes find (:mod:`sphere3d.reparam.emitter_field`), with
+  the emitters' own edges held fixed by their boundary term (:mod:`sphere3d.boundary.emitters`);
 - ``bsdf``: the vMF convolution of the cosine-sampled integral (at glossy points of the BSDF-sampled
   one, its concentration following the lobe's width: :mod:`sphere3d.reparam.lobe`), the probes on a
   ring around the kernel's centre, snapped onto the edge they straddle
   (:mod:`sphere3d.reparam.snaps`); a moving shape inside the ring followed by an affine map of the
-  gnomonic chart (:mod:`sphere3d.reparam.shading_affine`); the kernel weights' control variate (theory page
+  gnomonic chart (:mod:`sphere3d.reparam.shading_affine`); the light's border in the ring kept by a field
+  after either (:mod:`sphere3d.reparam.kernel_border`); the kernel weights' control variate (theory page
   *kernels*).
 
 :mod:`sphere3d.reparam.paper` is the estimator as published; the theory page *extensions* lists
@@ -178,9 +179,9 @@ class ReparamTransforms(Identity):
 
     def emitter(self, shading: Shading, visible: np.ndarray, bsdf: Any = None) -> EmitterChange:
         r"""Emitter sampling: one rotation per shading point from shadow probes (Sec. 4.3), following
-        the occluder's silhouette between a shadowed and a lit probe
-        (:func:`~sphere3d.reparam.emitter_probes.emitter_rotation`). With ``emitter_edges`` the
-        emitters' sharp edges are held fixed under it by their boundary term
+        the occluder's silhouette between a shadowed and a lit probe, then (``emitter_field``) a field
+        keeping every shadow edge the probes find (:func:`~sphere3d.reparam.emitter_probes.emitter_map`).
+        With ``emitter_edges`` the emitters' sharp edges are held fixed under them by their boundary term
         (:func:`~sphere3d.boundary.emitters.emitter_edge_term`), at every point (any may have edge
         samples); else only where an emitter sample is visible. ``bsdf``: glossy points' lobe at θ0
         (:class:`~sphere3d.glossy.Lobe`), the edge term's integrand then $L_e f \cos θ_x$."""

@@ -34,15 +34,16 @@ occluder (a moving light) gets none. Points that cannot see a moving occluder in
 lights are not probed at all (:mod:`sphere3d.reparam.penumbra`): their rotation would follow a
 static point.
 
-Where it is biased (one rotation per shading point, Sec. 4.1): the shadow edge crossing the
-light along two silhouette edges at different depths (a box's corner), or crossing it on two
-sides, is followed at one crossing only; where the occluder recedes, scales or turns, its
-shadow's edges across the light move apart, and a rotation following one point of one of them
-drags the others (tests/sphere3d/test_light_occluder.py, on the closed form
-:func:`~sphere3d.closed_form.occluded_light_irradiance`; the turning box's shadow of
-``hard_shadow_cube``); at the outermost lit points the hidden part can lie
-beside every probe, aimed ones included, and the emitter strategy then keeps the identity. The
-measurement pages (``hard_shadow``, the bias atlas) give the sizes.
+One rotation per shading point follows one point of one shadow edge (Sec. 4.1); where the occluder
+recedes, scales or turns, its shadow's edges across the light move apart, and with ``field``
+(:func:`emitter_map`) the rotation is followed by a field that keeps every shadow edge the pairs of
+probes find (:mod:`sphere3d.reparam.emitter_field`; tests/sphere3d/test_light_occluder.py on the
+closed form :func:`~sphere3d.closed_form.occluded_light_irradiance`).
+
+Where it is biased: an edge no pair of probes straddles (at the outermost lit points the hidden part
+can lie beside every probe, aimed ones included, and the emitter strategy then keeps the identity), and
+the cases of :mod:`sphere3d.reparam.emitter_field`. The measurement pages (``hard_shadow``, the bias
+atlas, the occluder's motions) give the sizes.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ from sphere3d.boundary.emitters import edge_points, edge_table
 from sphere3d.live import any_rows, emitters_change, moves, take_rows
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.chart_field import ChartField
-from sphere3d.reparam.emitter_field import shadow_field
+from sphere3d.reparam.emitter_field import PAIRS, shadow_field
 from sphere3d.reparam.paper import direction_towards, mean_point_direction
 from sphere3d.reparam.penumbra import may_see_motion, moving_occluders, moving_sphere
 from sphere3d.rotation import Rotation
@@ -87,10 +88,11 @@ def row_probes(probes: int) -> int:
 
 
 def probe_rays(probes: int) -> int:
-    """Rays per shading point of :func:`emitter_rotation` at most: its :func:`row_probes` shadow probes,
-    traced again where all are occluded, then the closest pair's inside ray and :data:`REFINE`
+    """Rays per shading point of :func:`emitter_map` at most: its :func:`row_probes` shadow probes,
+    traced again where all are occluded, then per pair of probes bisected (the closest one, and up to
+    :data:`~sphere3d.reparam.emitter_field.PAIRS` in all for the field) an inside ray and :data:`REFINE`
     bisection rays."""
-    return 2 * row_probes(probes) + 1 + REFINE
+    return 2 * row_probes(probes) + PAIRS * (1 + REFINE)
 
 
 def _border_points(state: Any, u: np.ndarray, count: int) -> np.ndarray | None:

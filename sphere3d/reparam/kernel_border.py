@@ -14,7 +14,9 @@ centre, over the lines of
   own velocity (the point's motion; the emitters static) relative to the rotation's, and
 - the edges the rotation follows (the snap's one edge, or a corner's two,
   :class:`~sphere3d.reparam.probes.Followed`), which it already turns with (relative velocity about 0):
-  the field keeps them where they are.
+  the field keeps them where they are; or, where the kernel's map is an inner shape's of one triangle
+  (:mod:`sphere3d.reparam.shading_affine`: exact for its three edges, dragging the border), that
+  triangle's three edges, the field then after the identity and replacing the shape's map.
 
 Its scale is the ring's radius in the chart, tan(ring): the kernel's own, as on the film
 (:mod:`sphere3d.reparam.corner_lines`). The map depends on the kernel's centre and its probes, not on
@@ -22,8 +24,8 @@ the sample: the convolution stays unbiased where these lines hold every disconti
 
 Not used (the border dragged, as before): moving emitters (their table holds θ0 positions), lights of
 more than :data:`MAX_BORDER` border edges (the cost per kernel grows with them), kernels whose map is an
-inner shape's (:mod:`sphere3d.reparam.shading_affine`, which replaces the rotation there). Biased where
-the kernel holds another moving edge than the followed ones.
+inner shape's of several triangles (an affine fit, not exact for its edges). Biased where the kernel
+holds another moving edge than the kept ones.
 """
 
 from __future__ import annotations
@@ -43,8 +45,9 @@ from sphere3d.vector import cross, dot, frame, norm
 
 __all__ = ["MAX_BORDER", "border_field", "near_arcs"]
 
-MAX_BORDER = 16
-"""Emitter border edges beyond which no kernel gets the field: each kernel is tested against every one."""
+MAX_BORDER = 8
+"""Emitter border edges beyond which no kernel gets the field: each kernel is tested against every one, and
+its field weighs every pair of its lines (at most this many and three more) per sample."""
 
 
 def near_arcs(x: np.ndarray, centre: np.ndarray, a: np.ndarray, b: np.ndarray, reach: Any) -> np.ndarray:

@@ -268,9 +268,10 @@ def _spheres(state: Any) -> tuple[tuple[np.ndarray, float], tuple[np.ndarray, fl
     return bounding_sphere(triangles[_changing(state)]), bounding_sphere(triangles[state.emitters])
 
 
+@per_state
 def emitter_sphere(state: Any) -> tuple[np.ndarray, float]:
     """The emitters' bounding sphere at θ0 (centre, radius), once per state."""
-    return _spheres(state)[1]
+    return bounding_sphere(np.asarray(detach(state.triangles))[state.emitters])
 
 
 def cones_overlap(state: Any, x: np.ndarray) -> np.ndarray:

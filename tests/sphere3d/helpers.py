@@ -7,7 +7,9 @@ quadrature). From ``test_hard_shadow``: the regions of the ``hard_shadow`` image
 forms and a grid of camera rays over every pixel's filter footprint. For
 ``test_triangle_closed_form``: the loss of ``reparam``'s cosine-strategy rotations given each kernel
 (:func:`rotation_loss`). For every test of a statistic over several pixels: its standard error from
-the batches (:func:`over_batches`), as the splatted film correlates neighbouring pixels.
+the batches (:func:`over_batches`), as the splatted film correlates neighbouring pixels. For the
+tests of one strategy of ``reparam``'s irradiance: the other's term set to 0 (:func:`strategy_alone`),
+against finite differences of the same (:func:`strategy_z`).
 """
 
 from __future__ import annotations
@@ -16,18 +18,21 @@ import itertools
 
 import numpy as np
 
+import sphere3d.integrator as integrator
 from flatland.core.dual import Dual, detach, tangent, variable
 from flatland.core.image import summarize_batches
 from flatland.core.rng import Draws
 from sphere3d import closed_form as cf
 from sphere3d.film import FilmTransform
 from sphere3d.integrator import Identity, Shading
+from sphere3d.render import irradiance
 from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.reparam.film_kernel import KAPPA_FILM
 from sphere3d.rotation import Rotation
 from sphere3d.sampling import GAUSSIAN_RADIUS, sample_cosine_hemisphere, sample_vmf
 from sphere3d.scene import load_scene
 from sphere3d.state import build_state, euler_matrix
+from sphere3d.tasks import PointTask
 from sphere3d.vector import norm
 
 SKY = 1.5
@@ -258,3 +263,23 @@ class FollowPlane(Identity):
         p = o + (-o[2] / d[:, 2])[:, None] * d  # on the plane z = 0 of the triangle
         moving = Dual(p, np.broadcast_to([1.0, 0.0, 0.0], p.shape)) - o
         return FilmTransform((Rotation.following(moving / norm(moving)[:, None]),))
+
+
+def strategy_alone(monkeypatch, keep: str) -> None:
+    """Only the ``keep`` strategy's estimate ("emitter" or "bsdf"): the other's term set to 0."""
+
+    def zero(shading, *args, **kwargs):
+        m = len(shading)
+        return Dual(np.zeros(m), None, shading.state.k) if shading.state.dual else np.zeros(m)
+
+    monkeypatch.setattr(integrator, "_bsdf_term" if keep == "emitter" else "_emitter_term", zero)
+
+
+def strategy_z(scene, param, **switches):
+    """reparam's derivative (:class:`~sphere3d.reparam.default.ReparamTransforms` with ``switches``) against
+    finite differences (16x the samples), both of the patched estimator: their difference over its
+    standard error."""
+    task = PointTask(load_scene(scene), param, ORIGIN, UP, 1 << 16, 3, 16)
+    r = summarize_batches(np.asarray(task.evaluate(variable(0.0), ReparamTransforms(**switches)).derivative))
+    f = irradiance(scene, ORIGIN, UP, param=param, method="finite_difference", n=1 << 20, seed=3, batches=16)
+    return (r.mean - f.derivative) / np.hypot(r.stderr, f.derivative_stderr)

@@ -16,18 +16,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import sphere3d as s3
-import sphere3d.integrator as integrator
-from flatland.core.dual import Dual, detach, variable
-from flatland.core.image import summarize_batches
+from flatland.core.dual import Dual, detach
 from flatland.core.stats import sidak
 from sphere3d import closed_form as cf
 from sphere3d.render import irradiance
 from sphere3d.reparam.chart_field import chart_line, relative_normal
-from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.rotation import Rotation
-from sphere3d.tasks import PointTask
 from sphere3d.vector import cross, frame
+from tests.sphere3d.helpers import strategy_alone, strategy_z
 
 ALPHA = 1e-3
 BATCHES = 16
@@ -97,41 +93,21 @@ def test03_an_edge_turning_with_the_rotation_does_not_move_relative_to_it():
     )
 
 
-def _strategy(monkeypatch, keep: str) -> None:
-    """Only the ``keep`` strategy's estimate ("emitter" or "bsdf"): the other's term set to 0."""
-
-    def zero(shading, *args, **kwargs):
-        m = len(shading)
-        return Dual(np.zeros(m), None, shading.state.k) if shading.state.dual else np.zeros(m)
-
-    monkeypatch.setattr(integrator, "_bsdf_term" if keep == "emitter" else "_emitter_term", zero)
-
-
-def _z(scene, param, **switches):
-    """reparam's derivative (:class:`~sphere3d.reparam.default.ReparamTransforms` with ``switches``) against
-    finite differences (16x the samples), both of the patched estimator: their difference over its
-    standard error."""
-    task = PointTask(s3.load_scene(scene), param, AT["point"], AT["normal"], 1 << 16, 3, BATCHES)
-    r = summarize_batches(np.asarray(task.evaluate(variable(0.0), ReparamTransforms(**switches)).derivative))
-    f = irradiance(scene, param=param, method="finite_difference", n=1 << 20, seed=3, **AT)
-    return (r.mean - f.derivative) / np.hypot(r.stderr, f.derivative_stderr)
-
-
 def test04_the_emitter_strategy_follows_both_shadow_edges_across_the_light(monkeypatch):
     # the field keeps the two shadow edges (and the light's border): within noise of finite differences
     # of the same strategy under recession, tilt and scaling, which move the edges apart
-    _strategy(monkeypatch, "emitter")
+    strategy_alone(monkeypatch, "emitter")
     q = stats.norm.ppf(1.0 - 0.5 * sidak(ALPHA, len(MOTIONS)))
     for param in MOTIONS:
-        z = _z(cf.light_triangle_scene(TRIANGLE), param)
+        z = strategy_z(cf.light_triangle_scene(TRIANGLE), param)
         print(f"{param}: emitter strategy alone, z {z:+.2f} (q {q:.2f})")
         assert abs(z) <= q, param
 
 
 def test05_the_rotation_alone_misses_them(monkeypatch):
     # one rotation follows one of the two edges: the recession's derivative is missed beyond the noise
-    _strategy(monkeypatch, "emitter")
-    z = _z(cf.light_triangle_scene(TRIANGLE), "tri.translate.z", emitter_field=False)
+    strategy_alone(monkeypatch, "emitter")
+    z = strategy_z(cf.light_triangle_scene(TRIANGLE), "tri.translate.z", emitter_field=False)
     print(f"tri.translate.z: the rotation alone, z {z:+.1f}")
     assert abs(z) > stats.norm.ppf(1.0 - 0.5 * ALPHA)
 

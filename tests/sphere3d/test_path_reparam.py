@@ -214,18 +214,20 @@ def test09_the_control_variate_carries_the_further_vertices_light_at_depth_three
     weights' derivative unchecked, heavy-tailed where a moving point nears a static crease: over the
     whole 16 x 16 image of ``interreflection`` the variance of the gradient's sum over batches is more
     than the F distribution's 1 - ALPHA quantile times the carrier's (heavy tails make the F law
-    approximate; it is about 25 here). The two differ by zero-mean terms only: their paired
-    difference per batch has a mean within the Student-t quantile of its standard error."""
+    approximate; the ratio is about 5 here, so 32 batches of 2 spp: the quantile of F(31, 31), about
+    3, leaves the test its power). The two differ by zero-mean terms only: their paired difference per
+    batch has a mean within the Student-t quantile of its standard error."""
+    batches = 2 * BATCHES
     scene = load_scene(_scene("interreflection", 16))
-    task = ImageTask(scene, PARAM, 64, 3, BATCHES, film="pixel", max_depth=3)
+    task = ImageTask(scene, PARAM, 64, 3, batches, film="pixel", max_depth=3)
     carried = GRADIENT_METHODS.run("reparam", task).derivative.sum(axis=(1, 2))
     monkeypatch.setattr(paths, "carrier", lambda depth, last: None)
     direct = GRADIENT_METHODS.run("reparam", task).derivative.sum(axis=(1, 2))
-    f = stats.f.ppf(1.0 - ALPHA, BATCHES - 1, BATCHES - 1)
+    f = stats.f.ppf(1.0 - ALPHA, batches - 1, batches - 1)
     assert direct.var(ddof=1) > f * carried.var(ddof=1), (direct.var(ddof=1), carried.var(ddof=1))
     diff = carried - direct
-    q = stats.t.ppf(1.0 - ALPHA / 2, BATCHES - 1)
-    assert abs(diff.mean()) <= q * diff.std(ddof=1) / np.sqrt(BATCHES), (diff.mean(), diff.std(ddof=1))
+    q = stats.t.ppf(1.0 - ALPHA / 2, batches - 1)
+    assert abs(diff.mean()) <= q * diff.std(ddof=1) / np.sqrt(batches), (diff.mean(), diff.std(ddof=1))
 
 
 def test10_the_control_variate_estimates_c_only_where_its_term_moves(monkeypatch):
