@@ -47,6 +47,7 @@ from sphere3d.reparam.film_kernel import (
 )
 from sphere3d.reparam.kernel_border import border_field
 from sphere3d.reparam.lobe import LOBE, lobe_kappa, lobe_radius
+from sphere3d.reparam.outline import outline_table
 from sphere3d.reparam.penumbra import cone_may_see_motion, moving_sphere, separating_planes
 from sphere3d.reparam.probes import REFINE, follow_probe_edges, ring_directions, vmf_spread_angle
 from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
@@ -168,7 +169,8 @@ class ReparamTransforms(Identity):
             + (_shape_images,) * self.film_shapes
             + (_corner_table,) * self.film_corners
         )
-        return (*film, separating_planes, moving_sphere, edge_table) + (_moving_shapes,) * self.shading_shapes
+        shading = (_moving_shapes,) * self.shading_shapes + (outline_table,) * self.emitter_field
+        return (*film, separating_planes, moving_sphere, edge_table, *shading)
 
     def camera(self, state: SceneState, x: np.ndarray, y: np.ndarray, draws: Draws) -> FilmTransform:
         """Pixel integral: one rotation per camera sample from probes around its film kernel's centre."""

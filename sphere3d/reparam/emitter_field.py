@@ -11,20 +11,22 @@ emitters' bounding sphere (:class:`~sphere3d.reparam.chart_field.ChartField`, Lo
 Sec. 4.3: a refinement of the heuristic) that keeps the shadow edges: the occluder's edges found by
 bisection between pairs of an occluded and a visible probe
 (:func:`~sphere3d.reparam.bisection.bisect_silhouette`), each moved onto the edge of its triangle that
-the bisection's segment leaves by (:func:`~sphere3d.reparam.snaps.edge_snap`). The first pair is the
-closest one (the rotation's); each next one joins an occluded and a visible probe on the same side of
-every edge found so far, so another edge lies between them; at most :data:`PAIRS` (the three edges of
-a triangle's shadow). The field's scale is the light's radius in the chart, $\tan(\arcsin(R / d))$
+the bisection's segment leaves by (:func:`~sphere3d.reparam.snaps.edge_snap`), with the silhouette
+edges that meet it at its ends (:func:`~sphere3d.reparam.outline.next_edges`: a triangle's other two,
+a box's corner's next edges). The first pair is the closest one (the rotation's); each next one joins
+an occluded and a visible probe on the same side of every edge found so far, so another edge lies
+between them; at most :data:`PAIRS` pairs. The field's scale is the light's radius in the chart, $\tan(\arcsin(R / d))$
 for its bounding sphere of radius R at distance d: beyond the light it is the rotation alone.
 
 The light's own border is dragged by the whole map as by the rotation alone, and its boundary term
 (:mod:`sphere3d.boundary.emitters`) takes the map's velocity at its edge points: the border held
 fixed, exactly, whatever the field does. A point on the light's bounding sphere gets no field.
 
-Biased where a shadow edge is found by no pair (a thin lit or hidden part between probes, a fourth
-edge), where a bisection stops on an inner edge of the occluder's mesh near its silhouette, and where
-the shadow's outline is curved (a smooth occluder's, straight per facet only: between the found edges
-the field blends their motions with the rotation's).
+Biased where a shadow edge is neither found by a pair nor next to a found one (a thin lit or hidden
+part between probes, an outline of many edges across the light), where a bisection stops on an inner
+edge of the occluder's mesh near its silhouette, and where the shadow's outline is curved (a smooth
+occluder's, straight per facet only: beyond the found edges the field blends their motions with the
+rotation's).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from flatland.core.dual import detach
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.chart_field import ChartField, chart_lines, relative_normal
 from sphere3d.reparam.film_lines import FilmLines
+from sphere3d.reparam.outline import next_edges
 from sphere3d.reparam.penumbra import emitter_sphere
 from sphere3d.reparam.snaps import edge_snap
 from sphere3d.rotation import Rotation
@@ -45,8 +48,8 @@ from sphere3d.vector import cross, frame, norm
 __all__ = ["PAIRS", "shadow_field"]
 
 PAIRS = 3
-"""Shadow edges sought per shading point at most (bisections between probe pairs): a triangle's shadow
-has three."""
+"""Pairs of probes bisected per shading point at most, each finding a shadow edge and its next ones: a
+triangle's shadow has three edges."""
 
 
 def _no_corner(rows: np.ndarray, ends: np.ndarray) -> np.ndarray:
@@ -109,16 +112,22 @@ def shadow_field(
         good = (lines[:, 0, 0] >= 0) & hits.hit & ok[rows]
         alive[:] = False
         alive[rows[good]] = True  # the next round only where this one found an edge
-        tri = state.triangles[hits.triangle[good]]
-        g = np.arange(good.sum())
-        v1, v2 = tri[g, lines[good, 0, 0]], tri[g, lines[good, 0, 1]]
-        xg = x[rows[good]]
-        m = cross(v1 - xg, v2 - xg)
-        found_rows.append(rows[good])
-        found_m.append(relative_normal(m, rotation.take(rows[good]), k))
-        plane = np.zeros((s, 1, 3))
-        plane[rows[good], 0] = np.asarray(detach(m))
-        planes = np.concatenate([planes, plane], axis=1)
+        g, triangle, slots = rows[good], hits.triangle[good], lines[good, 0]
+        # the found edge, and the silhouette edges that meet it at its ends (outline.next_edges)
+        after = next_edges(state, x0[g], triangle, slots)
+        edges = [(g, triangle, slots[:, 0], slots[:, 1])]
+        for end in range(2):  # the edge's two ends (not a loop over samples)
+            f = after.found[:, end]
+            edges.append((g[f], after.face[f, end], after.ia[f, end], after.ib[f, end]))
+        for row, face, ia, ib in edges:
+            tri, n = state.triangles[face], np.arange(len(face))
+            xg = x[row]
+            m = cross(tri[n, ia] - xg, tri[n, ib] - xg)
+            found_rows.append(row)
+            found_m.append(relative_normal(m, rotation.take(row), k))
+            plane = np.zeros((s, 1, 3))
+            plane[row, 0] = np.asarray(detach(m))
+            planes = np.concatenate([planes, plane], axis=1)
     shadow = np.concatenate(found_rows) if found_rows else np.zeros(0, np.intp)
     fields = np.unique(shadow)
     if not fields.size:

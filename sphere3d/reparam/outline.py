@@ -1,0 +1,124 @@
+r"""One step along an occluder's outline: the silhouette edges that meet a found one at its ends.
+
+The emitter strategy's field (:mod:`sphere3d.reparam.emitter_field`) keeps the shadow edges its
+probes find by bisection. A shadow crossing the light holds more edges than pairs of probes straddle:
+the shadow of a triangle larger than the light's gaps between probes, or of a box's corner. Seen from
+the shading point x, the occluder's silhouette is a chain of mesh edges; at each end V of a found
+silhouette edge the chain continues along another edge incident to V that is a silhouette edge from x
+(Loubet et al. 2019, Sec. 4.3: a refinement of the heuristic, the probes' edge extended by the mesh's
+adjacency): a boundary edge (one face: a single triangle's other edges), or an edge between a face
+turned towards x and one turned away, $\mathrm{sign}(n_1·(V - x)) \ne \mathrm{sign}(n_2·(V - x))$.
+
+:func:`outline_table` welds the state's triangles into vertices and edges once per state
+(:func:`~sphere3d.boundary.edges.state_edges`) and lists each vertex's edges; :func:`next_edges`
+gives, per found edge, the first silhouette edge at each of its ends (other than itself). The cost per
+row is the two vertices' valences, whatever the mesh's size. An edge that a neighbour's test finds is a
+silhouette edge from x; its shadow is a discontinuity of the light where it lies in front of it and
+nothing else hides it, and a line of the field elsewhere (which only constrains the map: no bias).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from flatland.core.dual import detach
+from sphere3d.boundary.edges import row_ids, state_edges
+from sphere3d.state import SceneState
+from sphere3d.tables import per_state
+
+__all__ = ["NextEdges", "OutlineTable", "next_edges", "outline_table"]
+
+
+@dataclass(frozen=True)
+class OutlineTable:
+    """Per state: each triangle corner's vertex ``vid`` (T, 3) and each triangle edge's id ``edge_of``
+    (T, 3; edge k from slot k to slot k + 1); per edge its first face, its slots there, its second face
+    (-1: none) and the faces' unit normals; per vertex its edges, ``incident[start[v]:start[v + 1]]``."""
+
+    vid: np.ndarray
+    edge_of: np.ndarray
+    face: np.ndarray
+    ia: np.ndarray
+    ib: np.ndarray
+    other: np.ndarray
+    n1: np.ndarray
+    n2: np.ndarray
+    start: np.ndarray
+    incident: np.ndarray
+
+
+@per_state
+def outline_table(state: SceneState) -> OutlineTable:
+    """The state's vertices, edges and their incidence, once per state. O(T log T)."""
+    edges = state_edges(state)
+    tri = np.asarray(detach(state.triangles), dtype=np.float64)
+    vid = row_ids(tri.reshape(-1, 3)).reshape(len(tri), 3)  # the ids mesh_edges welds by (exact position)
+    a, b = vid[edges.face, edges.ia], vid[edges.face, edges.ib]
+    count = int(vid.max(initial=-1)) + 1
+    key = np.minimum(a, b) * count + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    # every half-edge of every triangle: its edge by its key
+    ha, hb = vid, np.roll(vid, -1, axis=1)
+    half = np.minimum(ha, hb) * count + np.maximum(ha, hb)
+    at = np.clip(np.searchsorted(key[order], half), 0, max(len(key) - 1, 0))
+    edge_of = np.where(key[order][at] == half, order[at], -1) if len(key) else np.full(vid.shape, -1)
+    # each vertex's edges (both ends), in CSR
+    ends = np.concatenate([a, b])
+    ids = np.concatenate([np.arange(len(a)), np.arange(len(a))])
+    by = np.argsort(ends, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(ends, minlength=count))])
+    table = OutlineTable(
+        vid, edge_of, edges.face, edges.ia, edges.ib, edges.other, edges.n1, edges.n2, start, ids[by]
+    )
+    for f in fields(table):  # shared by every caller: read-only
+        getattr(table, f.name).setflags(write=False)
+    return table
+
+
+@dataclass(frozen=True)
+class NextEdges:
+    """Per found edge and end (r, 2): the next silhouette edge's face and its slots there (``face``,
+    ``ia``, ``ib``), and whether there is one (``found``)."""
+
+    face: np.ndarray
+    ia: np.ndarray
+    ib: np.ndarray
+    found: np.ndarray
+
+
+def next_edges(state: SceneState, x: np.ndarray, triangle: np.ndarray, slots: np.ndarray) -> NextEdges:
+    """At both ends of the edges ``slots`` (r, 2: vertex slots) of ``triangle`` (r,), the first other edge
+    that is a silhouette edge seen from the points ``x`` (plain, (r, 3)) (module docstring)."""
+    table = outline_table(state)
+    r = len(triangle)
+    i, j = slots[:, 0], slots[:, 1]
+    k = np.where(j == (i + 1) % 3, i, j)  # the triangle edge from slot k to k + 1
+    own = table.edge_of[triangle, k]
+    ends = table.vid[triangle[:, None], slots]  # (r, 2)
+    position = np.asarray(detach(state.triangles))[triangle[:, None], slots]  # (r, 2, 3)
+    v = ends.ravel()
+    degree = table.start[v + 1] - table.start[v]
+    rep = np.repeat(np.arange(v.size), degree)  # one entry per (end, incident edge)
+    within = np.arange(rep.size) - np.repeat(np.cumsum(degree) - degree, degree)
+    c = table.incident[table.start[v][rep] + within]
+    to = position.reshape(-1, 3)[rep] - np.repeat(x, 2, axis=0)[rep]  # V - x
+    s1 = np.einsum("nx,nx->n", table.n1[c], to)
+    s2 = np.einsum("nx,nx->n", table.n2[c], to)
+    silhouette = (table.other[c] < 0) | ((s1 > 0.0) != (s2 > 0.0))
+    silhouette &= c != np.repeat(own, 2)[rep]
+    # the first silhouette edge of each end
+    first = np.full(v.size, -1, dtype=np.int64)
+    hit = np.flatnonzero(silhouette)
+    end, at = np.unique(rep[hit], return_index=True)  # rep ascends: each end's first entry
+    first[end] = c[hit[at]]
+    found = first >= 0
+    e = np.maximum(first, 0)
+    shape = (r, 2)
+    return NextEdges(
+        table.face[e].reshape(shape),
+        table.ia[e].reshape(shape),
+        table.ib[e].reshape(shape),
+        found.reshape(shape),
+    )
