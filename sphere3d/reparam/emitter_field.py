@@ -15,8 +15,9 @@ the bisection's segment leaves by (:func:`~sphere3d.reparam.snaps.edge_snap`), w
 edges that meet it at its ends (:func:`~sphere3d.reparam.outline.next_edges`: a triangle's other two,
 a box's corner's next edges). The first pair is the closest one (the rotation's); each next one joins
 an occluded and a visible probe on the same side of every edge found so far, so another edge lies
-between them; at most :data:`PAIRS` pairs. The field's scale is the light's radius in the chart, $\tan(\arcsin(R / d))$
-for its bounding sphere of radius R at distance d: beyond the light it is the rotation alone.
+between them; at most :data:`PAIRS` pairs. The field's scale is the light's radius in the chart,
+$\tan(\arcsin(R / d))$ for its bounding sphere of radius R at distance d: beyond the light it is the
+rotation alone.
 
 The light's own border is dragged by the whole map as by the rotation alone, and its boundary term
 (:mod:`sphere3d.boundary.emitters`) takes the map's velocity at its edge points: the border held
