@@ -65,11 +65,11 @@ METHODS = {
 }
 FD_STEP = {"sphere3d": 1e-2, "flatland": 1e-3}
 """The packages' default finite-difference steps (the methods' documented defaults)."""
-SAMPLES = {"film": 1 << 18, "shading": 1 << 20, "light": 1 << 17}
+SAMPLES = {"film": 1 << 18, "shading": 1 << 20, "light": 1 << 16}
 """Camera samples per film cell (spp times pixels), shading samples per shading cell (full grid); under
 the light (``sphere3d light``) fewer: each sample's probes, shadow rays and edge terms cost several
 times a sky sample's (the standard errors say what that leaves)."""
-QUICK_SAMPLES = {"film": 1 << 16, "shading": 1 << 18, "light": 1 << 15}
+QUICK_SAMPLES = {"film": 1 << 16, "shading": 1 << 18, "light": 1 << 14}
 ROUNDING = 1e-9
 """A share lost below this, by a method without a spread, is rounding."""
 OUT = Path(__file__).resolve().parent.parent / "docs" / "measurements" / "atlas.md"

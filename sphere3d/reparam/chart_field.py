@@ -21,7 +21,7 @@ $du / (1 + |u|^2)^{3/2}$, as in :mod:`sphere3d.reparam.shading_affine`; R's is 1
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -30,9 +30,9 @@ from flatland.core.dual import Dual, detach, tangent
 from sphere3d.reparam.corner_lines import line_field
 from sphere3d.reparam.film_lines import FilmLines
 from sphere3d.rotation import Rotation
-from sphere3d.vector import dot
+from sphere3d.vector import cross, dot
 
-__all__ = ["ChartField", "chart_line", "chart_lines", "relative_normal"]
+__all__ = ["ChartField", "chart_edges", "chart_line", "chart_lines", "relative_normal"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,7 @@ class ChartField:
     b: np.ndarray
     scale: np.ndarray
     lines: FilmLines
+    segment: np.ndarray  # (P,): the line is its edge's image only (s in [0, 1]), else a whole line
     k: int | None = None
 
     @staticmethod
@@ -56,17 +57,18 @@ class ChartField:
         lines = FilmLines(
             np.zeros(0, np.intp), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(slots), np.zeros(slots)
         )
-        return ChartField(np.full(n, -1, dtype=np.intp), empty, empty, empty, np.zeros(0), lines, k)
+        no = np.zeros(0, dtype=bool)
+        return ChartField(np.full(n, -1, dtype=np.intp), empty, empty, empty, np.zeros(0), lines, no, k)
 
     def take(self, index: Any) -> ChartField:
         """The points at ``index`` (their fields shared)."""
-        return ChartField(self.slot[index], self.axis, self.t, self.b, self.scale, self.lines, self.k)
+        return replace(self, slot=self.slot[index])
 
     def spread(self, rows: np.ndarray, n: int) -> ChartField:
         """These fields as those of rows ``rows`` of n points (the others none)."""
         slot = np.full(n, -1, dtype=np.intp)
         slot[rows] = self.slot
-        return ChartField(slot, self.axis, self.t, self.b, self.scale, self.lines, self.k)
+        return replace(self, slot=slot)
 
     def apply(self, omega: np.ndarray, rotated: Any) -> tuple[Any, Any]:
         """The evaluation directions of the points' emitter samples ``omega`` (plain, (n, 3)): ``rotated``
@@ -82,14 +84,15 @@ class ChartField:
         start = np.cumsum(count) - count
         rep = np.repeat(np.arange(on.size), count[f])
         within = np.arange(rep.size) - np.repeat(np.cumsum(count[f]) - count[f], count[f])
-        pick = self.lines.take(order[start[f][rep] + within])
+        chosen = order[start[f][rep] + within]
+        pick, segment = self.lines.take(chosen), self.segment[chosen]
         lines = FilmLines(rep, pick.point, pick.direction, pick.point_dot, pick.direction_dot)
         y, axis, t, b = omega[on], self.axis[f], self.t[f], self.b[f]
         depth = dot(y, axis)
         u = np.stack([dot(y, t), dot(y, b)], axis=1) / depth[:, None]
         # in units of the light's chart radius r (prior weight 1 / r²), then back: v = r v_r, ∇v = ∇_r v_r
         scale = self.scale[f]
-        v, grad = line_field(u / scale[:, None], lines, np.zeros(rep.size, dtype=bool), 1.0)
+        v, grad = line_field(u / scale[:, None], lines, segment, 1.0, segment)
         k = self.k
         v = v * (scale[:, None] if k is None else scale[:, None, None])
         s2 = 1.0 + dot(u, u)
@@ -136,6 +139,53 @@ def relative_normal(m: Any, rotation: Rotation, k: int | None) -> Dual:
     tangent $\dot m - Ω × m$ ($Ω × m$ the rotation's tangent of m, linear in m)."""
     value = np.asarray(detach(m))
     return Dual(value, tangent(m, k) - rotation.apply(value).tangent, k)
+
+
+def chart_edges(
+    slot: np.ndarray,
+    p1: Any,
+    p2: Any,
+    base: Rotation,
+    axis: np.ndarray,
+    t: np.ndarray,
+    b: np.ndarray,
+    scale: np.ndarray,
+    k: int | None,
+) -> tuple[FilmLines, np.ndarray]:
+    """The images (rows ``slot``) of the edges from the directions ``p1`` to ``p2`` (Dual or plain (n, 3),
+    edge ends less the point) in the charts ``axis``, ``t``, ``b`` (n, 3), in units of ``scale`` (n,),
+    moving relative to ``base`` (one rotation per row), and which are segments: both ends in front of
+    the chart (else the edge's whole great circle, :func:`chart_line`)."""
+    ends = [relative_normal(p, base, k) for p in (p1, p2)]  # a direction turns with R as a normal does
+    depth = [dot(np.asarray(detach(p)), axis) for p in ends]
+    front = (depth[0] > 0.0) & (depth[1] > 0.0)
+    unit = scale[:, None]
+    per = unit if k is None else unit[:, None]
+    lines = chart_lines(slot, cross(ends[0], ends[1]), axis, t, b, scale, k)
+    if front.any():
+        g = [_chart_point(p, axis, t, b, k) for p in ends]
+        q, q_dot = g[0]
+        e, e_dot = g[1][0] - q, g[1][1] - q_dot
+        f = front[:, None]
+        fk = f if k is None else f[:, None]
+        lines = FilmLines(
+            slot,
+            np.where(f, q / unit, lines.point),
+            np.where(f, e / unit, lines.direction),
+            np.where(fk, q_dot / per, lines.point_dot),
+            np.where(fk, e_dot / per, lines.direction_dot),
+        )
+    return lines, front
+
+
+def _chart_point(p: Any, axis: np.ndarray, t: np.ndarray, b: np.ndarray, k: int | None) -> tuple:
+    """The chart point of the directions ``p`` (Dual (n, 3)): value (n, 2), velocity (n, 2) or (n, k, 2)."""
+    depth = dot(p, axis)
+    pair = [dot(p, t) / depth, dot(p, b) / depth]
+    value = np.stack([np.asarray(detach(c)) for c in pair], axis=-1)
+    n = len(value)
+    dots = np.stack([np.broadcast_to(tangent(c, k), (n,) if k is None else (k, n)) for c in pair], axis=-1)
+    return value, dots if k is None else np.moveaxis(dots, 0, 1)
 
 
 def chart_lines(

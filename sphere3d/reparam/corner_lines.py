@@ -90,14 +90,18 @@ def corner_line_maps(
     return rows, AffineFilm(np.ones(rows.size, dtype=bool), v, grad, at[rows].copy())
 
 
-def line_field(at: np.ndarray, lines: FilmLines, ray: np.ndarray, mu: float) -> tuple[np.ndarray, np.ndarray]:
+def line_field(
+    at: np.ndarray, lines: FilmLines, ray: np.ndarray, mu: float, end: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     r"""The moving least-squares velocity field keeping ``lines`` (module docstring), at points ``at``
     (m, 2): its value (m, 2) and gradient (m, 2, 2), ``[i, l]`` = $∂ v_i / ∂ u_l$ (for k parameters
     (m, k, 2) and (m, k, 2, 2)).
 
     ``lines.rows`` (P,) gives each line's point row; a line is $q + s e$ (``point``, ``direction``)
-    moving at $\dot q + s \dot e$, a ray from q (s >= 0) where ``ray`` (P,), a whole line elsewhere;
-    ``mu`` the prior's weight, $\mathrm{pixels}^{-2}$.
+    moving at $\dot q + s \dot e$, a ray from q (s >= 0) where ``ray`` (P,), the segment s in [0, 1] where
+    also ``end`` (P,), a whole line elsewhere; ``mu`` the prior's weight, $\mathrm{pixels}^{-2}$. Off a
+    ray's or segment's ends the condition is the nearest end's normal velocity (bounded however short
+    the segment, where a whole line's far points move with its turn times their distance).
 
     The weighted least-squares solution in two unknowns is the mean of the solutions of its pairs of
     conditions weighted by their squared determinants (Cauchy-Binet): two lines i, j give their
@@ -124,14 +128,15 @@ def line_field(at: np.ndarray, lines: FilmLines, ray: np.ndarray, mu: float) -> 
     q, e = dense(lines.point), dense(lines.direction)
     q_dot, e_dot = dense(lines.point_dot), dense(lines.direction_dot)
     is_ray = dense(ray.astype(float)) > 0.0
+    is_segment = is_ray & (dense(end.astype(float)) > 0.0) if end is not None else np.zeros_like(is_ray)
     e = np.where(valid[..., None], e, 1.0)  # empty slots: any line, weight 0 below
     l2 = np.sum(e * e, axis=-1)
     n = np.stack([-e[..., 1], e[..., 0]], axis=-1) / np.sqrt(l2)[..., None]  # (m, J, 2)
     rel = at[:, None] - q
     s = np.sum(rel * e, axis=-1) / l2
-    clamped = is_ray & (s < 0.0)
-    s = np.where(clamped, 0.0, s)
-    ds = np.where(clamped[..., None], 0.0, e / l2[..., None])  # ∇s: zero where the foot is the ray's start
+    clamped = (is_ray & (s < 0.0)) | (is_segment & (s > 1.0))
+    s = np.where(clamped, np.minimum(np.maximum(s, 0.0), 1.0), s)
+    ds = np.where(clamped[..., None], 0.0, e / l2[..., None])  # ∇s: zero where the foot is an end
     off = rel - s[..., None] * e  # from the foot to the point
     soft = np.sum(off * off, axis=-1) + EPSILON**2
     w = np.where(valid, 1.0 / soft, 0.0)

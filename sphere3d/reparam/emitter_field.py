@@ -38,7 +38,7 @@ import numpy as np
 
 from flatland.core.dual import detach
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
-from sphere3d.reparam.chart_field import ChartField, chart_lines, relative_normal
+from sphere3d.reparam.chart_field import ChartField, chart_edges
 from sphere3d.reparam.film_lines import FilmLines
 from sphere3d.reparam.outline import next_edges
 from sphere3d.reparam.penumbra import emitter_sphere
@@ -123,11 +123,11 @@ def shadow_field(
         for row, face, ia, ib in edges:
             tri, n = state.triangles[face], np.arange(len(face))
             xg = x[row]
-            m = cross(tri[n, ia] - xg, tri[n, ib] - xg)
+            p1, p2 = tri[n, ia] - xg, tri[n, ib] - xg
             found_rows.append(row)
-            found_m.append(relative_normal(m, rotation.take(row), k))
+            found_m.append((p1, p2, rotation.take(row)))
             plane = np.zeros((s, 1, 3))
-            plane[row, 0] = np.asarray(detach(m))
+            plane[row, 0] = cross(np.asarray(detach(p1)), np.asarray(detach(p2)))
             planes = np.concatenate([planes, plane], axis=1)
     shadow = np.concatenate(found_rows) if found_rows else np.zeros(0, np.intp)
     fields = np.unique(shadow)
@@ -136,10 +136,11 @@ def shadow_field(
     slot = np.full(s, -1, dtype=np.intp)
     slot[fields] = np.arange(fields.size)
     parts = [
-        chart_lines(slot[row], m, axis[row], t[row], b[row], scale[row], k)
-        for row, m in zip(found_rows, found_m, strict=True)  # one part per round of bisection
+        chart_edges(slot[row], p1, p2, base, axis[row], t[row], b[row], scale[row], k)
+        for row, (p1, p2, base) in zip(found_rows, found_m, strict=True)  # per round and edge kind
     ]
     lines = FilmLines(
-        *(np.concatenate([getattr(p, f) for p in parts]) for f in FilmLines.__dataclass_fields__)
+        *(np.concatenate([getattr(p, f) for p, _ in parts]) for f in FilmLines.__dataclass_fields__)
     )
-    return ChartField(slot, axis[fields], t[fields], b[fields], scale[fields], lines, k)
+    segment = np.concatenate([seg for _, seg in parts])
+    return ChartField(slot, axis[fields], t[fields], b[fields], scale[fields], lines, segment, k)

@@ -37,7 +37,7 @@ import numpy as np
 from flatland.core.dual import detach
 from sphere3d.boundary.emitters import edge_table
 from sphere3d.live import any_rows, moves
-from sphere3d.reparam.chart_field import ChartField, chart_lines, relative_normal
+from sphere3d.reparam.chart_field import ChartField, chart_edges
 from sphere3d.reparam.film_lines import FilmLines
 from sphere3d.reparam.probes import Followed
 from sphere3d.rotation import Rotation
@@ -102,11 +102,10 @@ def border_field(
     base = Rotation(base.target, base.active & ~own[fields], base.spin)
     moving = np.any(moves(shading.x))
 
-    def part(f: np.ndarray, a: Any, c: Any) -> FilmLines:
-        """The lines of the edges a c (Dual or plain, (len(f), 3)) of the fields ``f``, relative to base."""
+    def part(f: np.ndarray, a: Any, c: Any) -> tuple[FilmLines, np.ndarray]:
+        """The images of the edges a c (Dual or plain, (len(f), 3)) of the fields ``f``, relative to base."""
         x = shading.x[fields[f]] if moving else x0[fields[f]]
-        m = relative_normal(cross(a - x, c - x), base.take(f), k)
-        return chart_lines(f, m, centre[fields[f]], t[f], b[f], scale[f], k)
+        return chart_edges(f, a - x, c - x, base.take(f), centre[fields[f]], t[f], b[f], scale[f], k)
 
     # the border edges near each kernel
     row, edge = np.nonzero(near[fields])
@@ -123,6 +122,7 @@ def border_field(
             tri, j = state.triangles[triangles[use]], np.arange(use.sum())
             parts.append(part(slot[rows[use]], tri[j, lines[use, side, 0]], tri[j, lines[use, side, 1]]))
     lines = FilmLines(
-        *(np.concatenate([getattr(p, f) for p in parts]) for f in FilmLines.__dataclass_fields__)
+        *(np.concatenate([getattr(p, f) for p, _ in parts]) for f in FilmLines.__dataclass_fields__)
     )
-    return ChartField(slot, centre[fields], t, b, scale, lines, k)
+    segment = np.concatenate([seg for _, seg in parts])
+    return ChartField(slot, centre[fields], t, b, scale, lines, segment, k)

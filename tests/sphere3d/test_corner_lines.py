@@ -5,7 +5,8 @@ the field keeps every line on its moved line (its normal velocity on each equals
 meeting point's velocity where two lines meet (V, and an edge crossing L), its gradient matches
 central differences of its value, k parameters give each one's field, and its squared strain over a
 kernel grows as log(1 / h) as the corner nears the line (the one affine map keeping all three lines
-grows as 1 / h²). The film kernel's use of it is checked pixel by pixel against a closed form in
+grows as 1 / h²), and off a short segment's ends the field is bounded by their velocities (its whole
+line's far points move with its turn times their distance). The film kernel's use of it is checked pixel by pixel against a closed form in
 tests/sphere3d/test_junctions.py.
 """
 
@@ -148,3 +149,19 @@ def test06_without_a_prior_parallel_lines_alone_give_the_identity_not_nan():
     lines = FilmLines(np.array([0, 0]), q, e, np.array([[0.0, 1.0], [0.0, 2.0]]), np.zeros((2, 2)))
     v, grad = line_field(np.array([[0.3, 0.4]]), lines, np.zeros(2, dtype=bool), 0.0)
     assert np.all(v == 0.0) and np.all(np.isfinite(grad))
+
+
+def test07_off_a_segment_s_ends_the_field_is_bounded_by_the_ends_velocities():
+    # a short segment turning fast about its middle: its whole line's far points move with the turn times
+    # their distance, its ends do not; the field off a segment's ends takes the nearer end's velocity
+    length, spin = 1e-3, 1.0
+    q = np.array([[-0.5 * length, 0.0]])
+    e = np.array([[length, 0.0]])
+    q_dot = np.array([[0.0, 0.5 * length * spin]])  # the ends move at ± spin · length / 2, across
+    e_dot = np.array([[0.0, -length * spin]])
+    lines = FilmLines(np.array([0]), q, e, q_dot, e_dot)
+    far = np.array([[3.0, 0.2]])  # beyond the segment's end, near its line
+    line, _ = line_field(far, lines, np.zeros(1, dtype=bool), 1.0)
+    segment, _ = line_field(far, lines, np.ones(1, dtype=bool), 1.0, np.ones(1, dtype=bool))
+    assert np.abs(segment).max() <= 0.5 * length * spin
+    assert np.abs(line).max() > 100.0 * np.abs(segment).max()
