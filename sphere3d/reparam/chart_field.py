@@ -4,7 +4,10 @@ Shared by the emitter strategy (:mod:`sphere3d.reparam.emitter_field`: the chart
 the shadow edges) and the cosine strategy's kernels (:mod:`sphere3d.reparam.kernel_border`: the chart
 about a kernel's centre, the light's border). Per shading point or kernel, a chart about a θ-free
 unit axis a (frame t, b), $g(ω) = (ω·t, ω·b) / (ω·a)$, in which a great circle through the point
-of normal m is the line $(m·t) u_1 + (m·b) u_2 + m·a = 0$ (:func:`chart_line`), and a rotation R(θ)
+of normal m is the line $(m·t) u_1 + (m·b) u_2 + m·a = 0$ (:func:`chart_line`; an edge whose ends
+lie in front of the chart is kept as its image, a segment, :func:`chart_edges`: off its ends the field
+takes the nearer end's velocity, where a whole line's far points move with its turn times their
+distance, without bound for an edge seen nearly end-on), and a rotation R(θ)
 already chosen (the probes' rule). The evaluation direction of a sample ω is $R(θ)\, T(θ, ω)$, T
 the map of the chart $u \mapsto u + (θ - θ_0)\, v(u)$ with v the moving least-squares field of
 :func:`~sphere3d.reparam.corner_lines.line_field` over the lines, their velocities taken relative to

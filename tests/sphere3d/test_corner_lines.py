@@ -6,8 +6,8 @@ meeting point's velocity where two lines meet (V, and an edge crossing L), its g
 central differences of its value, k parameters give each one's field, and its squared strain over a
 kernel grows as log(1 / h) as the corner nears the line (the one affine map keeping all three lines
 grows as 1 / h²), and off a short segment's ends the field is bounded by their velocities (its whole
-line's far points move with its turn times their distance). The film kernel's use of it is checked pixel by pixel against a closed form in
-tests/sphere3d/test_junctions.py.
+line's far points move with its turn times their distance). The film kernel's use of it is checked
+pixel by pixel against a closed form in tests/sphere3d/test_junctions.py.
 """
 
 from __future__ import annotations
