@@ -49,7 +49,7 @@ from sphere3d.reparam.kernel_border import border_field
 from sphere3d.reparam.lobe import LOBE, lobe_kappa, lobe_radius
 from sphere3d.reparam.outline import outline_table
 from sphere3d.reparam.penumbra import cone_may_see_motion, moving_sphere, separating_planes
-from sphere3d.reparam.probes import REFINE, follow_probe_edges, ring_directions, vmf_spread_angle
+from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
 from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
 from sphere3d.reparam.snaps import angle_snap
 from sphere3d.rotation import Rotation
@@ -226,7 +226,7 @@ class ReparamTransforms(Identity):
         hits = hits.without(dot(d, normal[:, None]) <= 0.0)
         spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(kappa))
         sky = ~hits.hit[:, 0] & (dot(d[:, 0], normal) > 0.0)
-        followed = follow_probe_edges(
+        followed = follow_probes(
             shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
         )
         return followed.rotation, sky, followed

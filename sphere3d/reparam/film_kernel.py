@@ -220,7 +220,7 @@ def film_transform(
         axis = cam.directions(centre[rows, 0], centre[rows, 1])
         pixel_angle = 2.0 * cam.tan_half / cam.width
         spin = (axis / np.linalg.norm(axis, axis=1, keepdims=True), sigma * pixel_angle)
-        sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap, spin=spin)
+        sub = follow_probes(state, o, detach(o), d, hits, refine=refine, snap=snap, spin=spin).rotation
         rotation.target[rows] = sub.target
         rotation.active[rows] = sub.active
         if sub.spin is not None:

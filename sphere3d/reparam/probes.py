@@ -39,7 +39,6 @@ from sphere3d.vector import frame
 __all__ = [
     "REFINE",
     "Followed",
-    "follow_probe_edges",
     "follow_probes",
     "ring_directions",
     "ring_offsets",
@@ -223,30 +222,15 @@ def follow_probes(
     refine: int = REFINE,
     snap: Snap | None = None,
     spin: tuple[np.ndarray, float | np.ndarray] | None = None,
-) -> Rotation:
-    """The rotation following the point chosen by :func:`select_points` (identity where none).
+) -> Followed:
+    """The rotation following the point chosen by :func:`select_points` (identity where none), and the
+    edges it follows (:class:`Followed`).
 
     With ``spin`` = (kernel centres (m, 3), kernel σ in radians: one, or one per row) and a ``snap``,
     where the point was snapped onto an edge the rotation also turns about it so that the edge's great circle
     follows its own (:func:`~sphere3d.reparam.snaps.line_spin`); at a corner, by its two edges' rates
     weighted by the kernel.
     """
-    args = (state, origin, trace_origin, directions, hits, normal, refine, snap, spin)
-    return follow_probe_edges(*args).rotation
-
-
-def follow_probe_edges(
-    state: SceneState,
-    origin: Any,
-    trace_origin: np.ndarray,
-    directions: np.ndarray,
-    hits: Hits,
-    normal: np.ndarray | None = None,
-    refine: int = REFINE,
-    snap: Snap | None = None,
-    spin: tuple[np.ndarray, float | np.ndarray] | None = None,
-) -> Followed:
-    """:func:`follow_probes`, with the edges its rotation follows."""
     point, found, snapped = _choose(state, origin, trace_origin, directions, hits, normal, refine, snap)
     to, found = direction_towards(point, origin, found)
     if spin is None or snapped is None:
