@@ -149,7 +149,7 @@ class EmitterEdgeSamples:
         """
         rotated = rotation.apply(self.w)
         if field is not None:  # the edge point moves with the whole map: V_T from its direction's tangent
-            rotated = field.apply(self.w, rotated)[0]
+            rotated = field.apply(self.w, rotated, jacobian=False)[0]
         area = float(detach(state.emitter_area))
         tri0 = np.asarray(detach(state.triangles))
         # operands without a tangent enter plain: the Dual rules give the same nonzero tangents

@@ -73,10 +73,11 @@ class ChartField:
         slot[rows] = self.slot
         return replace(self, slot=slot)
 
-    def apply(self, omega: np.ndarray, rotated: Any) -> tuple[Any, Any]:
+    def apply(self, omega: np.ndarray, rotated: Any, jacobian: bool = True) -> tuple[Any, Any]:
         """The evaluation directions of the points' emitter samples ``omega`` (plain, (n, 3)): ``rotated``
         (the rotation's, Dual) with the field's tangent at the points that have one, and the
-        Jacobian weight (Dual of value 1; None where no point has a field)."""
+        Jacobian weight (Dual of value 1; None where no point has a field, or without ``jacobian``:
+        a boundary term's points need their velocity only)."""
         on = np.flatnonzero(self.slot >= 0)
         if not on.size:
             return rotated, None
@@ -95,27 +96,28 @@ class ChartField:
         u = np.stack([dot(y, t), dot(y, b)], axis=1) / depth[:, None]
         # in units of the light's chart radius r (prior weight 1 / r²), then back: v = r v_r, ∇v = ∇_r v_r
         scale = self.scale[f]
-        v, grad = line_field(u / scale[:, None], lines, segment, 1.0, segment)
+        v, trace = line_field(
+            u / scale[:, None], lines, segment, 1.0, segment, "trace" if jacobian else "none"
+        )
         k = self.k
         v = v * (scale[:, None] if k is None else scale[:, None, None])
         s2 = 1.0 + dot(u, u)
         shape = omega.shape if k is None else (k, *omega.shape)
         t_dir, log_j = np.zeros(shape) + tangent(rotated), np.zeros(shape[:-1])
         if k is not None:  # the parameters' axis first, as the Duals hold it
-            v, grad = np.moveaxis(v, 1, 0), np.moveaxis(grad, 1, 0)
+            v = np.moveaxis(v, 1, 0)
+            trace = None if trace is None else trace.T
         # ω = (a + u_1 t + u_2 b) / sqrt(1 + |u|²) moving with u̇ = v   (shading_affine._map_tangents)
         radial = np.sum(u * v, axis=-1) / s2
         y_dot = (v[..., :1] * t + v[..., 1:] * b) / np.sqrt(s2)[:, None] - y * radial[..., None]
-        # log |J|: tr ∇v - 3 u·v / (1 + |u|²), the chart's area element du / (1 + |u|²)^{3/2}
-        jac_dot = np.trace(grad, axis1=-2, axis2=-1) - 3.0 * radial
         # the rotation after the field: R(θ) T(θ, ω) moves at Ṙω + Ṫ(ω)
-        if k is None:
-            t_dir[on] += y_dot
-            log_j[on] = jac_dot
-        else:
-            t_dir[:, on] += y_dot
-            log_j[:, on] = jac_dot
-        return Dual(np.asarray(detach(rotated)), t_dir, k), Dual(np.ones(len(omega)), log_j, k)
+        t_dir[..., on, :] += y_dot
+        direction = Dual(np.asarray(detach(rotated)), t_dir, k)
+        if not jacobian:
+            return direction, None
+        # log |J|: tr ∇v - 3 u·v / (1 + |u|²), the chart's area element du / (1 + |u|²)^{3/2}
+        log_j[..., on] = trace - 3.0 * radial
+        return direction, Dual(np.ones(len(omega)), log_j, k)
 
 
 def chart_line(m: Any, axis: np.ndarray, t: np.ndarray, b: np.ndarray, k: int | None) -> tuple:

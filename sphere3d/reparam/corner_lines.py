@@ -91,15 +91,22 @@ def corner_line_maps(
 
 
 def line_field(
-    at: np.ndarray, lines: FilmLines, ray: np.ndarray, mu: float, end: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+    at: np.ndarray,
+    lines: FilmLines,
+    ray: np.ndarray,
+    mu: float,
+    end: np.ndarray | None = None,
+    gradient: str = "full",
+) -> tuple[np.ndarray, np.ndarray | None]:
     r"""The moving least-squares velocity field keeping ``lines`` (module docstring), at points ``at``
     (m, 2): its value (m, 2) and gradient (m, 2, 2), ``[i, l]`` = $∂ v_i / ∂ u_l$ (for k parameters
     (m, k, 2) and (m, k, 2, 2)).
 
     ``lines.rows`` (P,) gives each line's point row; a line is $q + s e$ (``point``, ``direction``)
     moving at $\dot q + s \dot e$, a ray from q (s >= 0) where ``ray`` (P,), the segment s in [0, 1] where
-    also ``end`` (P,), a whole line elsewhere; ``mu`` the prior's weight, $\mathrm{pixels}^{-2}$. Off a
+    also ``end`` (P,), a whole line elsewhere; ``mu`` the prior's weight, $\mathrm{pixels}^{-2}$.
+    ``gradient``: "full" (the gradient), "trace" ($\mathrm{tr}\, ∇v$ alone, (m,) or (m, k): a change of
+    variables' Jacobian needs no more) or "none" (None: the value alone). Off a
     ray's or segment's ends the condition is the nearest end's normal velocity (bounded however short
     the segment, where a whole line's far points move with its turn times their distance).
 
@@ -145,39 +152,38 @@ def line_field(
     kx = (lambda a: a[:, :, None]) if k else (lambda a: a)  # a (m, J, ...) array before the k axis
     c = np.sum((q_dot + kx(s[..., None]) * e_dot) * kx(n), axis=-1)  # (m, J) or (m, J, k)
     grad_c = np.sum(e_dot * kx(n), axis=-1)[..., None] * kx(ds)  # (m, J, [k,] 2)
-    # the pairs of lines i < j: weights, meeting velocities x = (c_i p_j - c_j p_i) / s, p = n turned
-    i, j = np.triu_indices(width, 1)
+    # every pair of lines (l, o), each unordered pair twice: weight W = w_l w_o sine², sine = n_l × n_o
     p = np.stack([n[..., 1], -n[..., 0]], axis=-1)
-    sine = n[:, i, 0] * n[:, j, 1] - n[:, i, 1] * n[:, j, 0]  # (m, pairs)
-    big = w[:, i] * w[:, j] * sine**2
-    grad_big = (w[:, i, None] * grad_w[:, j] + w[:, j, None] * grad_w[:, i]) * sine[..., None] ** 2
-    pk = (lambda a: a[:, :, None]) if k else (lambda a: a)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = (c[:, i, ..., None] * pk(p[:, j]) - c[:, j, ..., None] * pk(p[:, i])) / kx(sine[..., None])
-        grad_x = (
-            pk(p[:, j])[..., :, None] * grad_c[:, i, ..., None, :]
-            - pk(p[:, i])[..., :, None] * grad_c[:, j, ..., None, :]
-        ) / kx(sine[..., None, None])
-    meet = big > 0.0
-    x = np.where(kx(meet[..., None]), x, 0.0)
-    grad_x = np.where(kx(meet[..., None, None]), grad_x, 0.0)
-    # one line and the prior: c n with weight μ w; the prior alone: 0 with weight μ²
-    one = c[..., None] * kx(n)
-    grad_one = kx(n)[..., :, None] * grad_c[..., None, :]
-    total = np.sum(big, axis=1) + mu * np.sum(w, axis=1) + mu * mu  # (m,)
+    sine = n[:, :, None, 0] * n[:, None, :, 1] - n[:, :, None, 1] * n[:, None, :, 0]  # (m, J, J)
+    big = w[:, :, None] * w[:, None, :] * sine**2  # 0 on the diagonal
+    total = 0.5 * np.sum(big, axis=(1, 2)) + mu * np.sum(w, axis=1) + mu * mu  # (m,)
     # no weight at all (no prior, parallel lines only): the identity (v = 0), not 0 / 0
     total = np.where(total > 0.0, total, np.inf)
-    tk = (lambda a: a[:, None]) if k else (lambda a: a)
-    v = (np.sum(kx(big[..., None]) * x, axis=1) + mu * np.sum(kx(w[..., None]) * one, axis=1)) / tk(
-        total[:, None]
-    )
-    # ∇v = Σ (∇W ⊗ (x - v) + W ∇x) / Σ W
-    vk = v[:, None]
-    grad = np.sum(
-        (x - vk)[..., :, None] * kx(grad_big)[..., None, :] + kx(big[..., None, None]) * grad_x, axis=1
-    )
-    grad += mu * np.sum(
-        (one - vk)[..., :, None] * kx(grad_w)[..., None, :] + kx(w[..., None, None]) * grad_one, axis=1
-    )
-    # the prior's own term: ∇(μ²) = 0
-    return v, grad / tk(total[:, None, None])
+    # the pair's meeting velocity x = (c_l p_o - c_o p_l) / sine_lo is linear in the c's: its coefficient of
+    # c_l is b_lo = p_o / sine_lo (the prior's one-line term: c_l n_l). So v = Σ_l c_l a_l with
+    # a_l = (Σ_o W_lo b_lo + μ w_l n_l) / ΣW, geometric: the k parameters enter through c and ∇c only
+    # (O(J k) per point; the pairs O(J²) once)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(big > 0.0, 1.0 / sine, 0.0)
+    b = p[:, None, :, :] * inv[..., None]  # (m, J, J, 2): b_lo
+    a = (np.sum(big[..., None] * b, axis=2) + mu * w[..., None] * n) / total[:, None, None]
+    v = np.einsum("ml,mlx->mx", c, a) if not k else np.einsum("mlk,mlx->mkx", c, a)
+    if gradient == "none":
+        return v, None
+    grad_big = (w[:, :, None, None] * grad_w[:, None, :] + w[:, None, :, None] * grad_w[:, :, None]) * sine[
+        ..., None
+    ] ** 2
+    # ∇v = Σ_π (∇W_π ⊗ (x_π - v) + W_π ∇x_π) / ΣW = Σ_l (c_l G_l + a_l ⊗ ∇c_l), with
+    # G_l = (Σ_o b_lo ⊗ ∇W_lo + μ n_l ⊗ ∇w_l - a_l ⊗ Σ_π ∇W_π) / ΣW   (the prior's own ∇(μ²) = 0)
+    flux = 0.5 * np.sum(grad_big, axis=(1, 2)) + mu * np.sum(grad_w, axis=1)  # (m, 2): Σ_π ∇W_π
+    if gradient == "trace":  # tr ∇v alone: the 2 x 2 blocks never formed
+        inner = np.einsum("mlox,mlox->ml", b, grad_big) + mu * np.sum(n * grad_w, axis=-1)
+        tr_g = (inner - np.einsum("mlx,mx->ml", a, flux)) / total[:, None]
+        if not k:
+            return v, np.einsum("ml,ml->m", c, tr_g) + np.einsum("mlx,mlx->m", a, grad_c)
+        return v, np.einsum("mlk,ml->mk", c, tr_g) + np.einsum("mlx,mlkx->mk", a, grad_c)
+    outer = np.einsum("mlox,mloy->mlxy", b, grad_big) + mu * n[..., :, None] * grad_w[..., None, :]
+    g = (outer - a[..., :, None] * flux[:, None, None, :]) / total[:, None, None, None]
+    if not k:
+        return v, np.einsum("ml,mlxy->mxy", c, g) + np.einsum("mlx,mly->mxy", a, grad_c)
+    return v, np.einsum("mlk,mlxy->mkxy", c, g) + np.einsum("mlx,mlky->mkxy", a, grad_c)

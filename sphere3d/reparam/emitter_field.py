@@ -40,7 +40,7 @@ from flatland.core.dual import detach
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.chart_field import ChartField, chart_edges
 from sphere3d.reparam.film_lines import FilmLines
-from sphere3d.reparam.outline import next_edges
+from sphere3d.reparam.outline import next_edges, outline_table
 from sphere3d.reparam.penumbra import emitter_sphere
 from sphere3d.reparam.snaps import edge_snap
 from sphere3d.rotation import Rotation
@@ -93,6 +93,8 @@ def shadow_field(
     planes = np.zeros((s, 0, 3))  # the found edges' great circles (plain normals), for the side tests
     hits, inside, outside = first
     rows, alive = np.arange(s), ok.copy()
+    outline = outline_table(state)
+    count, seen = max(int(outline.edge_of.max(initial=0)) + 1, 1), np.zeros(0, dtype=np.int64)
     for r in range(pairs):  # a few rounds of bisection, each over every point at once
         if r:
             # a pair on the same side of every edge found: another edge lies between them
@@ -121,6 +123,13 @@ def shadow_field(
             f = after.found[:, end]
             edges.append((g[f], after.face[f, end], after.ia[f, end], after.ib[f, end]))
         for row, face, ia, ib in edges:
+            # each mesh edge once per point (a neighbour is often an edge found before)
+            key = row * count + outline.edge_of[face, np.where(ib == (ia + 1) % 3, ia, ib)]
+            _, first = np.unique(key, return_index=True)
+            new = np.zeros(key.size, dtype=bool)
+            new[first] = ~np.isin(key[first], seen)
+            seen = np.concatenate([seen, key[new]])
+            row, face, ia, ib = row[new], face[new], ia[new], ib[new]
             tri, n = state.triangles[face], np.arange(len(face))
             xg = x[row]
             p1, p2 = tri[n, ia] - xg, tri[n, ib] - xg
@@ -143,4 +152,26 @@ def shadow_field(
         *(np.concatenate([getattr(p, f) for p, _ in parts]) for f in FilmLines.__dataclass_fields__)
     )
     segment = np.concatenate([seg for _, seg in parts])
+    # only edges whose image reaches the light's disc in the chart (radius 1 in these units) can be a
+    # discontinuity there: the others would only constrain the map, at a cost per sample
+    keep = _reach_disc(lines, segment)
+    lines, segment = lines.take(keep), segment[keep]
+    held = np.zeros(fields.size, dtype=bool)
+    held[lines.rows] = True
+    if not held.all():  # a field without a line is the rotation alone
+        renumber = np.cumsum(held) - 1
+        slot = np.where(slot >= 0, np.where(held[np.maximum(slot, 0)], renumber[np.maximum(slot, 0)], -1), -1)
+        lines = FilmLines(
+            renumber[lines.rows], lines.point, lines.direction, lines.point_dot, lines.direction_dot
+        )
+        fields = fields[held]
     return ChartField(slot, axis[fields], t[fields], b[fields], scale[fields], lines, segment, k)
+
+
+def _reach_disc(lines: FilmLines, segment: np.ndarray) -> np.ndarray:
+    """Which of the ``lines`` (points ``q + s e``; s in [0, 1] where ``segment``) come within 1 of the chart's
+    origin."""
+    q, e = lines.point, lines.direction
+    s = -np.sum(q * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300)
+    s = np.where(segment, np.clip(s, 0.0, 1.0), s)
+    return np.hypot(*(q + s[:, None] * e).T) <= 1.0
