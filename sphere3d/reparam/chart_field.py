@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 
 from flatland.core.dual import Dual, detach, tangent
-from sphere3d.reparam.corner_lines import line_field
+from sphere3d.reparam.corner_lines import EPSILON
+from sphere3d.reparam.field_kernel import field_trace
 from sphere3d.reparam.film_lines import FilmLines
 from sphere3d.rotation import Rotation
 from sphere3d.vector import cross, dot
@@ -94,11 +95,10 @@ class ChartField:
         y, axis, t, b = omega[on], self.axis[f], self.t[f], self.b[f]
         depth = dot(y, axis)
         u = np.stack([dot(y, t), dot(y, b)], axis=1) / depth[:, None]
-        # in units of the light's chart radius r (prior weight 1 / r²), then back: v = r v_r, ∇v = ∇_r v_r
+        # in units of the chart's scale r (prior weight 1 / r²), then back: v = r v_r, tr ∇v = tr ∇_r v_r
+        # (line_field's, point by point: field_kernel)
         scale = self.scale[f]
-        v, trace = line_field(
-            u / scale[:, None], lines, segment, 1.0, segment, "trace" if jacobian else "none"
-        )
+        v, trace = field_trace(u / scale[:, None], lines, segment, 1.0, segment, jacobian, EPSILON)
         k = self.k
         v = v * (scale[:, None] if k is None else scale[:, None, None])
         s2 = 1.0 + dot(u, u)

@@ -40,7 +40,7 @@ from flatland.core.dual import detach
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.chart_field import ChartField, chart_edges
 from sphere3d.reparam.film_lines import FilmLines
-from sphere3d.reparam.outline import next_edges, outline_table
+from sphere3d.reparam.outline import next_edges
 from sphere3d.reparam.penumbra import emitter_sphere
 from sphere3d.reparam.snaps import edge_snap
 from sphere3d.rotation import Rotation
@@ -90,16 +90,15 @@ def shadow_field(
     t, b = frame(axis)
     snap = edge_snap(state, _no_corner, -1.0)
     found_rows, found_m = [], []
-    planes = np.zeros((s, 0, 3))  # the found edges' great circles (plain normals), for the side tests
+    # per point and probe, on which side of each found edge's great circle it lies: 2 bits an edge
+    # (sign + 1), so that two probes are on the same side of every edge where their codes are equal
+    code, shift = np.zeros(w.shape[:2], dtype=np.int64), 0
     hits, inside, outside = first
     rows, alive = np.arange(s), ok.copy()
-    outline = outline_table(state)
-    count, seen = max(int(outline.edge_of.max(initial=0)) + 1, 1), np.zeros(0, dtype=np.int64)
     for r in range(pairs):  # a few rounds of bisection, each over every point at once
         if r:
             # a pair on the same side of every edge found: another edge lies between them
-            side = np.sign(np.einsum("spx,sjx->spj", w, planes))  # (s, p, found)
-            same = np.all(side[:, :, None] == side[:, None, :], axis=-1)  # (s, p, p)
+            same = code[:, :, None] == code[:, None, :]  # (s, p, p)
             i, j, has = closest_pair(
                 w, lambda q, same=same: occluded[q, :, None] & visible[q, None, :] & same[q]
             )
@@ -116,28 +115,24 @@ def shadow_field(
         alive[:] = False
         alive[rows[good]] = True  # the next round only where this one found an edge
         g, triangle, slots = rows[good], hits.triangle[good], lines[good, 0]
-        # the found edge, and the silhouette edges that meet it at its ends (outline.next_edges)
+        # the found edge, and the silhouette edges that meet it at its ends (outline.next_edges); an edge
+        # found twice is a line twice (weight doubled, the field unchanged where it matters: on it)
         after = next_edges(state, x0[g], triangle, slots)
         edges = [(g, triangle, slots[:, 0], slots[:, 1])]
         for end in range(2):  # the edge's two ends (not a loop over samples)
             f = after.found[:, end]
             edges.append((g[f], after.face[f, end], after.ia[f, end], after.ib[f, end]))
         for row, face, ia, ib in edges:
-            # each mesh edge once per point (a neighbour is often an edge found before)
-            key = row * count + outline.edge_of[face, np.where(ib == (ia + 1) % 3, ia, ib)]
-            _, first = np.unique(key, return_index=True)
-            new = np.zeros(key.size, dtype=bool)
-            new[first] = ~np.isin(key[first], seen)
-            seen = np.concatenate([seen, key[new]])
-            row, face, ia, ib = row[new], face[new], ia[new], ib[new]
             tri, n = state.triangles[face], np.arange(len(face))
             xg = x[row]
             p1, p2 = tri[n, ia] - xg, tri[n, ib] - xg
             found_rows.append(row)
             found_m.append((p1, p2, rotation.take(row)))
-            plane = np.zeros((s, 1, 3))
-            plane[row, 0] = cross(np.asarray(detach(p1)), np.asarray(detach(p2)))
-            planes = np.concatenate([planes, plane], axis=1)
+            if r + 1 < pairs and shift < 62:  # the side codes, for the next rounds' pairs
+                plane = cross(np.asarray(detach(p1)), np.asarray(detach(p2)))
+                side = np.sign(np.einsum("rpx,rx->rp", w[row], plane)).astype(np.int64) + 1
+                code[row] |= side << shift
+                shift += 2
     shadow = np.concatenate(found_rows) if found_rows else np.zeros(0, np.intp)
     fields = np.unique(shadow)
     if not fields.size:

@@ -6,8 +6,10 @@ meeting point's velocity where two lines meet (V, and an edge crossing L), its g
 central differences of its value, k parameters give each one's field, and its squared strain over a
 kernel grows as log(1 / h) as the corner nears the line (the one affine map keeping all three lines
 grows as 1 / h²), and off a short segment's ends the field is bounded by their velocities (its whole
-line's far points move with its turn times their distance). The film kernel's use of it is checked
-pixel by pixel against a closed form in tests/sphere3d/test_junctions.py.
+line's far points move with its turn times their distance); its trace alone, its value alone, and the
+chart fields' compiled kernel (:mod:`sphere3d.reparam.field_kernel`) agree with it to rounding. The
+film kernel's use of it is checked pixel by pixel against a closed form in
+tests/sphere3d/test_junctions.py.
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sphere3d.reparam.corner_lines import line_field
+from sphere3d.reparam.corner_lines import EPSILON, line_field
+from sphere3d.reparam.field_kernel import field_points, field_trace
 from sphere3d.reparam.film_lines import FilmLines
 
 REACH = 0.85  # the film kernel's ring radius at the defaults (3 x 0.28 px)
@@ -165,3 +168,36 @@ def test07_off_a_segment_s_ends_the_field_is_bounded_by_the_ends_velocities():
     segment, _ = line_field(far, lines, np.ones(1, dtype=bool), 1.0, np.ones(1, dtype=bool))
     assert np.abs(segment).max() <= 0.5 * length * spin
     assert np.abs(line).max() > 100.0 * np.abs(segment).max()
+
+
+def test08_the_compiled_field_matches_its_python_and_line_field_s_trace():
+    # the chart fields' kernel (sphere3d.reparam.field_kernel): per point, the value and tr ∇v of the
+    # whole-array field, to rounding, with and without k parameters, rays, segments and a prior
+    rng = np.random.default_rng(8)
+    for trial in range(40):
+        m, count, k = 30, int(rng.integers(1, 10)), (None, 3)[trial % 2]
+        slots = (count, 2) if k is None else (count, k, 2)
+        rows = rng.integers(0, m, count)
+        lines = FilmLines(rows, *rng.normal(size=(2, count, 2)), *rng.normal(size=(2, *slots)))
+        ray = rng.random(count) < 0.5
+        end = ray & (rng.random(count) < 0.5)
+        at, mu = rng.normal(size=(m, 2)) * 2.0, (0.0, 1.0, 0.3)[trial % 3]
+        v, trace = line_field(at, lines, ray, mu, end, "trace")
+        v_full, grad = line_field(at, lines, ray, mu, end)
+        np.testing.assert_allclose(trace, np.trace(grad, axis1=-2, axis2=-1), rtol=1e-10, atol=1e-12)
+        np.testing.assert_array_equal(v, v_full)
+        fast, fast_trace = field_trace(at, lines, ray, mu, end, True, EPSILON)
+        np.testing.assert_allclose(fast, v, rtol=1e-9, atol=1e-12 * max(1.0, np.abs(v).max()))
+        np.testing.assert_allclose(fast_trace, trace, rtol=1e-9, atol=1e-12 * max(1.0, np.abs(trace).max()))
+        if trial < 4:  # the kernel as plain Python (its compiled form above)
+            order = np.argsort(rows, kind="stable")
+            start = np.searchsorted(rows[order], np.arange(m + 1))
+            q_dot = lines.point_dot[order] if k else lines.point_dot[order][:, None]
+            e_dot = lines.direction_dot[order] if k else lines.direction_dot[order][:, None]
+            out_v, out_t = np.empty((m, q_dot.shape[1], 2)), np.empty((m, q_dot.shape[1]))
+            field_points(
+                at, start, lines.point[order], lines.direction[order], q_dot, e_dot, ray[order], end[order],
+                mu, EPSILON**2, True, out_v, out_t,
+            )  # fmt: skip
+            np.testing.assert_allclose(out_v.reshape(fast.shape), fast, rtol=1e-12, atol=1e-300)
+            np.testing.assert_allclose(out_t.reshape(fast_trace.shape), fast_trace, rtol=1e-12, atol=1e-300)
