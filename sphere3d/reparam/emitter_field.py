@@ -17,7 +17,9 @@ a box's corner's next edges). The first pair is the closest one (the rotation's)
 an occluded and a visible probe on the same side of every edge found so far, so another edge lies
 between them; at most :data:`PAIRS` pairs. The field's scale is the light's radius in the chart,
 $\tan(\arcsin(R / d))$ for its bounding sphere of radius R at distance d: beyond the light it is the
-rotation alone.
+rotation alone. Edges are kept as their images, segments (:func:`~sphere3d.reparam.chart_field.chart_edges`);
+those whose image misses the light's disc in the chart, which cannot be a discontinuity there, are left
+out (they would only constrain the map, at a cost per sample).
 
 The light's own border is dragged by the whole map as by the rotation alone, and its boundary term
 (:mod:`sphere3d.boundary.emitters`) takes the map's velocity at its edge points: the border held
