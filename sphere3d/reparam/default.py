@@ -115,8 +115,9 @@ class ReparamTransforms(Identity):
         is thin and reaches into it, follow it by an affine map of the film
         (:mod:`sphere3d.reparam.film_affine`).
     film_corners : bool
-        Where a moving silhouette vertex's film image lies inside a camera sample's ring of probes,
-        follow both its silhouette edges by an affine map of the film
+        Where a moving silhouette vertex's film image lies within a camera sample's kernel's reach
+        (:data:`~sphere3d.reparam.film_corners.REACH` σ), follow both its silhouette edges by an affine
+        map of the film
         (:mod:`sphere3d.reparam.film_corners`).
     film_corner_lines : bool
         Where such a ring also holds a static edge, keep the corner's edges and that edge by one

@@ -10,10 +10,12 @@ is followed by a field of the gnomonic chart about the axis from the point to th
 emitters' bounding sphere (:class:`~sphere3d.reparam.chart_field.ChartField`, Loubet et al. 2019,
 Sec. 4.3: a refinement of the heuristic) that keeps the shadow edges: the occluder's edges found by
 bisection between pairs of an occluded and a visible probe
-(:func:`~sphere3d.reparam.bisection.bisect_silhouette`), each moved onto the edge of its triangle that
-the bisection's segment leaves by (:func:`~sphere3d.reparam.snaps.edge_snap`), with the silhouette
-edges that meet it at its ends (:func:`~sphere3d.reparam.outline.next_edges`: a triangle's other two,
-a box's corner's next edges). The first pair is the closest one (the rotation's); each next one joins
+(:func:`~sphere3d.reparam.bisection.bisect_silhouette`), each moved onto the silhouette edge the
+bisection's segment leaves by (:func:`~sphere3d.reparam.snaps.edge_snap`), with the silhouette edges
+that follow it along the outline from both its ends (:func:`~sphere3d.reparam.outline.outline_chain`: a
+triangle's other two, a box's corner's next edges, a faceted sphere's outline across the light) while
+their images reach the light's disc, up to :data:`CHAIN` a side. The first pair is the closest one
+(the rotation's); each next one joins
 an occluded and a visible probe on the same side of every edge found so far, so another edge lies
 between them; at most :data:`PAIRS` pairs. The field's scale is the light's radius in the chart,
 $\tan(\arcsin(R / d))$ for its bounding sphere of radius R at distance d: beyond the light it is the
@@ -25,11 +27,9 @@ The light's own border is dragged by the whole map as by the rotation alone, and
 (:mod:`sphere3d.boundary.emitters`) takes the map's velocity at its edge points: the border held
 fixed, exactly, whatever the field does. A point on the light's bounding sphere gets no field.
 
-Biased where a shadow edge is neither found by a pair nor next to a found one (a thin lit or hidden
-part between probes, an outline of many edges across the light), where a bisection stops on an inner
-edge of the occluder's mesh near its silhouette, and where the shadow's outline is curved (a smooth
-occluder's, straight per facet only: beyond the found edges the field blends their motions with the
-rotation's).
+Biased where a shadow edge is neither found by a pair nor on the outline within :data:`CHAIN` edges of
+a found one (a thin lit or hidden part between probes, an outline of more edges across the light), and
+where the shadow's outline is curved (straight per facet only).
 """
 
 from __future__ import annotations
@@ -42,17 +42,22 @@ from flatland.core.dual import detach
 from sphere3d.reparam.bisection import bisect_silhouette, closest_pair
 from sphere3d.reparam.chart_field import ChartField, chart_edges
 from sphere3d.reparam.film_lines import FilmLines
-from sphere3d.reparam.outline import next_edges
+from sphere3d.reparam.outline import outline_chain
 from sphere3d.reparam.penumbra import emitter_sphere
 from sphere3d.reparam.snaps import edge_snap
 from sphere3d.rotation import Rotation
 from sphere3d.vector import cross, frame, norm
 
-__all__ = ["PAIRS", "shadow_field"]
+__all__ = ["CHAIN", "PAIRS", "shadow_field"]
 
 PAIRS = 3
 """Pairs of probes bisected per shading point at most, each finding a shadow edge and its next ones: a
 triangle's shadow has three edges."""
+CHAIN = 8
+"""Silhouette edges followed along the outline from each end of a found edge at most, while their images
+reach the light's disc: a cost bound per shading point (the field costs O(J) per sample for J lines);
+an outline of more edges across the light (a finer mesh's) keeps its further edges only where another
+pair finds them."""
 
 
 def _no_corner(rows: np.ndarray, ends: np.ndarray) -> np.ndarray:
@@ -112,18 +117,18 @@ def shadow_field(
             hits, inside, outside = bisect_silhouette(
                 state, origin[rows], a_in, a_out, h0, normal[rows], refine
             )
-        _, _, lines = snap(rows, origin[rows], inside, outside, hits)
+        snapped, _, _, lines = snap(rows, origin[rows], inside, outside, hits)
         good = (lines[:, 0, 0] >= 0) & hits.hit & ok[rows]
         alive[:] = False
         alive[rows[good]] = True  # the next round only where this one found an edge
-        g, triangle, slots = rows[good], hits.triangle[good], lines[good, 0]
+        g, triangle, slots = rows[good], snapped[good], lines[good, 0]
         # the found edge, and the silhouette edges that meet it at its ends (outline.next_edges); an edge
         # found twice is a line twice (weight doubled, the field unchanged where it matters: on it)
-        after = next_edges(state, x0[g], triangle, slots)
         edges = [(g, triangle, slots[:, 0], slots[:, 1])]
-        for end in range(2):  # the edge's two ends (not a loop over samples)
-            f = after.found[:, end]
-            edges.append((g[f], after.face[f, end], after.ia[f, end], after.ib[f, end]))
+        # and on along the outline while its edges' images reach the light's disc (outline.outline_chain)
+        near = _near_light(state, x0, g, axis, t, b, scale)
+        for i, face, ia, ib in outline_chain(state, x0[g], triangle, slots, near, CHAIN):
+            edges.append((g[i], face, ia, ib))
         for row, face, ia, ib in edges:
             tri, n = state.triangles[face], np.arange(len(face))
             xg = x[row]
@@ -172,3 +177,34 @@ def _reach_disc(lines: FilmLines, segment: np.ndarray) -> np.ndarray:
     s = -np.sum(q * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300)
     s = np.where(segment, np.clip(s, 0.0, 1.0), s)
     return np.hypot(*(q + s[:, None] * e).T) <= 1.0
+
+
+def _near_light(
+    state: Any,
+    x0: np.ndarray,
+    g: np.ndarray,
+    axis: np.ndarray,
+    t: np.ndarray,
+    b: np.ndarray,
+    scale: np.ndarray,
+) -> Any:
+    """``near(rows, face, ia, ib)`` for :func:`~sphere3d.reparam.outline.outline_chain`: whether the edge's
+    image in the gnomonic chart about ``axis`` comes within the light's radius ``scale`` of its origin
+    (points ``x0[g[rows]]``); an edge with an end behind the chart's plane counts as near."""
+    triangles = np.asarray(detach(state.triangles))
+
+    def near(rows: np.ndarray, face: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:
+        p = g[rows]
+        ends = np.stack([triangles[face, ia], triangles[face, ib]], axis=1) - x0[p, None]  # (r, 2, 3)
+        depth = np.einsum("rex,rx->re", ends, axis[p])
+        behind = np.any(depth <= 0.0, axis=1)
+        z = np.where(depth > 0.0, depth, 1.0)
+        u = (
+            np.stack([np.einsum("rex,rx->re", ends, t[p]), np.einsum("rex,rx->re", ends, b[p])], -1)
+            / z[..., None]
+        )
+        e = u[:, 1] - u[:, 0]
+        s = np.clip(-np.sum(u[:, 0] * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300), 0.0, 1.0)
+        return behind | (np.hypot(*(u[:, 0] + s[:, None] * e).T) <= scale[p])
+
+    return near

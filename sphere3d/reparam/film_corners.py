@@ -11,8 +11,9 @@ Where a moving vertex V, at which two or more discontinuity edges seen from the 
 (silhouette edges, :meth:`sphere3d.boundary.edges.Edges.silhouette`, and the creases of flat-shaded
 shapes, :func:`sphere3d.boundary.camera.camera_candidates`: a smooth shape's interpolated normals
 make its creases no discontinuity, and its vertices slide under its silhouette), has its film
-image v inside the ring of a camera sample's probes, or two of its edges' images pass through the
-ring (near an acute corner, up to $r / \sin(α/2)$ from v for a ring of radius r and a sector of angle
+image v within the kernel's reach r (:data:`REACH` kernel σ, or the ring of a camera sample's probes
+where wider) of its centre, or two of its edges' images pass within r
+(near an acute corner, up to $r / \sin(α/2)$ from v for a ring of radius r and a sector of angle
 α), the sample's film map is affine on each sector
 between two consecutive edges' images about v: $A(u) = u + (θ - θ_0)(\dot v + \dot L_s (u - v))$,
 where $\dot L_s$ keeps both of the sector's bounding edges on their moved lines. With $e_i$ the
@@ -54,7 +55,16 @@ from sphere3d.film import AffineFilm
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
 
-__all__ = ["NearCorners", "corner_table", "nearest_corners", "silhouette_corners"]
+__all__ = ["REACH", "NearCorners", "corner_table", "nearest_corners", "silhouette_corners"]
+
+REACH = 5.0
+r"""Film kernel standard deviations σ within which a corner's edges are kept (:func:`nearest_corners`'s
+reach in :func:`~sphere3d.reparam.film_kernel.film_transform`, or the probes' ring where wider): the
+corners come from the scene's table, not from the probes, so their reach is the kernel's, whose weight
+beyond 5 σ is below $e^{-12.5} ≈ 4 \cdot 10^{-6}$ of its peak (a precision, not a scene's fit). Kept
+only within the ring (3 σ), a corner between 3 and 5 σ was followed by the probes' rotation about one
+point of its edges, which drags the other edge where the shape turns: a smooth sphere turning about its
+centre kept a bias of 0.8 of its film gradient's RMS."""
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ from sphere3d.film import AffineFilm, FilmTransform
 from sphere3d.live import all_rows, any_rows, moves
 from sphere3d.reparam.corner_lines import corner_line_maps
 from sphere3d.reparam.film_affine import inner_shapes
-from sphere3d.reparam.film_corners import nearest_corners, silhouette_corners
+from sphere3d.reparam.film_corners import REACH, nearest_corners, silhouette_corners
 from sphere3d.reparam.junctions import junction_maps
 from sphere3d.reparam.probes import follow_probes, ring_offsets
 from sphere3d.reparam.snaps import Snap, edge_snap
@@ -162,7 +162,8 @@ def film_transform(
         Where a moving shape's whole image lies inside a ring, follow it by an affine map of the
         film (:mod:`sphere3d.reparam.film_affine`).
     corners : bool, optional
-        Where a moving silhouette vertex's image lies inside a ring, follow both its silhouette
+        Where a moving silhouette vertex's image lies within the kernel's reach (the ring, or
+        :data:`~sphere3d.reparam.film_corners.REACH` σ where wider), follow both its silhouette
         edges by an affine map of the film (:mod:`sphere3d.reparam.film_corners`).
     corner_lines : bool, optional
         Where such a ring also holds a static edge (with ``junctions``), the field keeping the corner's
@@ -184,9 +185,12 @@ def film_transform(
     rotation = Rotation.identity((2 * n,), k)
     # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
     affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
-    if corners:  # a silhouette corner inside the ring: the affine map that follows both its edges
-        near, at = nearest_corners(state, centre, spread * sigma), np.concatenate([s, s])
-        fan = silhouette_corners(state, centre, spread * sigma, at, near)
+    if corners:  # a silhouette corner within the kernel's reach: the affine map that follows both its edges
+        reach = (
+            max(spread, REACH) * sigma
+        )  # the corners come from the scene: the kernel's reach, not the ring's
+        near, at = nearest_corners(state, centre, reach), np.concatenate([s, s])
+        fan = silhouette_corners(state, centre, reach, at, near)
         if junctions and corner_lines:  # and a static edge: the field keeping all (reparam.corner_lines)
             _fill(affine, _rows_of(2 * n, *corner_line_maps(state, near, centre, at, spread * sigma), k))
         _fill(affine, fan)

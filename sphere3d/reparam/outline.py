@@ -19,6 +19,7 @@ nothing else hides it, and a line of the field elsewhere (which only constrains 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -28,7 +29,7 @@ from sphere3d.boundary.edges import row_ids, state_edges
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
 
-__all__ = ["NextEdges", "OutlineTable", "next_edges", "outline_table"]
+__all__ = ["NextEdges", "OutlineTable", "next_edges", "outline_chain", "outline_table"]
 
 
 @dataclass(frozen=True)
@@ -122,3 +123,45 @@ def next_edges(state: SceneState, x: np.ndarray, triangle: np.ndarray, slots: np
         table.ib[e].reshape(shape),
         found.reshape(shape),
     )
+
+
+def _edge_id(table: OutlineTable, face: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """The welded edge of each (face, slots ia, ib)."""
+    return table.edge_of[face, np.where(ib == (ia + 1) % 3, ia, ib)]
+
+
+def outline_chain(
+    state: SceneState,
+    x: np.ndarray,
+    triangle: np.ndarray,
+    slots: np.ndarray,
+    near: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    steps: int,
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Along the outline seen from ``x`` (plain, (r, 3)), from both ends of the edges ``slots`` (r, 2) of
+    ``triangle`` (r,): the silhouette edges that follow, one step (:func:`next_edges`) at a time, while
+    ``near(rows, face, ia, ib)`` holds for the last one (bool per row), up to ``steps`` a side; the first
+    at each end always. A chain that comes back to the edge it started from stops. Returns per step and
+    end (rows of the r, the edge's face, its slots there); each step costs the ends' valences."""
+    table = outline_table(state)
+    own = _edge_id(table, triangle, slots[:, 0], slots[:, 1])
+    after = next_edges(state, x, triangle, slots)
+    out = []
+    for end in range(2):  # the edge's two ends (not a loop over samples)
+        rows = np.flatnonzero(after.found[:, end])
+        face, ia, ib = after.face[rows, end], after.ia[rows, end], after.ib[rows, end]
+        shared = table.vid[triangle[rows], slots[rows, end]]  # the vertex the chain goes on from
+        for step in range(steps):
+            out.append((rows, face, ia, ib))
+            go = (_edge_id(table, face, ia, ib) != own[rows]) & near(rows, face, ia, ib)
+            if step + 1 == steps or not go.any():
+                break
+            rows, face, ia, ib, shared = rows[go], face[go], ia[go], ib[go], shared[go]
+            far = np.where(table.vid[face, ia] == shared, 1, 0)  # the last edge's end away from it
+            shared = np.where(far == 1, table.vid[face, ib], table.vid[face, ia])
+            nxt = next_edges(state, x[rows], face, np.stack([ia, ib], axis=1))
+            n = np.arange(rows.size)
+            f = nxt.found[n, far]
+            rows, shared = rows[f], shared[f]
+            face, ia, ib = nxt.face[n, far][f], nxt.ia[n, far][f], nxt.ib[n, far][f]
+    return out

@@ -145,8 +145,8 @@ def select_points(
         Bisection rays toward the silhouette per single-probe point (default
         :data:`REFINE`; 0: the probe's own hit, the paper's rule).
     snap : callable, optional
-        ``snap(rows, origin, inside, outside, hits) -> (u, v, lines)``: the barycentrics to follow
-        on the bisected hits' triangles instead of the hits' own (rows: the rows of the
+        ``snap(rows, origin, inside, outside, hits) -> (triangle, u, v, lines)``: the triangles and
+        barycentrics to follow instead of the bisected hits' own (rows: the rows of the
         single-probe points; the final bisection directions), and the edges through that
         point (:data:`~sphere3d.reparam.snaps.Snap`, :func:`~sphere3d.reparam.snaps.edge_snap`).
 
@@ -192,11 +192,11 @@ def _choose(
         nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
         edge, inside, outside = bisect_silhouette(state, tro, inside, outside, start, nrm, refine)
         if snap is None:
-            u, v = edge.u, edge.v
+            triangle, u, v = edge.triangle, edge.u, edge.v
         else:
-            u, v, lines = snap(single, tro, inside, outside, edge)
-            snapped = (single, edge.triangle, lines)
-        moved = attached_points(state.triangles[edge.triangle], u, v)
+            triangle, u, v, lines = snap(single, tro, inside, outside, edge)
+            snapped = (single, triangle, lines)
+        moved = attached_points(state.triangles[triangle], u, v)
         choice.p0[single] = np.where(first3, moved, choice.p0[single])
         choice.p1[single] = np.where(first3, choice.p1[single], moved)
     return choice.point(), choice.found, snapped

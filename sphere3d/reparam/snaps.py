@@ -32,6 +32,7 @@ import numpy as np
 from scipy import special
 
 from flatland.core.dual import detach, tangent
+from sphere3d.reparam.outline import outline_table
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
 from sphere3d.vector import cross, dot, norm
@@ -39,11 +40,13 @@ from sphere3d.vector import cross, dot, norm
 __all__ = ["Snap", "angle_snap", "edge_snap", "line_spin"]
 
 Snap = Callable[
-    [np.ndarray, np.ndarray, np.ndarray, np.ndarray, Hits], tuple[np.ndarray, np.ndarray, np.ndarray]
+    [np.ndarray, np.ndarray, np.ndarray, np.ndarray, Hits],
+    tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ]
-"""``snap(rows, origin, inside, outside, hits) -> (u, v, lines)``: where on a bisected hit's triangle to
-follow, and the two edges (pairs of the triangle's vertex slots, (k, 2, 2); the same edge twice for a
-point on one edge; -1: the hit's own point, on no edge) whose lines pass through that point
+"""``snap(rows, origin, inside, outside, hits) -> (triangle, u, v, lines)``: the triangle to follow a
+point of (the bisected hit's, or a face beyond it along the segment), the point's barycentrics there,
+and the two edges (pairs of that triangle's vertex slots, (k, 2, 2); the same edge twice for a point on
+one edge; -1: the hit's own point, on no edge) whose lines pass through that point
 (:func:`~sphere3d.reparam.probes.select_points`)."""
 Gap = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``gap(rows, ends) -> (k, 2)``: how far the vertices ``ends - origin`` (k, 2, 3) lie from the rows'
@@ -57,7 +60,12 @@ def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
     segment of directions from ``inside`` (hits T) to ``outside`` (misses the shape) leaves T.
     With $e_k(d) = ((V_{k+1} - o) × (V_{k+2} - o)) · d$, linear in d and proportional to the
     barycentric weight of $V_k$ of the hit along d, that exit is the smallest λ in (0, 1] with
-    $e_k((1 - λ) a + λ b) = 0$. A rotation that follows a point on a straight edge's line
+    $e_k((1 - λ) a + λ b) = 0$. Where that edge is no silhouette seen from o (two faces turned towards
+    it: the bisection ended in a face narrow on the image, next to the one whose edge is the
+    silhouette), the segment goes on over the face across it (:func:`_across`), up to the first edge
+    that is one (:func:`_silhouette`, by :mod:`sphere3d.reparam.outline`'s table): the discontinuity
+    the pair of probes straddles, which an edge between two faces is not where they move apart (a shape
+    turning). A rotation that follows a point on a straight edge's line
     follows the whole edge under translation and motion in depth (on the film: the edge's normal
     velocity is affine in the point and constant along the line; on the sphere, with
     :func:`line_spin`, the edge's great circle), while one following a point inside T drifts by
@@ -70,20 +78,34 @@ def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
 
     def snap(
         rows: np.ndarray, origin: np.ndarray, inside: np.ndarray, outside: np.ndarray, hits: Hits
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         m = np.arange(rows.size)
-        vert = triangles[hits.triangle] - origin[:, None]  # (k, 3, 3): V_j - o
+        triangle = hits.triangle.copy()
+        vert = triangles[triangle] - origin[:, None]  # (k, 3, 3): V_j - o
         # row j of c: (V_{j+1} - o) × (V_{j+2} - o), so e_j(d) = c_j · d
         c = cross(np.roll(vert, -1, axis=1), np.roll(vert, -2, axis=1))
-        ea, eb = np.einsum("kjx,kx->kj", c, inside), np.einsum("kjx,kx->kj", c, outside)
-        sign = np.where(ea.sum(axis=1) < 0.0, -1.0, 1.0)[:, None]  # orient: e_j(inside) >= 0
-        ea, eb = ea * sign, eb * sign
-        leaving = (eb < 0.0) & (ea >= 0.0)
-        lam = np.where(leaving, ea / np.where(leaving, ea - eb, 1.0), np.inf)
-        j = np.argmin(lam, axis=1)  # V_j's weight reaches 0 first: the exit edge is V_{j+1} V_{j+2}
-        exits = np.isfinite(lam[m, j])
-        d = inside + np.where(exits, lam[m, j], 0.0)[:, None] * (outside - inside)
-        w = np.maximum(np.einsum("kjx,kx->kj", c, d) * sign, 0.0)
+        sign = np.where(np.einsum("kjx,kx->k", c, inside) < 0.0, -1.0, 1.0)  # orient: e_j(inside) >= 0
+        j, lam, exits = _exit(c, sign, inside, outside, np.full(rows.size, -1))
+        d = inside + np.where(exits, lam, 0.0)[:, None] * (outside - inside)
+        # across an edge that is no silhouette seen from o, the segment goes on over the next face
+        walk = exits.copy()
+        for _ in range(len(triangles)):  # each step enters a new face along the segment: it ends
+            walk[walk] = ~_silhouette(state, origin[walk], triangle[walk], j[walk])
+            r = np.flatnonzero(walk)
+            if not r.size:
+                break
+            face, entry = _across(state, triangle[r], j[r])
+            fv = triangles[face] - origin[r, None]
+            fc = cross(np.roll(fv, -1, axis=1), np.roll(fv, -2, axis=1))
+            fsign = np.where(np.einsum("kx,kx->k", fc[:, 0], fv[:, 0]) < 0.0, -1.0, 1.0)
+            fj, flam, ok = _exit(fc, fsign, d[r], outside[r], entry)
+            ok &= face >= 0
+            r, face, fj, flam, fv, fc, fsign = (a[ok] for a in (r, face, fj, flam, fv, fc, fsign))
+            walk[:] = False
+            walk[r] = True
+            triangle[r], j[r], vert[r], c[r], sign[r] = face, fj, fv, fc, fsign
+            d[r] += flam[:, None] * (outside[r] - d[r])
+        w = np.maximum(np.einsum("kjx,kx->kj", c, d) * sign[:, None], 0.0)
         w[m, j] = 0.0
         total = w.sum(axis=1)
         exits &= total > 0.0
@@ -97,6 +119,7 @@ def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
         w[m[corner], ends[m, near][corner]] = 1.0
         u = np.where(exits, w[:, 1], hits.u)
         v = np.where(exits, w[:, 2], hits.v)
+        triangle = np.where(exits, triangle, hits.triangle)
         # the edges through the point: the exit edge twice, or the corner's two edges
         lines = np.where(exits[:, None, None], ends[:, None, :], -1).repeat(2, axis=1)
         vertex = ends[m, near][:, None]
@@ -104,9 +127,51 @@ def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
             [np.hstack([vertex, (vertex + 1) % 3]), np.hstack([vertex, (vertex + 2) % 3])], axis=1
         )
         lines[corner] = at_corner[corner]
-        return u, v, lines
+        return triangle, u, v, lines
 
     return snap
+
+
+def _exit(
+    c: np.ndarray, sign: np.ndarray, a: np.ndarray, b: np.ndarray, skip: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the segment of directions from ``a`` (in the face whose edge planes are the rows of ``c``,
+    oriented by ``sign``) to ``b`` leaves the face: the vertex slot j opposite the exit edge, the
+    fraction λ of the way, and whether it leaves; the edge opposite ``skip`` (the entry edge) is not
+    an exit. The smallest λ in [0, 1] with $e_j((1 - λ) a + λ b) = 0$, $e_j$ going from >= 0 to < 0."""
+    m = np.arange(len(c))
+    ea = np.einsum("kjx,kx->kj", c, a) * sign[:, None]
+    eb = np.einsum("kjx,kx->kj", c, b) * sign[:, None]
+    leaving = (eb < 0.0) & (ea >= 0.0) & (np.arange(3) != skip[:, None])
+    lam = np.where(leaving, ea / np.where(leaving, ea - eb, 1.0), np.inf)
+    j = np.argmin(lam, axis=1)  # V_j's weight reaches 0 first: the exit edge is V_{j+1} V_{j+2}
+    exits = np.isfinite(lam[m, j])
+    return j, np.where(exits, lam[m, j], 0.0), exits
+
+
+def _silhouette(state: SceneState, origin: np.ndarray, triangle: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Whether the edge opposite slot ``j`` of ``triangle`` is a silhouette edge seen from ``origin``
+    (:mod:`sphere3d.reparam.outline`): one face only, or a face turned towards o and one turned away."""
+    table = outline_table(state)
+    e = table.edge_of[triangle, (j + 1) % 3]
+    ok = e >= 0
+    e = np.maximum(e, 0)
+    to = np.asarray(detach(state.triangles))[triangle, (j + 1) % 3] - origin  # V - o
+    s1 = np.einsum("kx,kx->k", table.n1[e], to)
+    s2 = np.einsum("kx,kx->k", table.n2[e], to)
+    return ~ok | (table.other[e] < 0) | ((s1 > 0.0) != (s2 > 0.0))
+
+
+def _across(state: SceneState, triangle: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The face across the edge opposite slot ``j`` of ``triangle`` (-1: none), and the slot of that
+    face opposite the same edge (its vertex off the edge, by the welded vertex ids)."""
+    table = outline_table(state)
+    e = np.maximum(table.edge_of[triangle, (j + 1) % 3], 0)
+    face = np.where(table.face[e] == triangle, table.other[e], table.face[e])
+    ids = table.vid[np.maximum(face, 0)]  # (k, 3)
+    own = table.vid[triangle]
+    shared = (ids[:, :, None] == own[:, None, :]).any(axis=2)  # (k, 3): the slot's vertex is on T
+    return face, np.argmin(shared, axis=1)
 
 
 def angle_snap(state: SceneState, centre: np.ndarray, radius: float | np.ndarray) -> Snap:

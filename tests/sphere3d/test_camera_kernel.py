@@ -46,18 +46,41 @@ def test01_the_snap_moves_a_bisected_hit_onto_the_edge_or_its_corner_and_names_t
     hits = state.tracer.intersect(o, inside)
     assert hits.triangle.tolist() == [0]
     far = np.array([[1e6, 1e6]])  # no corner within reach: the exit point on the edge
-    u, v, lines = silhouette_snap(state, far, 1.0)(np.array([0]), o[None], inside, outside, hits)
+    t, u, v, lines = silhouette_snap(state, far, 1.0)(np.array([0]), o[None], inside, outside, hits)
+    assert t.tolist() == [0]
     np.testing.assert_allclose(attached_points(tri, u, v)[0], mid, atol=1e-12)
     assert lines.tolist() == [[[0, 1], [0, 1]]]  # on the edge V0 V1 (twice: one line)
     fx, fy = state.camera.film(tri[0] - o)  # a kernel centred on V0's image: the corner V0
-    u, v, corner = silhouette_snap(state, np.array([[fx, fy]]), 1.0)(
+    _, u, v, corner = silhouette_snap(state, np.array([[fx, fy]]), 1.0)(
         np.array([0]), o[None], inside, outside, hits
     )
     assert (u.tolist(), v.tolist()) == ([0.0], [0.0])
     assert corner.tolist() == [[[0, 1], [0, 2]]]  # the corner V0 lies on its two edges
 
 
-def test02_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_triangle():
+def test02_the_snap_walks_over_faces_to_the_edge_that_is_a_silhouette():
+    # A square of two triangles facing the camera, split along V0 V2: a segment from inside the first
+    # triangle to past the square's left side crosses the diagonal (an edge between two faces turned
+    # towards the camera: no discontinuity) and leaves the square through V3 V0, its silhouette. The
+    # snap follows V3 V0, on the second face, where the segment crosses it.
+    scene = cf.pinhole_triangle_scene(4, 8)
+    square = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]]
+    scene["shapes"][0].update(vertices=square, faces=[[0, 1, 2], [0, 2, 3]], translate=[0.0, 0.0, 0.0])
+    state = build_state(load_scene(scene), "tri.translate.x", variable(0.0))
+    o = np.asarray(detach(state.camera.origin))
+    inside = normalize(np.array([0.5, -0.5, 0.0]) - o)[None]
+    outside = normalize(np.array([-1.5, 0.5, 0.0]) - o)[None]
+    hits = state.tracer.intersect(o, inside)
+    assert hits.triangle.tolist() == [0]
+    far = np.array([[1e6, 1e6]])
+    t, u, v, lines = silhouette_snap(state, far, 1.0)(np.array([0]), o[None], inside, outside, hits)
+    assert t.tolist() == [1]
+    tri = np.asarray(detach(state.triangles))[1]
+    np.testing.assert_allclose(attached_points(tri, u, v)[0], [-1.0, 0.25, 0.0], atol=1e-12)
+    assert lines.tolist() == [[[2, 0], [2, 0]]]  # slots of V3 and V0 in the face (V0, V2, V3)
+
+
+def test03_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_triangle():
     state = _state()
     n = 400
     rng = np.random.default_rng(3)
@@ -72,7 +95,7 @@ def test02_the_centres_are_an_antithetic_pair_and_rotations_follow_the_moving_tr
         assert 0 < moving.sum() < n and np.all(rotation.active[moving])
 
 
-def test03_the_options_checks():
+def test04_the_options_checks():
     assert check_kappa_film("kappa_film", KAPPA_FILM) == 2.0 / 0.4**2  # σ = 0.4 px / √2, the same expression
     assert check_kappa_film("kappa_film", 3) == 3.0
     for bad, message in [(0.0, "must be > 0"), (1e13, r"must be <= 1e\+12"), (None, "kappa_film")]:
@@ -82,7 +105,7 @@ def test03_the_options_checks():
 
 
 @pytest.mark.parametrize("scene", sweep(["hard_shadow", "hard_shadow_cube"], ["hard_shadow_cube"]))
-def test04_rings_skipped_by_the_film_hull_cannot_see_the_moving_occluder(scene):
+def test05_rings_skipped_by_the_film_hull_cannot_see_the_moving_occluder(scene):
     """:func:`sphere3d.reparam.film_kernel._reaching_motion` is conservative: of 20000 film centres, every one
     whose centre or any of 64 points on its ring (radius 1.5 px) sees a moving triangle is kept; and
     the hull rules out a share of what its box keeps (else it would be pointless)."""

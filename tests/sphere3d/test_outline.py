@@ -3,16 +3,21 @@
 On a single triangle the next edges at both ends of an edge are its other two; on the cube and the
 sphere of the built-in scenes, seen from points around them, every next edge shares the found edge's
 end, differs from it, and is a silhouette edge by the faces' facing (every mesh edge tested), and an
-end has none only where no silhouette edge but the found one meets it.
+end has none only where no silhouette edge but the found one meets it. Walked on edge by edge
+(:func:`~sphere3d.reparam.outline.outline_chain`), the convex sphere's outline is one closed loop: the
+two chains from a found edge cover every silhouette edge of it, each step meeting the last at a vertex,
+and a chain told to stop after its first step stops there.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 
 from sphere3d import closed_form as cf
 from sphere3d.boundary.edges import state_edges
-from sphere3d.reparam.outline import next_edges, outline_table
+from sphere3d.reparam.outline import next_edges, outline_chain, outline_table
 from sphere3d.scene import load_scene
 from sphere3d.state import build_state
 
@@ -65,3 +70,28 @@ def test02_on_the_cube_and_the_sphere_the_next_edges_are_silhouette_edges_at_the
                     assert not np.any(meets & silhouette & (np.arange(len(meets)) != found[row]))
                 checked += int(f.sum())
         assert checked > 0
+
+
+def test03_walked_on_the_sphere_s_outline_is_one_loop_of_silhouette_edges():
+    scene = load_scene("hard_shadow")
+    state = build_state(scene)
+    table, edges = outline_table(state), state_edges(state)
+    shape = [s.name for s in scene.shapes].index("occluder")
+    mine = np.flatnonzero(state.shape_of[edges.face] == shape)
+    x = np.array([[0.3, -0.4, 0.0]])  # a point on the ground below the sphere
+    loop = mine[_silhouette(state, x[0])[mine]]
+    start = loop[:1]
+    slots = np.stack([edges.ia[start], edges.ib[start]], axis=1)
+    ids = lambda face, ia, ib: table.edge_of[face, np.where(ib == (ia + 1) % 3, ia, ib)]  # noqa: E731
+    every = outline_chain(
+        state, x, edges.face[start], slots, lambda r, f, a, b: np.ones(r.size, bool), len(loop)
+    )
+    walked = [int(ids(f, a, b)[0]) for _, f, a, b in every]
+    assert set(walked) | {int(start[0])} == set(loop.tolist())
+    for side in (walked[: len(walked) // 2], walked[len(walked) // 2 :]):
+        for e1, e2 in itertools.pairwise(side):  # each step meets the last at a vertex
+            ends1 = {table.vid[edges.face[e1], edges.ia[e1]], table.vid[edges.face[e1], edges.ib[e1]]}
+            ends2 = {table.vid[edges.face[e2], edges.ia[e2]], table.vid[edges.face[e2], edges.ib[e2]]}
+            assert len(ends1 & ends2) == 1
+    first = outline_chain(state, x, edges.face[start], slots, lambda r, f, a, b: np.zeros(r.size, bool), 5)
+    assert len(first) == 2 and all(r.size == 1 for r, *_ in first)
