@@ -23,6 +23,9 @@ Two scenes of one black triangle (albedo 0, emission 0) in front of a constant s
    light instead of the sky (:func:`light_triangle_scene`), the light minus the triangle's shadow on
    its plane (:func:`occluded_light_irradiance`): the emitter strategy's integral.
 
+A black convex mesh (:func:`icosphere_scene`) has the camera image of its front faces
+(:func:`convex_image`): a silhouette of many edges whose images move differently when it turns.
+
 A third scene adds a static black triangle behind the moving one (:func:`junction_scene`): its
 camera image (:func:`junction_image`) is the filter integrated over the union of the two, whose
 derivative carries the two T-junctions where the moving edges cross the static one
@@ -37,6 +40,7 @@ profiles, shape transform), not from the estimators' code. The scenes the tests 
 estimator misses.
 """
 
+from sphere3d.closed_form.convex import convex_image, mesh_vertices
 from sphere3d.closed_form.film import (
     QUADRATURE_NODES,
     TriangleImage,
@@ -63,6 +67,7 @@ from sphere3d.closed_form.scenes import (
     TRIANGLE_SHAPE,
     ShareLost,
     corner_junction_scene,
+    icosphere_scene,
     junction_scene,
     light_triangle_scene,
     pinhole_triangle_scene,
@@ -80,13 +85,16 @@ __all__ = [
     "TriangleImage",
     "boundary_flux",
     "clip_convex",
+    "convex_image",
     "corner_junction_scene",
     "filter_cdf_1d",
     "filter_kinks",
     "filter_profile_1d",
+    "icosphere_scene",
     "junction_image",
     "junction_scene",
     "light_triangle_scene",
+    "mesh_vertices",
     "occluded_light_irradiance",
     "occluded_sky_irradiance",
     "pinhole_triangle_scene",

@@ -16,6 +16,7 @@ __all__ = [
     "TRIANGLE_SHAPE",
     "ShareLost",
     "corner_junction_scene",
+    "icosphere_scene",
     "junction_scene",
     "pinhole_triangle_scene",
     "share_lost",
@@ -216,3 +217,23 @@ def share_lost(batch_estimates: Any, exact: Any) -> ShareLost:
     kept = np.sum((np.sign(g) * d).reshape(len(d), -1), axis=1) / total
     lost = 1.0 - kept
     return ShareLost(float(lost.mean()), float(lost.std(ddof=1) / math.sqrt(len(d))), len(d))
+
+
+def icosphere_scene(radius: float = 6.0, subdivisions: int = 2, width: int = 20, smooth: bool = True) -> dict:
+    """:func:`pinhole_triangle_scene`'s camera and sky, with a black icosphere of ``radius`` px (at its
+    centre's depth) in place of the triangle, its centre offset by (0.13, -0.21) px from the optical
+    axis: a convex mesh whose outline's vertices lie about 2 px apart at ``subdivisions`` 2 and 6 px."""
+    scene = pinhole_triangle_scene(1.0, width)
+    scene["name"] = f"icosphere_{radius:g}px"
+    scene["shapes"] = [
+        {
+            "name": "ball",
+            "type": "icosphere",
+            "radius": radius * PIXEL,
+            "subdivisions": subdivisions,
+            "smooth": smooth,
+            "albedo": 0.0,
+            "translate": [0.013, -0.021, 0.0],
+        }
+    ]
+    return scene
