@@ -12,6 +12,7 @@ import numpy as np
 
 from flatland.core.dual import detach, tangent, variable
 from flatland.core.validate import ValidationError
+from sphere3d.closed_form.convex import mesh_vertices
 from sphere3d.closed_form.film import triangle_vertices
 from sphere3d.closed_form.junction import clip_convex
 from sphere3d.scene import check_vector, load_scene
@@ -111,7 +112,9 @@ def occluded_light_irradiance(
     scene: Any, param: str | None = None, eye: float = 0.0, theta: float = 0.0
 ) -> tuple[float, float]:
     r"""E and dE/dθ at the origin (normal +z) under the square light of
-    :func:`~sphere3d.closed_form.light_triangle_scene` with its black triangle ``tri`` in between.
+    :func:`~sphere3d.closed_form.light_triangle_scene` with its black triangle ``tri`` in between, or
+    with one black convex mesh in its place (its faces turned towards the eye, whose shadows tile the
+    mesh's: each clipped and subtracted alike).
 
     Seen from the origin the triangle hides the part of the light inside its shadow on the light's
     plane z = H: the triangle's vertices projected from the origin, $v H / v_z$, clipped by the
@@ -128,27 +131,29 @@ def occluded_light_irradiance(
     """
     scene = load_scene(scene)
     names = sorted(s.name for s in scene.shapes)
-    if names != ["light", "tri"]:
-        raise ValidationError("scene.shapes", f"must be the shapes 'light' and 'tri', got {names}")
+    if len(names) != 2 or "light" not in names:
+        raise ValidationError("scene.shapes", f"must be the shape 'light' and one occluder, got {names}")
     light = next(s for s in scene.shapes if s.name == "light")
     height = float(light.translate[2])
     half = 0.5 * float(dict(light.geometry)["size"][0]) * light.scale
     square = np.array([[-half, -half], [half, -half], [half, half], [-half, half]])
     whole = scene.to_dict()
-    alone = load_scene({**whole, "shapes": [s for s in whole["shapes"] if s["name"] == "tri"]})
-    v = triangle_vertices(alone, param, variable(theta) if param is not None else 0.0)
+    alone = load_scene({**whole, "shapes": [s for s in whole["shapes"] if s["name"] != "light"]})
+    v = mesh_vertices(alone, param, variable(theta) if param is not None else 0.0)
     z = np.asarray(detach(v))[:, 2]
     if not np.all((z > eye) & (z < height)):
         raise ValidationError(
-            "scene.shapes[tri]", f"must lie between the origin and the light, got heights {z}"
+            f"scene.shapes[{alone.shapes[0].name}]",
+            f"must lie between the origin and the light, got heights {z}",
         )
     scale = (height - eye) / (v[:, 2] - eye)  # each vertex's shadow on the light's plane, seen from the eye
-    hidden = clip_convex([(v[k, 0] * scale[k], v[k, 1] * scale[k]) for k in range(3)], square)
     origin, up = np.zeros(3), np.array([0.0, 0.0, 1.0])
     e = light.emission * projected_solid_angle(origin, up, np.column_stack([square, np.full(4, height)]))
-    if hidden:
-        lift = [np.stack([x, y, 0.0 * x + height]) for x, y in hidden]
-        e = e - light.emission * projected_solid_angle(origin, up, np.stack(lift))
+    for face in _facing(np.asarray(detach(v)), alone.shapes[0].mesh.faces, np.array([0.0, 0.0, eye])):
+        hidden = clip_convex([(v[k, 0] * scale[k], v[k, 1] * scale[k]) for k in face], square)
+        if hidden:
+            lift = [np.stack([x, y, 0.0 * x + height]) for x, y in hidden]
+            e = e - light.emission * projected_solid_angle(origin, up, np.stack(lift))
     value = float(np.asarray(detach(e)))
     return value, float(np.asarray(tangent(e))) if param is not None and hasattr(e, "tangent") else 0.0
 
@@ -212,3 +217,14 @@ def boundary_flux(
         net += float(np.sum(w * density))
         gross += float(np.sum(w * np.abs(density)))
     return Flux(-radiance * net, radiance * gross)
+
+
+def _facing(v: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """The faces (a triangle's only one) of a convex mesh turned towards ``eye``: outward normal (away
+    from the vertices' mean) · (V - eye) < 0."""
+    if len(faces) == 1:
+        return faces
+    tri = v[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    outward = np.sign(np.sum(normal * (tri.mean(axis=1) - v.mean(axis=0)), axis=1))
+    return faces[np.sum(outward[:, None] * normal * (tri[:, 0] - eye), axis=1) < 0.0]

@@ -14,7 +14,9 @@ shadow edge its probes find by a field after the rotation (:mod:`sphere3d.repara
 alone, the rotation misses most of a scaling shadow, test07), and its cosine strategy keeps the light's
 border in the kernels that also see the triangle (:mod:`sphere3d.reparam.kernel_border`; without it,
 the triangle's edge is followed and the border dragged: test08). Each strategy alone against finite
-differences of itself: tests/sphere3d/test_emitter_field.py and test_kernel_border.py.
+differences of itself: tests/sphere3d/test_emitter_field.py and test_kernel_border.py. A faceted ball in
+the triangle's place (the closed form over its faces turned to the point) has an outline of many edges
+across the light: the field walks along it (test09), within a few per cent.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from flatland.core.image import summarize_batches
 from flatland.core.stats import sidak
 from sphere3d import closed_form as cf
 from sphere3d.methods.boundary import RATE, SECONDARY, boundary
+from sphere3d.reparam import emitter_field
 from sphere3d.reparam.default import ReparamTransforms
 from sphere3d.state import build_state
 from sphere3d.tasks import PointTask
@@ -176,3 +179,37 @@ def test08_beside_the_light_the_derivative_is_0_and_the_cosine_strategy_keeps_th
         f"beside: exact {exact}, reparam z {z:+.2f}, without the border z {z_off:+.1f}, boundary {z_b:+.2f}"
     )
     assert exact == 0.0 and abs(z) <= q and abs(z_off) > q and abs(z_b) <= q
+
+
+BALL = {"name": "ball", "type": "icosphere", "radius": 0.3, "subdivisions": 2, "smooth": True, "albedo": 0.0,
+        "translate": [0.45, 0.2, 1.0]}  # fmt: skip
+"""A black 320-face icosphere whose shadow on the light's plane covers the light's right part: an outline
+of about ten facets' edges across the light."""
+
+
+def _ball_z(samples: int) -> tuple[float, float, float]:
+    """reparam's (mean - exact) / standard error, the two-sided quantile and the relative error of dE/dθ
+    for the ball scaling (its shadow's outline moving apart across the light)."""
+    scene = _scene()
+    scene["shapes"] = [scene["shapes"][0], BALL]
+    loaded = s3.load_scene(scene)
+    _, exact = cf.occluded_light_irradiance(scene, "ball.scale", build_state(loaded).epsilon)
+    task = PointTask(loaded, "ball.scale", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), samples, 5, BATCHES)
+    summary = summarize_batches(np.asarray(task.evaluate(variable(0.0), ReparamTransforms()).derivative))
+    q = stats.t.ppf(1.0 - 0.5 * sidak(ALPHA, 2), BATCHES - 1)
+    return (summary.mean - exact) / summary.stderr, float(q), (summary.mean - exact) / exact
+
+
+def test09_a_faceted_ball_s_shadow_keeps_the_outline_across_the_light(monkeypatch):
+    # the field keeps the found edge and the outline's next edges while their images reach the light
+    # (sphere3d.reparam.outline.outline_chain); with one next edge at each end (CHAIN = 1) it misses 6 % of
+    # the derivative (z about 12 at these samples). What stays is a bias of a few per cent (-2.3 %, z about
+    # 5 here), shown rather than hidden: bounded by 3 % beyond the noise.
+    z, q, relative = _ball_z(4 * SAMPLES)
+    monkeypatch.setattr(emitter_field, "CHAIN", 1)
+    z_one, _, relative_one = _ball_z(4 * SAMPLES)
+    print(
+        f"ball.scale: reparam z {z:+.2f} ({relative:+.1%}), one a side z {z_one:+.1f} ({relative_one:+.1%})"
+    )
+    assert abs(z_one) > q and abs(relative_one) > 0.04
+    assert abs(relative) <= 0.03 + q * abs(relative / z)
