@@ -24,12 +24,13 @@ from flatland.core.dual import detach, tangent, variable
 from flatland.core.validate import ValidationError
 from sphere3d.closed_form.film import (
     TriangleImage,
+    _moved_transform,
     _rotate_xyz,
     polygon_filter_derivative,
     polygon_filter_integral,
     project,
 )
-from sphere3d.scene import AXES, Scene, load_scene
+from sphere3d.scene import Scene, load_scene
 
 __all__ = ["convex_image", "mesh_vertices"]
 
@@ -40,21 +41,7 @@ def mesh_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) -> A
     if len(scene.shapes) != 1:
         raise ValidationError("scene.shapes", f"must hold exactly one shape, got {len(scene.shapes)}")
     s = scene.shapes[0]
-    translate, rotate, scale = np.array(s.translate), np.array(s.rotate), s.scale
-    if param is not None:
-        owner, _, rest = scene.check_param(param).partition(".")
-        kind, _, axis = rest.partition(".")
-        if owner != s.name or kind not in ("translate", "rotate", "scale"):
-            raise ValidationError(
-                "param", f"must move the shape ({s.name}.translate/rotate/scale), got {param!r}"
-            )
-        basis = np.eye(3)[AXES.index(axis)] if axis else None
-        if kind == "translate":
-            translate = translate + basis * theta
-        elif kind == "rotate":
-            rotate = rotate + basis * theta
-        else:
-            scale = scale * (1.0 + theta)
+    translate, rotate, scale = _moved_transform(scene, s, param, theta, "the shape")
     return translate + _rotate_xyz(s.mesh.vertices * scale, rotate)
 
 

@@ -265,6 +265,24 @@ def _triangle_shape(scene: Scene, field: str = "scene") -> int:
     return 0
 
 
+def _moved_transform(scene: Scene, s: Any, param: str | None, theta: Any, what: str) -> tuple[Any, Any, Any]:
+    """The shape ``s``'s (translate, rotate, scale) with ``param`` (its translate, rotate or scale;
+    ``what`` names the shape in the error) offset by ``theta`` (float or Dual)."""
+    translate, rotate, scale = np.array(s.translate), np.array(s.rotate), s.scale
+    if param is None:
+        return translate, rotate, scale
+    owner, _, rest = scene.check_param(param).partition(".")
+    kind, _, axis = rest.partition(".")
+    if owner != s.name or kind not in ("translate", "rotate", "scale"):
+        raise ValidationError("param", f"must move {what} ({s.name}.translate/rotate/scale), got {param!r}")
+    basis = np.eye(3)[AXES.index(axis)] if axis else None
+    if kind == "translate":
+        return translate + basis * theta, rotate, scale
+    if kind == "rotate":
+        return translate, rotate + basis * theta, scale
+    return translate, rotate, scale * (1.0 + theta)
+
+
 def triangle_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) -> Any:
     """World vertices (3, 3) of the scene's triangle with ``param`` offset by ``theta`` (float or Dual).
 
@@ -272,24 +290,8 @@ def triangle_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) 
     $R = R_z R_y R_x$ of ``rotate``; ``NAME.translate.a`` adds θ to translate[a], ``NAME.rotate.a``
     to rotate[a], ``NAME.scale`` multiplies the scale by 1 + θ.
     """
-    i = _triangle_shape(scene)
-    s = scene.shapes[i]
-    translate, rotate, scale = np.array(s.translate), np.array(s.rotate), s.scale
-    if param is not None:
-        param = scene.check_param(param)
-        owner, _, rest = param.partition(".")
-        kind, _, axis = rest.partition(".")
-        if owner != s.name or kind not in ("translate", "rotate", "scale"):
-            raise ValidationError(
-                "param", f"must move the triangle ({s.name}.translate/rotate/scale), got {param!r}"
-            )
-        basis = np.eye(3)[AXES.index(axis)] if axis else None
-        if kind == "translate":
-            translate = translate + basis * theta
-        elif kind == "rotate":
-            rotate = rotate + basis * theta
-        else:
-            scale = scale * (1.0 + theta)
+    s = scene.shapes[_triangle_shape(scene)]
+    translate, rotate, scale = _moved_transform(scene, s, param, theta, "the triangle")
     local = s.mesh.vertices[s.mesh.faces[0]]
     return translate + _rotate_xyz(local * scale, rotate)
 
