@@ -96,6 +96,7 @@ def shadow_field(
     scale = radius / np.sqrt(np.maximum(distance * distance - radius * radius, 1e-300))
     t, b = frame(axis)
     snap = edge_snap(state, _no_corner, -1.0)
+    plain = np.asarray(detach(state.triangles))
     found_rows, found_m = [], []
     # per point and probe, on which side of each found edge's great circle it lies: 2 bits an edge
     # (sign + 1), so that two probes are on the same side of every edge where their codes are equal
@@ -129,14 +130,15 @@ def shadow_field(
         near = _near_light(state, x0, g, axis, t, b, scale)
         for i, face, ia, ib in outline_chain(state, x0[g], triangle, slots, near, CHAIN):
             edges.append((g[i], face, ia, ib))
+        # the round's edges at once (one chart conversion a round, not one per step along the outline)
+        row, face, ia, ib = (np.concatenate([e[i] for e in edges]) for i in range(4))
+        tri, n = state.triangles[face], np.arange(len(face))
+        xg = x[row]
+        found_rows.append(row)
+        found_m.append((tri[n, ia] - xg, tri[n, ib] - xg, rotation.take(row)))
         for row, face, ia, ib in edges:
-            tri, n = state.triangles[face], np.arange(len(face))
-            xg = x[row]
-            p1, p2 = tri[n, ia] - xg, tri[n, ib] - xg
-            found_rows.append(row)
-            found_m.append((p1, p2, rotation.take(row)))
             if r + 1 < pairs and shift < 62:  # the side codes, for the next rounds' pairs
-                plane = cross(np.asarray(detach(p1)), np.asarray(detach(p2)))
+                plane = cross(plain[face, ia] - x0[row], plain[face, ib] - x0[row])
                 side = np.sign(np.einsum("rpx,rx->rp", w[row], plane)).astype(np.int64) + 1
                 code[row] |= side << shift
                 shift += 2
@@ -148,7 +150,7 @@ def shadow_field(
     slot[fields] = np.arange(fields.size)
     parts = [
         chart_edges(slot[row], p1, p2, base, axis[row], t[row], b[row], scale[row], k)
-        for row, (p1, p2, base) in zip(found_rows, found_m, strict=True)  # per round and edge kind
+        for row, (p1, p2, base) in zip(found_rows, found_m, strict=True)  # per round
     ]
     lines = FilmLines(
         *(np.concatenate([getattr(p, f) for p, _ in parts]) for f in FilmLines.__dataclass_fields__)
