@@ -146,22 +146,36 @@ def outline_chain(
     table = outline_table(state)
     own = _edge_id(table, triangle, slots[:, 0], slots[:, 1])
     after = next_edges(state, x, triangle, slots)
-    out = []
+    chains = []  # per end: the rows still walking, their last edge (face, slots) and the vertex behind
     for end in range(2):  # the edge's two ends (not a loop over samples)
         rows = np.flatnonzero(after.found[:, end])
         face, ia, ib = after.face[rows, end], after.ia[rows, end], after.ib[rows, end]
-        shared = table.vid[triangle[rows], slots[rows, end]]  # the vertex the chain goes on from
-        for step in range(steps):
-            out.append((rows, face, ia, ib))
-            go = (_edge_id(table, face, ia, ib) != own[rows]) & near(rows, face, ia, ib)
-            if step + 1 == steps or not go.any():
-                break
-            rows, face, ia, ib, shared = rows[go], face[go], ia[go], ib[go], shared[go]
+        chains.append([rows, face, ia, ib, table.vid[triangle[rows], slots[rows, end]]])
+    out: tuple[list, list] = ([], [])
+    walking = [0, 1]
+    for step in range(steps):  # both ends' chains in one call a step (each row's result its own)
+        for end in walking:
+            out[end].append(tuple(chains[end][:4]))
+        rows, face, ia, ib = (np.concatenate([chains[e][i] for e in walking]) for i in range(4))
+        go = (_edge_id(table, face, ia, ib) != own[rows]) & near(rows, face, ia, ib)
+        go = dict(
+            zip(walking, np.split(go, np.cumsum([len(chains[e][0]) for e in walking])[:-1]), strict=True)
+        )
+        walking = [e for e in walking if step + 1 < steps and go[e].any()]
+        if not walking:
+            break
+        for end in walking:
+            rows, face, ia, ib, shared = (part[go[end]] for part in chains[end])
             far = np.where(table.vid[face, ia] == shared, 1, 0)  # the last edge's end away from it
             shared = np.where(far == 1, table.vid[face, ib], table.vid[face, ia])
-            nxt = next_edges(state, x[rows], face, np.stack([ia, ib], axis=1))
-            n = np.arange(rows.size)
+            chains[end] = [rows, face, ia, ib, shared, far]
+        rows, face, ia, ib = (np.concatenate([chains[e][i] for e in walking]) for i in range(4))
+        nxt = next_edges(state, x[rows], face, np.stack([ia, ib], axis=1))
+        start = 0
+        for end in walking:
+            rows, _, _, _, shared, far = chains[end]
+            n = start + np.arange(rows.size)
+            start += rows.size
             f = nxt.found[n, far]
-            rows, shared = rows[f], shared[f]
-            face, ia, ib = nxt.face[n, far][f], nxt.ia[n, far][f], nxt.ib[n, far][f]
-    return out
+            chains[end] = [rows[f], nxt.face[n, far][f], nxt.ia[n, far][f], nxt.ib[n, far][f], shared[f]]
+    return out[0] + out[1]
