@@ -112,8 +112,9 @@ def next_edges(state: SceneState, x: np.ndarray, triangle: np.ndarray, slots: np
     # the first silhouette edge of each end
     first = np.full(v.size, -1, dtype=np.int64)
     hit = np.flatnonzero(silhouette)
-    end, at = np.unique(rep[hit], return_index=True)  # rep ascends: each end's first entry
-    first[end] = c[hit[at]]
+    ends_hit = rep[hit]  # ascending: each end's entries together, its first one where the end changes
+    at = np.flatnonzero(np.r_[True, ends_hit[1:] != ends_hit[:-1]]) if hit.size else hit
+    first[ends_hit[at]] = c[hit[at]]
     found = first >= 0
     e = np.maximum(first, 0)
     shape = (r, 2)
