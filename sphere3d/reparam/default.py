@@ -111,9 +111,9 @@ class ReparamTransforms(Identity):
         Where a camera sample's film probes see a moving silhouette cross a static edge,
         follow their crossing (:mod:`sphere3d.reparam.junctions`).
     film_shapes : bool
-        Where a moving shape's film image lies wholly inside a camera sample's ring of probes, or
-        is thin and reaches into it, follow it by an affine map of the film
-        (:mod:`sphere3d.reparam.film_affine`).
+        Where a moving shape's film image lies wholly within a camera sample's kernel's reach
+        (:data:`~sphere3d.reparam.film_corners.REACH` σ), or is thin and reaches into it, follow it
+        by an affine map of the film (:mod:`sphere3d.reparam.film_affine`).
     film_corners : bool
         Where a moving silhouette vertex's film image lies within a camera sample's kernel's reach
         (:data:`~sphere3d.reparam.film_corners.REACH` σ), follow both its silhouette edges by an affine

@@ -159,8 +159,9 @@ def film_transform(
         Where a ring holds one moving silhouette edge and a static edge, the affine map keeping both
         (:mod:`sphere3d.reparam.junctions`).
     shapes : bool, optional
-        Where a moving shape's whole image lies inside a ring, follow it by an affine map of the
-        film (:mod:`sphere3d.reparam.film_affine`).
+        Where a moving shape's whole image lies within the kernel's reach (the ring, or
+        :data:`~sphere3d.reparam.film_corners.REACH` σ where wider), or is thin and reaches into it,
+        follow it by an affine map of the film (:mod:`sphere3d.reparam.film_affine`).
     corners : bool, optional
         Where a moving silhouette vertex's image lies within the kernel's reach (the ring, or
         :data:`~sphere3d.reparam.film_corners.REACH` σ where wider), follow both its silhouette
@@ -183,12 +184,11 @@ def film_transform(
     phase = draws.uniforms("probes.film", 2).T.ravel()
     k = state.k  # None, or k parameters: every tangent below with a leading axis of k
     rotation = Rotation.identity((2 * n,), k)
-    # a moving shape whose whole image lies inside the ring: the affine map that follows all its edges
-    affine = inner_shapes(state, centre, spread * sigma) if shapes else AffineFilm.none(2 * n, k)
+    # shapes and corners come from the scene's tables, not from the probes: the kernel's reach, not the ring's
+    reach = max(spread, REACH) * sigma
+    # a moving shape whose whole image lies within reach: the affine map that follows all its edges
+    affine = inner_shapes(state, centre, reach) if shapes else AffineFilm.none(2 * n, k)
     if corners:  # a silhouette corner within the kernel's reach: the affine map that follows both its edges
-        reach = (
-            max(spread, REACH) * sigma
-        )  # the corners come from the scene: the kernel's reach, not the ring's
         near, at = nearest_corners(state, centre, reach), np.concatenate([s, s])
         fan = silhouette_corners(state, centre, reach, at, near)
         if junctions and corner_lines:  # and a static edge: the field keeping all (reparam.corner_lines)
