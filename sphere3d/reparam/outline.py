@@ -93,36 +93,46 @@ def next_edges(state: SceneState, x: np.ndarray, triangle: np.ndarray, slots: np
     """At both ends of the edges ``slots`` (r, 2: vertex slots) of ``triangle`` (r,), the first other edge
     that is a silhouette edge seen from the points ``x`` (plain, (r, 3)) (module docstring)."""
     table = outline_table(state)
-    r = len(triangle)
-    i, j = slots[:, 0], slots[:, 1]
-    k = np.where(j == (i + 1) % 3, i, j)  # the triangle edge from slot k to k + 1
-    own = table.edge_of[triangle, k]
+    own = _edge_id(table, triangle, slots[:, 0], slots[:, 1])
     ends = table.vid[triangle[:, None], slots]  # (r, 2)
     position = np.asarray(detach(state.triangles))[triangle[:, None], slots]  # (r, 2, 3)
-    v = ends.ravel()
+    first = _first_silhouette(
+        table, np.repeat(x, 2, axis=0), ends.ravel(), position.reshape(-1, 3), np.repeat(own, 2)
+    )
+    return _next(table, first, (len(triangle), 2))
+
+
+def _first_silhouette(
+    table: OutlineTable, x: np.ndarray, v: np.ndarray, position: np.ndarray, own: np.ndarray
+) -> np.ndarray:
+    """Per vertex ``v`` (n,) at ``position`` (n, 3): its first incident edge other than ``own`` (n,) that is
+    a silhouette edge seen from ``x`` (n, 3); -1 where none is. The cost is the vertices' valences."""
     degree = table.start[v + 1] - table.start[v]
-    rep = np.repeat(np.arange(v.size), degree)  # one entry per (end, incident edge)
+    rep = np.repeat(np.arange(v.size), degree)  # one entry per (vertex, incident edge)
     within = np.arange(rep.size) - np.repeat(np.cumsum(degree) - degree, degree)
     c = table.incident[table.start[v][rep] + within]
-    to = position.reshape(-1, 3)[rep] - np.repeat(x, 2, axis=0)[rep]  # V - x
+    to = position[rep] - x[rep]  # V - x
     s1 = np.einsum("nx,nx->n", table.n1[c], to)
     s2 = np.einsum("nx,nx->n", table.n2[c], to)
     silhouette = (table.other[c] < 0) | ((s1 > 0.0) != (s2 > 0.0))
-    silhouette &= c != np.repeat(own, 2)[rep]
-    # the first silhouette edge of each end
+    silhouette &= c != own[rep]
+    # the first silhouette edge of each vertex
     first = np.full(v.size, -1, dtype=np.int64)
     hit = np.flatnonzero(silhouette)
-    ends_hit = rep[hit]  # ascending: each end's entries together, its first one where the end changes
+    ends_hit = rep[hit]  # ascending: each vertex's entries together, its first one where the vertex changes
     at = np.flatnonzero(np.r_[True, ends_hit[1:] != ends_hit[:-1]]) if hit.size else hit
     first[ends_hit[at]] = c[hit[at]]
-    found = first >= 0
+    return first
+
+
+def _next(table: OutlineTable, first: np.ndarray, shape: tuple[int, ...]) -> NextEdges:
+    """:class:`NextEdges` of the edges ``first`` (-1: none), in ``shape``."""
     e = np.maximum(first, 0)
-    shape = (r, 2)
     return NextEdges(
         table.face[e].reshape(shape),
         table.ia[e].reshape(shape),
         table.ib[e].reshape(shape),
-        found.reshape(shape),
+        (first >= 0).reshape(shape),
     )
 
 
@@ -145,6 +155,7 @@ def outline_chain(
     at each end always. A chain that comes back to the edge it started from stops. Returns per step and
     end (rows of the r, the edge's face, its slots there); each step costs the ends' valences."""
     table = outline_table(state)
+    plain = np.asarray(detach(state.triangles))
     own = _edge_id(table, triangle, slots[:, 0], slots[:, 1])
     after = next_edges(state, x, triangle, slots)
     chains = []  # per end: the rows still walking, their last edge (face, slots) and the vertex behind
@@ -170,13 +181,18 @@ def outline_chain(
             far = np.where(table.vid[face, ia] == shared, 1, 0)  # the last edge's end away from it
             shared = np.where(far == 1, table.vid[face, ib], table.vid[face, ia])
             chains[end] = [rows, face, ia, ib, shared, far]
-        rows, face, ia, ib = (np.concatenate([chains[e][i] for e in walking]) for i in range(4))
-        nxt = next_edges(state, x[rows], face, np.stack([ia, ib], axis=1))
+        rows, face, ia, ib, far = (np.concatenate([chains[e][i] for e in walking]) for i in (0, 1, 2, 3, 5))
+        # the first silhouette edge at each last edge's far end, other than that edge
+        tip = np.where(far == 1, ib, ia)
+        first = _first_silhouette(
+            table, x[rows], table.vid[face, tip], plain[face, tip], _edge_id(table, face, ia, ib)
+        )
+        nxt = _next(table, first, first.shape)
         start = 0
         for end in walking:
-            rows, _, _, _, shared, far = chains[end]
+            rows, _, _, _, shared, _ = chains[end]
             n = start + np.arange(rows.size)
             start += rows.size
-            f = nxt.found[n, far]
-            chains[end] = [rows[f], nxt.face[n, far][f], nxt.ia[n, far][f], nxt.ib[n, far][f], shared[f]]
+            f = nxt.found[n]
+            chains[end] = [rows[f], nxt.face[n][f], nxt.ia[n][f], nxt.ib[n][f], shared[f]]
     return out[0] + out[1]
