@@ -199,11 +199,11 @@ class ReparamTransforms(Identity):
 
     def _probe_rotation(
         self, shading: Shading, centre: np.ndarray, kappa: float | np.ndarray | None = None
-    ) -> tuple[Rotation, np.ndarray, Any]:
+    ) -> tuple[Rotation, np.ndarray, Any, tuple[np.ndarray, Hits]]:
         """One rotation per shading point from a ring of probes around the kernel ``centre`` (of
         concentration ``kappa``: one, or one per point; None: the option's), whether the centre's
-        probe sees the sky (above the horizon, no hit), and the edges the rotation follows
-        (:class:`~sphere3d.reparam.probes.Followed`).
+        probe sees the sky (above the horizon, no hit), the edges the rotation follows
+        (:class:`~sphere3d.reparam.probes.Followed`) and the probes (directions (n, P, 3), hits).
 
         Without a kernel (``kappa`` None) the probes are drawn from the cosine lobe instead.
         """
@@ -230,7 +230,7 @@ class ReparamTransforms(Identity):
         followed = follow_probes(
             shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
         )
-        return followed.rotation, sky, followed
+        return followed.rotation, sky, followed, (d, hits)
 
     def _kernel_weight(
         self, rotated: Any, centre: np.ndarray, kappa: float | np.ndarray | None = None
@@ -295,7 +295,7 @@ class ReparamTransforms(Identity):
         """The rotated samples, their kernel weights and the control variate's c(ω) (the radiance the
         kernel's centre sees: the sky, or 0; π L(ω)), from probes around the kernel centres (of
         concentration ``kappa``: one, or one per point)."""
-        rotation, sky, followed = self._probe_rotation(sub, centre, kappa)
+        rotation, sky, followed, probes = self._probe_rotation(sub, centre, kappa)
         rotated = rotation.apply(mu_l)
         jacobian = None
         ring = vmf_spread_angle(kappa, self.spread)
@@ -305,7 +305,7 @@ class ReparamTransforms(Identity):
         own = np.zeros(len(mu_l), dtype=bool)
         if self.shading_border:  # the light's border in the kernel: kept by a field after the rotation
             single = None if shape is None else shape.triangle
-            field = border_field(sub, centre, ring, rotation, followed, single)
+            field = border_field(sub, centre, ring, rotation, followed, single, probes, self.refine)
             # where an inner triangle's edges are kept with the border, the field after the identity
             own = (field.slot >= 0) & (single >= 0) if single is not None else own
             base = Dual(rotated.value, np.where(own[:, None], 0.0, rotated.tangent), k)

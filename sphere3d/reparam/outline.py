@@ -29,7 +29,7 @@ from sphere3d.boundary.edges import row_ids, state_edges
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
 
-__all__ = ["NextEdges", "OutlineTable", "next_edges", "outline_chain", "outline_table"]
+__all__ = ["NextEdges", "OutlineTable", "next_edges", "outline_chain", "outline_edges", "outline_table"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +134,40 @@ def _next(table: OutlineTable, first: np.ndarray, shape: tuple[int, ...]) -> Nex
         table.ib[e].reshape(shape),
         (first >= 0).reshape(shape),
     )
+
+
+def outline_edges(state: SceneState, x: np.ndarray, triangle: np.ndarray, lines: np.ndarray) -> NextEdges:
+    """Per followed snap (``lines`` (r, 2, 2): an edge of ``triangle`` twice, or a corner's two edges, the
+    corner's slot first; :class:`~sphere3d.reparam.snaps.Snap`): a silhouette edge seen from ``x`` (plain,
+    (r, 3)) through the followed point, to walk the outline from: the first of the snap's edges that is
+    one, else the first silhouette edge at the corner's vertex (a mesh's corner snap holds the triangle's
+    two edges there, of which the outline often takes one, or none); ``found`` False where none is."""
+    table = outline_table(state)
+    plain = np.asarray(detach(state.triangles))
+    r = np.arange(len(triangle))
+    face, ia, ib = triangle.copy(), lines[:, 0, 0].copy(), lines[:, 0, 1].copy()
+    found = np.zeros(len(triangle), dtype=bool)
+    for side in range(2):  # the snap's two edges (not a loop over samples)
+        i, j = lines[:, side, 0], lines[:, side, 1]
+        e = _edge_id(table, triangle, i, j)
+        to = plain[triangle, i] - x  # V - x
+        s1 = np.einsum("nx,nx->n", table.n1[e], to)
+        s2 = np.einsum("nx,nx->n", table.n2[e], to)
+        take = ~found & ((table.other[e] < 0) | ((s1 > 0.0) != (s2 > 0.0)))
+        ia[take], ib[take], found[take] = i[take], j[take], True
+    rest = np.flatnonzero(~found)
+    if rest.size:  # at the corner's vertex, its first silhouette edge
+        corner = lines[rest, 0, 0]
+        first = _first_silhouette(
+            table,
+            x[rest],
+            table.vid[triangle[rest], corner],
+            plain[triangle[rest], corner],
+            np.full(rest.size, -1),
+        )
+        at = _next(table, first, first.shape)
+        face[rest], ia[rest], ib[rest], found[rest] = at.face, at.ia, at.ib, at.found
+    return NextEdges(face, ia, ib, found & (r >= 0))
 
 
 def _edge_id(table: OutlineTable, face: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:

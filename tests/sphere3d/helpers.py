@@ -275,6 +275,13 @@ def strategy_alone(monkeypatch, keep: str) -> None:
     monkeypatch.setattr(integrator, "_bsdf_term" if keep == "emitter" else "_emitter_term", zero)
 
 
+def cosine_only(monkeypatch) -> None:
+    """The cosine strategy alone and unweighted: the emitter strategy's term 0 and the light's density 0 in
+    the balance heuristic, so the cosine-sampled estimate is one of the whole E (its closed form's)."""
+    strategy_alone(monkeypatch, "bsdf")
+    monkeypatch.setattr(integrator, "solid_angle_pdf", lambda inv_area, t, cos_y: 0.0 * cos_y)
+
+
 def strategy_z(scene, param, **switches):
     """reparam's derivative (:class:`~sphere3d.reparam.default.ReparamTransforms` with ``switches``) against
     finite differences (16x the samples), both of the patched estimator: their difference over its
