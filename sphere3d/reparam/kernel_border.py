@@ -205,7 +205,9 @@ def _outline(
 
     steps = [(np.arange(rows.size), face, ia, ib)]
     steps += outline_chain(state, x0[rows], face, np.stack([ia, ib], axis=1), near, CHAIN)
-    return [part(slot[rows[i]], state.triangles[f, a], state.triangles[f, b]) for i, f, a, b in steps]
+    # every step's edges at once (one chart conversion, not one per step along the outline)
+    i, f, a, b = (np.concatenate([step[c] for step in steps]) for c in range(4))
+    return [part(slot[rows[i]], state.triangles[f, a], state.triangles[f, b])]
 
 
 def _seen_outline(
