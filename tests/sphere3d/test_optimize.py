@@ -14,6 +14,9 @@ tests/flatland/test_optimize.py; here sphere3d's renderer is injected (:func:`sp
    offsets (measured errors, seeds 0 and 1: translations at most 0.0014, the rotation 0.0035 rad, the
    albedo 0.0008).
    A sphere's rotation would be invisible (its image does not change): the box's is not.
+   Slow: tutorial 12 (tests/test_tutorials.py, in ``make test``) runs the same recovery (the same
+   scene, film, parameters, truth, ranges, learning rates, spp and steps; its own seed) and asserts
+   the same 1 % goal.
 3. Shape from 4 views (slow): nine coefficients (degree <= 2) of a black icosphere before the sky,
    cameras around it at four azimuths and elevations: every view's silhouette
    (:func:`~sphere3d.optimize.silhouette`) has an IoU >= 0.97 with the target's, from initial IoUs
@@ -63,6 +66,7 @@ def test01_the_loss_gradient_is_the_derivative_of_the_rendered_loss():
     assert abs(gradient - central) <= 1e-9 * abs(gradient)
 
 
+@SLOW
 def test02_pose_and_albedo_from_one_image():
     scene = small("hard_shadow_cube", 32)
     params = [
