@@ -136,12 +136,15 @@ def shadow_field(
         xg = x[row]
         found_rows.append(row)
         found_m.append((tri[n, ia] - xg, tri[n, ib] - xg, rotation.take(row)))
-        for row, face, ia, ib in edges:
-            if r + 1 < pairs and shift < 62:  # the side codes, for the next rounds' pairs
-                plane = cross(plain[face, ia] - x0[row], plain[face, ib] - x0[row])
-                side = np.sign(np.einsum("rpx,rx->rp", w[row], plane)).astype(np.int64) + 1
-                code[row] |= side << shift
-                shift += 2
+        if r + 1 < pairs and shift < 62:  # the side codes, for the next rounds' pairs
+            # each step's edges (one row each) their own 2 bits, while bits are left: all steps at once
+            groups = min(len(edges), (62 - shift + 1) // 2)
+            sizes = [len(e[0]) for e in edges[:groups]]
+            c, used = slice(0, sum(sizes)), shift + 2 * np.repeat(np.arange(groups), sizes)
+            plane = cross(plain[face[c], ia[c]] - x0[row[c]], plain[face[c], ib[c]] - x0[row[c]])
+            side = np.sign(np.einsum("rpx,rx->rp", w[row[c]], plane)).astype(np.int64) + 1
+            np.bitwise_or.at(code, row[c], side << used[:, None])
+            shift += 2 * groups
     shadow = np.concatenate(found_rows) if found_rows else np.zeros(0, np.intp)
     fields = np.unique(shadow)
     if not fields.size:

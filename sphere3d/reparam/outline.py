@@ -111,7 +111,7 @@ def _first_silhouette(
     rep = np.repeat(np.arange(v.size), degree)  # one entry per (vertex, incident edge)
     within = np.arange(rep.size) - np.repeat(np.cumsum(degree) - degree, degree)
     c = table.incident[table.start[v][rep] + within]
-    to = position[rep] - x[rep]  # V - x
+    to = (position - x)[rep]  # V - x, per vertex, then per incident edge
     s1 = np.einsum("nx,nx->n", table.n1[c], to)
     s2 = np.einsum("nx,nx->n", table.n2[c], to)
     silhouette = (table.other[c] < 0) | ((s1 > 0.0) != (s2 > 0.0))
