@@ -87,6 +87,7 @@ class Shading:
 
     ``origin = detach(x) + ε n_g`` (n_g: the geometric normal, n itself unless given)
     keeps rays from re-hitting the surface they leave; re-attached quantities use x itself.
+    ``geometric`` is n_g (θ-dependent, as given), None where it is n.
     """
 
     state: SceneState
@@ -94,20 +95,21 @@ class Shading:
     n: Any
     origin: np.ndarray
     draws: Draws
+    geometric: Any = None
 
     @staticmethod
     def at(state: SceneState, x: Any, n: Any, draws: Draws, geometric: Any = None) -> Shading:
         """Shading points ``x``, shading normals ``n`` (offset along the ``geometric`` normals when
         given); ``draws`` keys their random numbers on their samples."""
         offset = detach(n if geometric is None else geometric)
-        return Shading(state, x, n, detach(x) + state.epsilon * offset, draws)
+        return Shading(state, x, n, detach(x) + state.epsilon * offset, draws, geometric)
 
     def __len__(self) -> int:
         return len(self.origin)
 
     def take(self, index: np.ndarray) -> Shading:
-        x, n, origin = self.x[index], self.n[index], take_rows(self.origin, index)
-        return type(self)(self.state, x, n, origin, self.draws.take(index))
+        x, n, g = (None if v is None else v[index] for v in (self.x, self.n, self.geometric))
+        return type(self)(self.state, x, n, take_rows(self.origin, index), self.draws.take(index), g)
 
     def trace(self, mu: np.ndarray) -> Hits:
         """First hits along directions ``mu`` from the shading points (detached)."""
@@ -152,8 +154,7 @@ class Shading:
             it = intersect_triangles(self.x[e], rotated[e], state.triangles[tri])
             cos_y = -dot(it.normal, rotated[e])
             front = detach(cos_y) > 0.0
-            e, cos_y, tri = e[front], cos_y[front], tri[front]
-            it_t, b1, b2 = it.t[front], it.b1[front], it.b2[front]
+            e, cos_y, tri, it_t, b1, b2 = (v[front] for v in (e, cos_y, tri, it.t, it.b1, it.b2))
             p_light = solid_angle_pdf(1.0 / state.emitter_area, it_t, cos_y)
             p_cos = cos_x[e] * INV_PI
             # balance heuristic at the rotated direction, θ-dependent on both sides   (MIS, see module doc)

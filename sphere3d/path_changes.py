@@ -69,7 +69,7 @@ class Onward(Shading):
 
     @staticmethod
     def of(shading: Shading) -> Onward:
-        return Onward(shading.state, shading.x, shading.n, shading.origin, shading.draws)
+        return Onward(shading.state, shading.x, shading.n, shading.origin, shading.draws, shading.geometric)
 
     def contributes(self, mu: np.ndarray, hits: Any) -> np.ndarray:
         state = self.state

@@ -16,6 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from sphere3d.live import all_rows
 from sphere3d.state import SceneState
 from sphere3d.tracing import Hits
 from sphere3d.vector import dot, norm
@@ -132,12 +133,15 @@ def bisect_silhouette(
     """Move ``hits`` towards their shape's silhouette: ``refine`` bisections between a direction
     that hits the shape (``inside``, with ``hits``) and one that does not (``outside``); returns
     the moved hits and the final pair of directions. A bisection ray is inside where it hits the
-    same shape (above the horizon of ``normal``, if given), else outside."""
+    same shape (above the horizon of ``normal``, if given: (m, 3), or (m, 2, 3) for two planes), else
+    outside."""
 
     def side(h: Hits, mid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         on = h.shape == shape  # the shape never changes: hits are only replaced where it matches
-        if normal is not None:
-            on = on & (dot(mid, normal) > 0.0)
+        if normal is not None:  # above the horizon; with two normals (m, 2, 3), above both planes
+            on = on & (
+                dot(mid, normal) > 0.0 if normal.ndim == 2 else all_rows(dot(mid[:, None], normal) > 0.0)
+            )
         return on, ~on
 
     shape = hits.shape

@@ -11,7 +11,8 @@ discontinuity where one rotation per integral cannot (Loubet et al. 2019, Sec. 4
 - ``bsdf``: the vMF convolution of the cosine-sampled integral (at glossy points of the BSDF-sampled
   one, its concentration following the lobe's width: :mod:`sphere3d.reparam.lobe`), the probes on a
   ring around the kernel's centre, snapped onto the edge they straddle
-  (:mod:`sphere3d.reparam.snaps`); a moving shape inside the ring followed by an affine map of the
+  (:mod:`sphere3d.reparam.snaps`), at a smooth-shaded point the face's own plane
+  (:mod:`sphere3d.reparam.face_plane`); a moving shape inside the ring followed by an affine map of the
   gnomonic chart (:mod:`sphere3d.reparam.shading_affine`); the light's border in the ring kept by a field
   after either (:mod:`sphere3d.reparam.kernel_border`); the kernel weights' control variate (theory page
   *kernels*).
@@ -36,6 +37,7 @@ from sphere3d.film import FilmTransform
 from sphere3d.integrator import EmitterChange, Identity, Members, Shading
 from sphere3d.live import any_rows, moves
 from sphere3d.reparam.emitter_probes import PROBES, emitter_map
+from sphere3d.reparam.face_plane import below_face, face_plane_rotation
 from sphere3d.reparam.film_affine import _shape_images
 from sphere3d.reparam.film_corners import _corner_table
 from sphere3d.reparam.film_kernel import (
@@ -49,7 +51,7 @@ from sphere3d.reparam.kernel_border import border_field
 from sphere3d.reparam.lobe import LOBE, lobe_kappa, lobe_radius
 from sphere3d.reparam.outline import outline_table
 from sphere3d.reparam.penumbra import cone_may_see_motion, moving_sphere, separating_planes
-from sphere3d.reparam.probes import REFINE, follow_probes, ring_directions, vmf_spread_angle
+from sphere3d.reparam.probes import REFINE, Followed, follow_probes, ring_directions, vmf_spread_angle
 from sphere3d.reparam.shading_affine import _moving_shapes, inner_shape_map
 from sphere3d.reparam.snaps import angle_snap
 from sphere3d.rotation import Rotation
@@ -222,15 +224,24 @@ class ReparamTransforms(Identity):
             snap = angle_snap(shading.state, centre, 2.0 * ring)
         hits = shading.state.tracer.intersect(shading.origin[:, None], d)
         # a probe below the horizon sees only the surface it leaves, where the integrand is 0
-        # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε
+        # (cos θ < 0), not a discontinuity: it counts as a miss rather than as a point at distance ~ε;
+        # so does one below the face's own plane at a smooth-shaded point (face_plane)
         normal = detach(shading.n)
-        hits = hits.without(dot(d, normal[:, None]) <= 0.0)
+        below = below_face(shading, d)
+        hits = hits.without(below)
         spin = None if self.kappa is None else (centre, 1.0 / np.sqrt(kappa))
-        sky = ~hits.hit[:, 0] & (dot(d[:, 0], normal) > 0.0)
-        followed = follow_probes(
-            shading.state, shading.x, shading.origin, d, hits, normal, self.refine, snap, spin
+        sky = ~hits.hit[:, 0] & ~below[:, 0]
+        planes = (
+            normal if shading.geometric is None else np.stack([normal, detach(shading.geometric)], axis=1)
         )
-        return followed.rotation, sky, followed, (d, hits)
+        followed = follow_probes(
+            shading.state, shading.x, shading.origin, d, hits, planes, self.refine, snap, spin
+        )
+        if self.kappa is None:
+            return followed.rotation, sky, followed, (d, hits)
+        # where it follows nothing, the face's plane in the kernel's reach (twice the ring, as the snaps)
+        rotation = face_plane_rotation(shading, centre, 2.0 * ring, followed.rotation)
+        return rotation, sky, Followed(rotation, followed.snapped), (d, hits)
 
     def _kernel_weight(
         self, rotated: Any, centre: np.ndarray, kappa: float | np.ndarray | None = None

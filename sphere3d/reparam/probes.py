@@ -139,8 +139,9 @@ def select_points(
         Probe directions (θ-free).
     hits : Hits, shape (m, P)
         Their first hits; probes below a shading point's horizon must count as misses.
-    normal : ndarray, shape (m, 3), optional
-        The shading normal: bisection rays below the horizon count as misses too.
+    normal : ndarray, shape (m, 3) or (m, 2, 3), optional
+        The shading normal (and the face's): bisection rays below the horizon (or below either
+        plane) count as misses too.
     refine : int, optional
         Bisection rays toward the silhouette per single-probe point (default
         :data:`REFINE`; 0: the probe's own hit, the paper's rule).
@@ -189,7 +190,11 @@ def _choose(
         outside = np.where(first3, choice.d1[single], choice.d0[single])
         start = choice.h0.take(single).where(choice.first, choice.h1.take(single))
         tro = np.broadcast_to(trace_origin, (m, 3))[single]
-        nrm = None if normal is None else np.broadcast_to(normal, (m, 3))[single]
+        nrm = (
+            None
+            if normal is None
+            else np.broadcast_to(normal, (m, *np.shape(normal)[-1 - (np.ndim(normal) > 2) :]))[single]
+        )
         edge, inside, outside = bisect_silhouette(state, tro, inside, outside, start, nrm, refine)
         if snap is None:
             triangle, u, v = edge.triangle, edge.u, edge.v
