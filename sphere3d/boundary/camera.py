@@ -164,9 +164,12 @@ def camera_candidates(state: SceneState, edges: Edges) -> np.ndarray:
     flat-shaded shapes that reflect (albedo > 0, or the albedo is the parameter).
 
     A crease of a smooth shape (``smooth: true``) is skipped: the interpolated vertex normals
-    agree on both sides, so L is continuous there and the side rays would only measure an
-    O(EPS_FILM) difference, a bias of that order and wasted points (480 of the 490 edges of
-    the ``hard_shadow`` icosphere, most of its projected edge length).
+    agree on both sides, so the side rays would only measure an O(EPS_FILM) difference and the
+    part of the hemisphere each face's own plane cuts off (:mod:`sphere3d.reparam.face_plane`),
+    whose change across the crease is the difference of $n_s·n_g$ on its two faces, nearly 0 where
+    $n_s$ lies between the two face normals (a bias of that order, checked against the term of
+    those creases alone under a sky; skipping saves 480 of the 490 edges of the ``hard_shadow``
+    icosphere, most of its projected edge length).
     """
     origin = np.asarray(detach(state.camera.origin))
     albedo = np.asarray(detach(state.albedo))
