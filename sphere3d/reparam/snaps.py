@@ -70,8 +70,11 @@ def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
     velocity is affine in the point and constant along the line; on the sphere, with
     :func:`line_spin`, the edge's great circle), while one following a point inside T drifts by
     its distance from the edge times the image's rate of scaling. Where an end of that edge lies
-    within ``radius`` of the kernel centre (``gap``), the corner is followed instead: it lies on
-    both edges that meet there, so one rotation follows the two. ``radius``: one, or one per kernel
+    within ``radius`` of the kernel centre (``gap``) and T's other edge there is a silhouette too, the
+    corner is followed instead: it lies on both edges that meet there, so one rotation follows the two
+    (where T's other edge is none, the outline turns along another face's edge: a mesh's outline
+    corner, or a face seen nearly edge-on whose other edge lies beside the outline on the image and
+    moves otherwise; the exit edge alone is followed). ``radius``: one, or one per kernel
     (indexed by the snap's ``rows``).
     """
     triangles = np.asarray(detach(state.triangles))
@@ -115,6 +118,11 @@ def edge_snap(state: SceneState, gap: Gap, radius: float | np.ndarray) -> Snap:
         away = gap(rows, vert[m[:, None], ends])
         near = np.argmin(away, axis=1)
         corner = exits & (away[m, near] <= (radius if np.ndim(radius) == 0 else radius[rows]))
+        # the corner's second edge in T (opposite the exit edge's other end) must be a silhouette too: else
+        # (a mesh's outline turns at the corner along another face's edge) its line is no discontinuity,
+        # and on a face seen nearly edge-on it lies beside the outline and moves otherwise
+        c = np.flatnonzero(corner)
+        corner[c] = _silhouette(state, origin[c], triangle[c], ends[c, 1 - near[c]])
         w[corner] = 0.0
         w[m[corner], ends[m, near][corner]] = 1.0
         u = np.where(exits, w[:, 1], hits.u)
