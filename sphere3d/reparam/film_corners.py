@@ -55,7 +55,7 @@ from sphere3d.film import AffineFilm
 from sphere3d.state import SceneState
 from sphere3d.tables import per_state
 
-__all__ = ["REACH", "NearCorners", "corner_table", "nearest_corners", "silhouette_corners"]
+__all__ = ["REACH", "NearCorners", "corner_table", "nearest_corners", "sectors", "silhouette_corners"]
 
 REACH = 5.0
 r"""Film kernel standard deviations σ within which a corner's edges are kept (:func:`nearest_corners`'s
@@ -270,17 +270,22 @@ def silhouette_corners(
     if not rows.size:
         return out
     rel = at[rows] - corners.point[k]
-    phi = np.arctan2(rel[:, 1], rel[:, 0])
-    # the sector: after the last edge whose angle is <= phi (before the first: the last sector, cyclic),
-    # by a binary search in each corner's run of ascending angles
-    lo, hi = corners.start[k], corners.start[k] + corners.count[k]
-    while np.any(lo < hi):
-        mid = (lo + hi) // 2
-        right = (lo < hi) & (corners.angle[np.minimum(mid, corners.angle.size - 1)] <= phi)
-        lo, hi = np.where(right, mid + 1, lo), np.where(right | (lo >= hi), hi, mid)
-    below = lo - corners.start[k]
-    sector = np.where(below > 0, below - 1, corners.count[k] - 1)
+    sector = sectors(corners.angle, corners.start[k], corners.count[k], np.arctan2(rel[:, 1], rel[:, 0]))
     out.mask[rows] = True
     out.a_dot[rows], out.centre[rows] = corners.a_dot[k], corners.point[k]
     out.b_dot[rows] = corners.b_dot[corners.start[k] + sector]
     return out
+
+
+def sectors(angle: np.ndarray, start: np.ndarray, count: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Per row, the sector of a fan that holds the direction of angle ``phi`` (radians): the fan's rays
+    are ``angle[start : start + count]``, ascending; sector s lies from ray s to the next, the last
+    wrapping round to the first. After the last ray whose angle is <= phi (before the first: the last
+    sector), by a binary search in each row's run of angles (O(log count) passes)."""
+    lo, hi = start.copy(), start + count
+    while np.any(lo < hi):
+        mid = (lo + hi) // 2
+        right = (lo < hi) & (angle[np.minimum(mid, angle.size - 1)] <= phi)
+        lo, hi = np.where(right, mid + 1, lo), np.where(right | (lo >= hi), hi, mid)
+    below = lo - start
+    return np.where(below > 0, below - 1, count - 1)

@@ -186,13 +186,14 @@ def film_transform(
     rotation = Rotation.identity((2 * n,), k)
     # shapes and corners come from the scene's tables, not from the probes: the kernel's reach, not the ring's
     reach = max(spread, REACH) * sigma
-    # a moving shape whose whole image lies within reach: the affine map that follows all its edges
-    affine = inner_shapes(state, centre, reach) if shapes else AffineFilm.none(2 * n, k)
+    # a moving shape whose whole image lies within reach: the fan of affine maps that follows its outline
+    own = np.concatenate([s, s])  # each member's own film point: the cone or sector of a fan it lies in
+    affine = inner_shapes(state, centre, reach, own) if shapes else AffineFilm.none(2 * n, k)
     if corners:  # a silhouette corner within the kernel's reach: the affine map that follows both its edges
-        near, at = nearest_corners(state, centre, reach), np.concatenate([s, s])
-        fan = silhouette_corners(state, centre, reach, at, near)
+        near = nearest_corners(state, centre, reach)
+        fan = silhouette_corners(state, centre, reach, own, near)
         if junctions and corner_lines:  # and a static edge: the field keeping all (reparam.corner_lines)
-            _fill(affine, _rows_of(2 * n, *corner_line_maps(state, near, centre, at, spread * sigma), k))
+            _fill(affine, _rows_of(2 * n, *corner_line_maps(state, near, centre, own, spread * sigma), k))
         _fill(affine, fan)
     moving = _moving_vertices(state)
     # where the camera stands still and no probe can see a moving triangle, any point chosen is static
@@ -210,7 +211,7 @@ def film_transform(
                 rows, d, hits = rows[keep], d[keep], hits.take(keep)
         if junctions:  # one moving edge and a static one, two that do not meet, a crease: reparam.junctions
             free = rows[~affine.mask[rows]]
-            at, maps = junction_maps(state, centre[free], np.concatenate([s, s])[free], spread * sigma)
+            at, maps = junction_maps(state, centre[free], own[free], spread * sigma)
             _fill(affine, _rows_of(2 * n, free[at], maps, k))
         # the probes' rotation where no affine map applies (the same, row by row, as for all rows)
         keep = ~affine.mask[rows]
