@@ -22,10 +22,11 @@ edge $p_i p_{i+1}$ goes onto its moved segment, and two neighbouring cones' maps
 they share (both are affine on it and agree at c and at its hull vertex), so the pieces tile the
 film. For one triangle the three cones' maps are one, the affine map through its three vertex
 images, exact under every motion; for a convex mesh each outline edge is carried exactly, under
-every motion (an out-of-plane turn moves the image's vertices in no affine way: a least-squares
-affine fit to all vertex images, as this map was before, lost 97-100 % of a 2 px icosphere's film
-derivative under a turn). The sample's cone is the one its own film point lies in (as for the
-corners' fans, :mod:`sphere3d.reparam.film_corners`); a map of its kernel's centre only.
+every motion. (One affine map fitted to all the vertex images by least squares would not do for a
+mesh: under a turn out of the image plane its vertex images, front and back, move in no affine way,
+and the fit averages the outline's motion away.) The sample's cone is the one its own film point
+lies in (as for the corners' fans, :mod:`sphere3d.reparam.film_corners`); a map of its kernel's
+centre only.
 
 A change of variables of the film: the sample at s is evaluated at $A(s)$, whose direction is
 the sample's own (value) moving with $\dot A(s)$, and its weight carries $|\det A|$ (value 1,
@@ -47,7 +48,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, QhullError
 
 from flatland.core.dual import detach, tangent
 from sphere3d.film import AffineFilm
@@ -110,7 +111,10 @@ def _shape_images(state: SceneState) -> _ShapeImages:
         extent = float(np.trace(scatter))
         if extent <= 0.0 or np.linalg.eigvalsh(scatter)[0] <= DEGENERATE * extent:
             continue
-        hull = ConvexHull(p).vertices  # counter-clockwise (in film x, y), each vertex once
+        try:
+            hull = ConvexHull(p).vertices  # counter-clockwise (in film x, y), each vertex once
+        except QhullError:  # flat to Qhull's precision (a speck far off): a segment, as DEGENERATE says
+            continue
         centre = p[hull].mean(axis=0)
         rate = p_dot[..., hull, :].mean(axis=-2)  # (2,) or (k, 2): c's velocity
         angle = np.arctan2(*(p[hull] - centre)[:, ::-1].T)
