@@ -1,6 +1,6 @@
-"""The irradiance at a point under the sky, or under a square light, with a black triangle above it:
-Lambert's polygon formula for the projected solid angle, on Duals so that its θ-derivative comes
-with it."""
+"""The irradiance at a point under the sky, or under a square light, with a black triangle (or a black
+convex mesh) above it: Lambert's polygon formula for the projected solid angle, on Duals so that its
+θ-derivative comes with it."""
 
 from __future__ import annotations
 
@@ -86,13 +86,14 @@ def polygon_irradiance(point: Any, normal: Any, vertices: Any, radiance: Any) ->
 def occluded_sky_irradiance(
     scene: Any, point: Any, normal: Any, param: str | None = None, theta: float = 0.0
 ) -> tuple[float, float]:
-    r"""$E = sky (π - Φ(T))$ at a point under a constant sky with the scene's black triangle above it,
-    and dE/dθ.
+    r"""$E = sky (π - Φ)$ at a point under a constant sky with the scene's black triangle above it,
+    or one black convex mesh, and dE/dθ.
 
     The open sky gives $∫_H L \cos θ\, dω = π L$; the triangle (black, so nothing of it adds
-    light) removes $L Φ$. Returns (value, derivative) at the parameter offset ``theta``;
-    the derivative flows through Lambert's formula with a Dual θ (derivative 0 without
-    ``param``).
+    light) removes $L Φ(T)$; a convex mesh removes the sum over its faces turned towards the point,
+    whose images from it tile the mesh's (:func:`_facing`). Returns (value, derivative) at the
+    parameter offset ``theta``; the derivative flows through Lambert's formula with a Dual θ
+    (derivative 0 without ``param``). The shape must lie wholly above the point's horizon.
     """
     scene = load_scene(scene)
     point = np.array(check_vector("point", point))
@@ -102,9 +103,20 @@ def occluded_sky_irradiance(
         raise ValidationError("normal", f"must not be zero, got {list(normal)}")
     theta = float(check_vector("theta", [theta], 1)[0])
     dual = variable(theta) if param is not None else theta
-    e = scene.sky * (
-        np.pi - projected_solid_angle(point, normal / length, triangle_vertices(scene, param, dual))
-    )
+    if len(scene.shapes) == 1 and len(scene.shapes[0].mesh.faces) > 1:  # a convex mesh: its facing faces
+        s = scene.shapes[0]
+        if s.albedo != 0.0 or s.emission != 0.0:
+            raise ValidationError(
+                "scene.shapes[0]", f"must be black (albedo 0, emission 0), got {s.albedo!r}"
+            )
+        v = mesh_vertices(scene, param, dual)
+        hidden = sum(
+            projected_solid_angle(point, normal / length, v[face])
+            for face in _facing(np.asarray(detach(v)), s.mesh.faces, point)
+        )
+    else:
+        hidden = projected_solid_angle(point, normal / length, triangle_vertices(scene, param, dual))
+    e = scene.sky * (np.pi - hidden)
     return float(np.asarray(detach(e))), float(np.asarray(tangent(e))) if param is not None else 0.0
 
 
@@ -178,7 +190,8 @@ def boundary_flux(
     radiance: float | None = None,
     window: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> Flux:
-    r""":class:`Flux` of the scene's black triangle seen from ``point`` (normal ``normal``) under ``param``.
+    r""":class:`Flux` of the scene's black triangle (or convex mesh: the edges of its outline, between the
+    faces turned towards the point and the others) seen from ``point`` (normal ``normal``) under ``param``.
 
     Reynolds transport on the sphere of directions: the triangle's image Ω(T) is bounded by the
     great arcs of its edges; at the direction $ω(s) = P(s)/|P(s)|$ of the edge point
@@ -197,12 +210,16 @@ def boundary_flux(
     x = np.array(check_vector("point", point))
     n = np.array(check_vector("normal", normal))
     n = n / np.linalg.norm(n)
-    v = triangle_vertices(scene, param, variable(0.0)) - x
+    if len(scene.shapes) == 1 and len(scene.shapes[0].mesh.faces) > 1:  # a convex mesh: its outline
+        v = mesh_vertices(scene, param, variable(0.0)) - x
+        edges = _outline(_facing(np.asarray(detach(v)) + x, scene.shapes[0].mesh.faces, x))
+    else:
+        v, edges = triangle_vertices(scene, param, variable(0.0)) - x, [(0, 1, 2), (1, 2, 0), (2, 0, 1)]
     s, w = np.polynomial.legendre.leggauss(nodes)
     s, w = 0.5 * (s + 1.0), 0.5 * w
     net = gross = 0.0
-    for i in range(3):  # the three edges (not a loop over samples)
-        a, b, c = v[i], v[(i + 1) % 3], v[(i + 2) % 3]
+    for i, j, k in edges:  # the outline's edges (a dozen, not a loop over samples)
+        a, b, c = v[i], v[j], v[k]
         m = np.cross(np.asarray(detach(a)), np.asarray(detach(b)))
         m = m / np.linalg.norm(m)
         m = -m if m @ np.asarray(detach(c)) > 0.0 else m  # outward: away from the third vertex
@@ -217,6 +234,15 @@ def boundary_flux(
         net += float(np.sum(w * density))
         gross += float(np.sum(w * np.abs(density)))
     return Flux(-radiance * net, radiance * gross)
+
+
+def _outline(faces: np.ndarray) -> list[tuple[int, int, int]]:
+    """The edges (a, b) of the region the ``faces`` (F, 3) cover that belong to one of them only (the
+    outline of a convex mesh's faces turned towards a point), each with its face's third vertex."""
+    ends = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])  # (a, b, third)
+    key = np.sort(ends[:, :2], axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return [tuple(int(i) for i in row) for row in ends[counts[inverse.ravel()] == 1]]
 
 
 def _facing(v: np.ndarray, faces: np.ndarray, eye: np.ndarray) -> np.ndarray:
