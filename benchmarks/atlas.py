@@ -1,8 +1,8 @@
 r"""The bias atlas: every gradient method against closed forms, over motions, feature sizes, viewing
 angles and filters, in both packages (``python -m benchmarks.atlas [--quick]``, or ``make bench``).
 
-Each cell is one case of :mod:`benchmarks.atlas_cases` (a black triangle or segment under the sky,
-one motion, one size, one viewing angle, one filter) and one method, rendered in ``BATCHES``
+Each cell is one case of :mod:`benchmarks.atlas_cases` (a black triangle, convex mesh or segment
+under the sky, one motion, one size, one viewing angle, one filter) and one method, rendered in ``BATCHES``
 independent batches. It reports the share of the derivative the method loses and its z-score:
 
 film
@@ -10,8 +10,8 @@ film
     (:func:`sphere3d.closed_form.share_lost`; g the closed form, d the estimate), per batch; the
     ± is the batch means' standard error. Positive: the estimate falls short of the derivative.
 shading
-    $\mathrm{lost} = (g - d) / G$, G the gross boundary flux $∮ |f (v·n)| dl$
-    (:func:`sphere3d.closed_form.boundary_flux`, :func:`flatland.closed_form.boundary_flux`): for a
+    $\mathrm{lost} = (g - d) / G$, G the gross boundary flux $∮ |f (v·n)| dl$ (over a mesh's outline:
+    :func:`sphere3d.closed_form.boundary_flux`, :func:`flatland.closed_form.boundary_flux`): for a
     motion whose net derivative is a small difference of large parts (a small triangle turning
     about its centre), the error is measured against the moving boundary the method must follow.
     The closed form is taken where the renderer evaluates the integral: sphere3d's ray origin

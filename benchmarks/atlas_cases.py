@@ -1,6 +1,6 @@
 """The cases of the bias atlas (:mod:`benchmarks.atlas`): scenes, motions and their closed forms.
 
-Five families, each a black feature against a constant sky of radiance 1 or a square light, where the
+Seven families, each a black feature against a constant sky of radiance 1 or a square light, where the
 closed forms of :mod:`sphere3d.closed_form` and :mod:`flatland.closed_form` give the exact derivative:
 
 ``sphere3d film``
@@ -21,6 +21,14 @@ closed forms of :mod:`sphere3d.closed_form` and :mod:`flatland.closed_form` give
     Lambert's formula, :func:`sphere3d.closed_form.occluded_light_irradiance`. The emitter strategy's
     integral and the cosine strategy's kernels beside a light's border, which the sky families do not
     have.
+``sphere3d mesh film``, ``sphere3d mesh shading``
+    As ``sphere3d film`` and ``sphere3d shading``, with a convex mesh in place of the triangle: an
+    icosphere of :data:`MESH_SUBDIVISIONS` subdivision (42 vertices, 80 faces, flat-shaded) ``size``
+    across (its diameter), turned by ``angle`` as the triangle is tilted (so each angle shows another
+    outline). Its outline is a polygon of several edges, whose corners move apart under a turn where a
+    triangle's do not: :func:`sphere3d.closed_form.convex_image` on the film, Lambert's formula over
+    its faces turned towards the point in shading (:func:`sphere3d.closed_form.occluded_sky_irradiance`).
+    On their own, smaller grid (:data:`MESH`).
 ``flatland film``
     A segment ``size`` px long at depth 2.5 in front of flatland's camera (16 pixels), at ``angle``
     degrees to the line of sight: :func:`flatland.closed_form.segment_image`.
@@ -46,10 +54,19 @@ import numpy as np
 
 from flatland import closed_form as fcf
 from sphere3d import closed_form as scf
+from sphere3d.shapes import icosphere
 
 __all__ = ["FAMILIES", "Case", "grid"]
 
-FAMILIES = ("sphere3d film", "sphere3d shading", "sphere3d light", "flatland film", "flatland shading")
+FAMILIES = (
+    "sphere3d film",
+    "sphere3d shading",
+    "sphere3d light",
+    "sphere3d mesh film",
+    "sphere3d mesh shading",
+    "flatland film",
+    "flatland shading",
+)
 FILM_MOTIONS_3D = {
     "translate x": "tri.translate.x",
     "translate y": "tri.translate.y",
@@ -80,6 +97,8 @@ MOTIONS = {
     "sphere3d film": FILM_MOTIONS_3D,
     "sphere3d shading": SHADING_MOTIONS_3D,
     "sphere3d light": SHADING_MOTIONS_3D,
+    "sphere3d mesh film": FILM_MOTIONS_3D,
+    "sphere3d mesh shading": SHADING_MOTIONS_3D,
     "flatland film": FILM_MOTIONS_2D,
     "flatland shading": SHADING_MOTIONS_2D,
 }
@@ -96,6 +115,18 @@ LIGHT_OFFSET = (0.1, 0.05)
 shadow's centre twice as far off on the light's plane)."""
 LIGHT = {"half": 0.5, "height": 2.0, "radiance": 5.0}
 """``sphere3d light``: the square light of :func:`sphere3d.closed_form.light_triangle_scene`."""
+MESH_SUBDIVISIONS = 1
+"""The mesh families' icosphere: 42 vertices, so that its outline is a polygon of several edges a few
+pixels (or hundredths of a radian) long at the grid's sizes."""
+_c, _s = np.cos([0.3, 0.2, 0.1]), np.sin([0.3, 0.2, 0.1])
+MESH_TURN = (
+    np.array([[_c[2], -_s[2], 0.0], [_s[2], _c[2], 0.0], [0.0, 0.0, 1.0]])
+    @ np.array([[_c[1], 0.0, _s[1]], [0.0, 1.0, 0.0], [-_s[1], 0.0, _c[1]]])
+    @ np.array([[1.0, 0.0, 0.0], [0.0, _c[0], -_s[0]], [0.0, _s[0], _c[0]]])
+)
+"""A fixed turn of the icosphere (0.3, 0.2, 0.1 rad about x, y, z) before its tilt: off its symmetry
+axes, so that no face is seen exactly edge-on (where the closed forms' set of faces turned towards
+the eye changes within a finite difference's step)."""
 OFFSET = (0.13, -0.21)
 """The feature's centre off the optical axis, in pixels (no edge lines up with the pixel grid)."""
 
@@ -146,11 +177,13 @@ class Case:
 
     # ------------------------------------------------------------ scenes
     def scene(self) -> dict:
-        """The scene dict of this case (a black triangle or segment under a sky of radiance 1)."""
+        """The scene dict of this case (a black triangle, icosphere or segment under a sky of radiance 1)."""
         return {
             "sphere3d film": self._film_3d,
             "sphere3d shading": self._shading_3d,
             "sphere3d light": self._light_3d,
+            "sphere3d mesh film": self._film_3d,
+            "sphere3d mesh shading": self._shading_3d,
             "flatland film": self._film_2d,
             "flatland shading": self._shading_2d,
         }[self.family]()
@@ -162,18 +195,31 @@ class Case:
         pivot = np.array([1.0, 0.5, 0.0]) * self.size * unit if self.pivot else np.zeros(3)
         return (local - pivot).tolist(), (centre + pivot).tolist()
 
+    def _mesh(self, unit: float, centre: np.ndarray) -> tuple[list, list, list]:
+        """Local vertices, faces and position of the turned icosphere ``size`` across (``unit``: world
+        size of 1), the position one size beside it for the off-centre pivot (as :meth:`_triangle`)."""
+        ball = icosphere(0.5 * self.size * unit, MESH_SUBDIVISIONS)
+        local = _tilt(ball.vertices @ MESH_TURN.T, self.angle)
+        pivot = np.array([1.0, 0.5, 0.0]) * self.size * unit if self.pivot else np.zeros(3)
+        return (local - pivot).tolist(), ball.faces.tolist(), (centre + pivot).tolist()
+
+    def _place(self, shape: dict, unit: float, centre: np.ndarray) -> None:
+        """The feature of this case into ``shape`` (a mesh): the triangle, or the mesh families' icosphere."""
+        if "mesh" in self.family.split():
+            shape["vertices"], shape["faces"], shape["translate"] = self._mesh(unit, centre)
+        else:
+            shape["vertices"], shape["translate"] = self._triangle(unit, centre)
+
     def _film_3d(self) -> dict:
         width = 8 if self.size <= 2.0 else (12 if self.size <= 4.0 else 16)
         scene = scf.pinhole_triangle_scene(self.size, width=width, filter=self.filter)
-        shape = scene["shapes"][0]
         centre = np.array([OFFSET[0] * scf.PIXEL, OFFSET[1] * scf.PIXEL, 0.0])
-        shape["vertices"], shape["translate"] = self._triangle(scf.PIXEL, centre)
+        self._place(scene["shapes"][0], scf.PIXEL, centre)
         return scene
 
     def _shading_3d(self) -> dict:
         scene = scf.sky_triangle_scene(np.array(scf.TRIANGLE_SHAPE) + np.array([0.0, 0.0, 1.0]))
-        shape = scene["shapes"][0]
-        shape["vertices"], shape["translate"] = self._triangle(1.0, np.array([0.0, 0.0, 1.0]))
+        self._place(scene["shapes"][0], 1.0, np.array([0.0, 0.0, 1.0]))
         return scene
 
     def _light_3d(self) -> dict:
@@ -225,6 +271,9 @@ class Case:
         scene = self.scene()
         if self.family == "sphere3d film":
             image = scf.triangle_image(scene, self.param, theta)
+            return image.value, image.derivative
+        if self.family == "sphere3d mesh film":
+            image = scf.convex_image(scene, self.param, theta)
             return image.value, image.derivative
         if self.family == "flatland film":
             segment = fcf.segment_image(scene, self.param, theta)
@@ -288,13 +337,16 @@ class Grid:
 
 FULL = Grid((0.5, 1.0, 2.0, 4.0, 8.0), (0.01, 0.03, 0.1, 0.5), (90.0, 30.0, 10.0, 5.0), ("tent", "gaussian"))
 QUICK = Grid((0.5, 2.0, 8.0), (0.01, 0.1, 0.5), (90.0, 10.0), ("gaussian",))
+MESH = Grid((1.0, 2.0, 4.0, 8.0), (0.03, 0.1, 0.3), (90.0, 30.0), ("gaussian",))
+"""The mesh families' grid (full and quick): the icosphere's diameter, two of its orientations (an angle
+turns it; seen from anywhere it is a ball) and the gaussian filter; the triangle's cells cover the rest."""
 
 
 def grid(quick: bool = False, families: tuple[str, ...] = FAMILIES) -> list[Case]:
     """Every case of the full (or quick) grid of ``families``, in the atlas's order."""
-    g = QUICK if quick else FULL
     cases = []
     for family in families:
+        g = MESH if "mesh" in family.split() else (QUICK if quick else FULL)
         film = family.endswith("film")
         for motion in MOTIONS[family]:
             for size in g.film_sizes if film else g.shading_sizes:

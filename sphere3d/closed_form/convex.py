@@ -30,7 +30,7 @@ from sphere3d.closed_form.film import (
     polygon_filter_integral,
     project,
 )
-from sphere3d.scene import Scene, load_scene
+from sphere3d.scene import AXES, Scene, load_scene
 
 __all__ = ["convex_image", "mesh_vertices"]
 
@@ -45,15 +45,22 @@ def mesh_vertices(scene: Scene, param: str | None = None, theta: Any = 0.0) -> A
     return translate + _rotate_xyz(s.mesh.vertices * scale, rotate)
 
 
-def convex_image(scene: Any, param: str | None = None) -> TriangleImage:
+def convex_image(scene: Any, param: str | None = None, theta: float = 0.0) -> TriangleImage:
     """The image $I(p) = sky (1 - Σ_{front} ∫_{T_f} k(x - c_p) dx)$ of one black convex mesh (albedo and
-    emission 0) in front of the camera, and dI/dθ for ``param`` (module docstring); ``vertices``: the
-    front faces' projected triangles (F, 3, 2)."""
+    emission 0) in front of the camera, and dI/dθ for ``param`` (its translate, rotate or scale, or
+    ``camera.translate.x|y|z`` as in :func:`~sphere3d.closed_form.triangle_image`; module docstring), at
+    the parameter's offset ``theta``; ``vertices``: the front faces' projected triangles (F, 3, 2)."""
     scene = load_scene(scene)
     s = scene.shapes[0] if len(scene.shapes) == 1 else None
     if s is None or s.albedo != 0.0 or s.emission != 0.0:
         raise ValidationError("scene.shapes", "must hold one black shape (albedo 0, emission 0)")
-    world = mesh_vertices(scene, param, variable(0.0) if param is not None else 0.0)
+    dual = variable(float(theta)) if param is not None else 0.0
+    if param is not None and param.startswith("camera."):
+        # the camera and its look-at point move together: the frame stays, every point shifts by -θ e_a
+        axis = AXES.index(scene.check_param(param).rpartition(".")[2])
+        world = mesh_vertices(scene) - np.eye(3)[axis] * dual
+    else:
+        world = mesh_vertices(scene, param, dual)
     faces = s.mesh.faces
     plain = np.asarray(detach(world))
     tri = plain[faces]
