@@ -84,8 +84,8 @@ vertices along them span its extent, for deciding which kernels take the map."""
 @dataclass(frozen=True)
 class _Shapes:
     """Per moving shape: its index, bounding sphere at θ0, anchor points (Dual, padded by repeats;
-    where ``climb``, found per kernel in mesh ``slot`` of ``graph`` instead) and whether it is one
-    triangle."""
+    where ``climb``, found per kernel in mesh ``slot`` of :func:`_graph` instead) and whether it is
+    one triangle."""
 
     shape: np.ndarray
     centre: np.ndarray
@@ -95,7 +95,6 @@ class _Shapes:
     triangle: np.ndarray  # the shape's first triangle (its only one where ``single``)
     climb: np.ndarray
     slot: np.ndarray
-    graph: MeshGraph | None
 
 
 @per_state
@@ -108,9 +107,11 @@ def _moving_shapes(state: SceneState) -> _Shapes:
     for s in np.unique(state.shape_of[moving]):  # a handful of shapes, each vectorized
         corners = state.triangles[state.shape_of == s].reshape(-1, 3)
         plain = np.asarray(detach(corners))
-        _, first = np.unique(plain, axis=0, return_index=True)
+        first = np.arange(len(plain))  # more corners than 8 per anchor: a large mesh, without sorting them
+        if len(plain) <= 8 * MAX_ANCHORS:
+            _, first = np.unique(plain, axis=0, return_index=True)
         rows = np.ascontiguousarray(plain.T)  # (3, corners): each coordinate contiguous
-        large.append(corners if first.size > MAX_ANCHORS else None)
+        large.append(first.size > MAX_ANCHORS)
         if first.size > MAX_ANCHORS:  # for the rule's first pass: the extreme corners along the axes
             proj = _AXES @ rows
             first = np.unique(np.concatenate([proj.argmin(axis=1), proj.argmax(axis=1)]))
@@ -125,15 +126,23 @@ def _moving_shapes(state: SceneState) -> _Shapes:
     if not shapes:
         none = Dual(np.zeros((0, MAX_ANCHORS, 3)), None, k)
         empty, nothing = np.zeros(0, np.int64), np.zeros(0, dtype=bool)
-        return _Shapes(empty, np.zeros((0, 3)), np.zeros(0), none, nothing, empty, nothing, empty, None)
+        return _Shapes(empty, np.zeros((0, 3)), np.zeros(0), none, nothing, empty, nothing, empty)
     anchors = Dual(np.array(values), np.array(tangents) if k is None else np.stack(tangents, axis=1), k)
     first = np.array([np.argmax(state.shape_of == s) for s in shapes], dtype=np.int64)  # per shape
-    climb = np.array([c is not None for c in large])
-    graph = mesh_graph([c for c in large if c is not None]) if climb.any() else None
+    climb = np.array(large)
     return _Shapes(
         np.array(shapes), np.array(centres), np.array(radii), anchors, np.array(single), first,
-        climb, np.cumsum(climb) - 1, graph,
+        climb, np.cumsum(climb) - 1,
     )  # fmt: skip
+
+
+@per_state
+def _graph(state: SceneState) -> MeshGraph:
+    """Once per state, when a kernel first needs it: the vertex graphs of the large moving meshes (those
+    ``climb`` marks, in its order), O(V log V) (:func:`~sphere3d.reparam.outline_anchors.mesh_graph`)."""
+    shapes = _moving_shapes(state)
+    corners = [state.triangles[state.shape_of == s].reshape(-1, 3) for s in shapes.shape[shapes.climb]]
+    return mesh_graph(corners)
 
 
 @dataclass(frozen=True)
@@ -227,11 +236,10 @@ def inner_shape_map(
     u, u_dot = u[keep_idx], u_dot[..., keep_idx, :, :]
     climb = np.flatnonzero(shapes.climb[k])
     if climb.size:  # a large mesh: its outline's vertices in this kernel's chart (reparam.outline_anchors)
-        found = outline_candidates(
-            shapes.graph, shapes.slot[k[climb]], x[rows[climb]], *(c[climb], t[climb], b[climb])
-        )
+        graph = _graph(shading.state)
+        found = outline_candidates(graph, shapes.slot[k[climb]], x[rows[climb]], c[climb], t[climb], b[climb])
         anchors = shapes.anchors[k][:, np.resize(np.arange(MAX_ANCHORS), found.shape[1])]  # the same hull
-        anchors[climb] = shapes.graph.vertices[found]
+        anchors[climb] = graph.vertices[found]
         u, u_dot, _ = _anchor_charts(shading, anchors, rows, c, t, b)
     mean = u.mean(axis=1)
     # the sample's chart point
